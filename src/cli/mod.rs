@@ -1,0 +1,71 @@
+//! The command line: one file per subcommand.
+//!
+//! Each subcommand only parses its arguments and calls into the library modules; no
+//! synthesis, geometry, bench or analysis logic lives here. This is the only place (with
+//! `main.rs`) where `anyhow` is used: library errors are typed and converted at this edge.
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// Design, fabricate and bench-verify multi-point conjugation mechanisms.
+#[derive(Debug, Parser)]
+#[command(name = "mpc-rig", version, about, long_about = None)]
+pub struct Cli {
+    /// More log output (-v info, -vv debug, -vvv trace).
+    #[arg(short, long, action = clap::ArgAction::Count, global = true)]
+    pub verbose: u8,
+    /// Only errors.
+    #[arg(short, long, global = true, conflicts_with = "verbose")]
+    pub quiet: bool,
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {}
+
+/// Set up `tracing` output on stderr from the -v/-q flags (`RUST_LOG` overrides).
+pub fn init_logging(verbose: u8, quiet: bool) {
+    let level = if quiet {
+        "error"
+    } else {
+        match verbose {
+            0 => "warn",
+            1 => "info",
+            2 => "debug",
+            _ => "trace",
+        }
+    };
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .try_init();
+}
+
+/// Run a parsed command line.
+pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
+    match cli.command {}
+}
+
+/// Exit code for an error that reached the binary edge: 1 unless a subcommand asked for
+/// another one by returning an [`ExitStatusError`] somewhere in the chain.
+pub fn exit_code_for(err: &anyhow::Error) -> u8 {
+    err.chain()
+        .find_map(|cause| cause.downcast_ref::<ExitStatusError>())
+        .map_or(1, |e| e.code)
+}
+
+/// An error that carries the process exit code the binary should end with.
+#[derive(Debug, thiserror::Error)]
+#[error("{message}")]
+pub struct ExitStatusError {
+    /// Exit code (non-zero).
+    pub code: u8,
+    /// What went wrong, for the user.
+    pub message: String,
+}

@@ -1,0 +1,384 @@
+//! Charts written as PNG and SVG, shared by `motion show`, the synthesis report and the
+//! bench report.
+//!
+//! Owns the embedded font (DejaVu Sans, so no system font library is needed), the colour
+//! palette and a small declarative chart description ([`Chart`]) that every report draws
+//! through. It does not decide what to plot: callers build the series.
+
+use std::path::{Path, PathBuf};
+use std::sync::Once;
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+/// The embedded font, registered with plotters under the family name "sans-serif".
+static FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
+static REGISTER: Once = Once::new();
+
+/// Default picture size in pixels (width, height).
+pub const DEFAULT_SIZE: (u32, u32) = (1000, 600);
+
+/// Error while drawing or writing a chart.
+#[derive(Debug, thiserror::Error)]
+pub enum PlotError {
+    /// The plotting backend failed (file not writable, bad range, ...).
+    #[error("cannot draw chart {path}: {message}")]
+    Draw {
+        /// The file being written.
+        path: PathBuf,
+        /// The backend's message.
+        message: String,
+    },
+    /// There is nothing to draw or the data is not finite.
+    #[error("chart {title:?} has no finite data to draw")]
+    Empty {
+        /// The chart's title.
+        title: String,
+    },
+}
+
+/// How a series is drawn.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Mark {
+    /// A solid polyline; breaks where a point is not finite.
+    Line,
+    /// A dashed polyline (targets, references).
+    Dashed,
+    /// Filled circles of the given radius in pixels.
+    Points(u32),
+}
+
+/// One named data series.
+#[derive(Debug, Clone)]
+pub struct Series {
+    /// Legend text; empty for no legend entry.
+    pub label: String,
+    /// (x, y) points in data units.
+    pub points: Vec<(f64, f64)>,
+    /// How to draw it.
+    pub mark: Mark,
+    /// Index into the palette ([`color`]).
+    pub color: usize,
+}
+
+impl Series {
+    /// A solid line series.
+    pub fn line(label: impl Into<String>, points: Vec<(f64, f64)>, color: usize) -> Self {
+        Self {
+            label: label.into(),
+            points,
+            mark: Mark::Line,
+            color,
+        }
+    }
+
+    /// A dashed line series.
+    pub fn dashed(label: impl Into<String>, points: Vec<(f64, f64)>, color: usize) -> Self {
+        Self {
+            label: label.into(),
+            points,
+            mark: Mark::Dashed,
+            color,
+        }
+    }
+
+    /// A scatter series with markers of `radius` pixels.
+    pub fn points(
+        label: impl Into<String>,
+        points: Vec<(f64, f64)>,
+        radius: u32,
+        color: usize,
+    ) -> Self {
+        Self {
+            label: label.into(),
+            points,
+            mark: Mark::Points(radius),
+            color,
+        }
+    }
+}
+
+/// A 2-D chart: axes, series, optional horizontal reference lines.
+#[derive(Debug, Clone)]
+pub struct Chart {
+    /// Caption above the plot.
+    pub title: String,
+    /// X axis description (with unit).
+    pub x_label: String,
+    /// Y axis description (with unit).
+    pub y_label: String,
+    /// The data.
+    pub series: Vec<Series>,
+    /// Fixed x range; computed from the data when `None`.
+    pub x_range: Option<(f64, f64)>,
+    /// Fixed y range; computed from the data when `None`.
+    pub y_range: Option<(f64, f64)>,
+    /// Horizontal reference lines (y value, legend label).
+    pub h_lines: Vec<(f64, String)>,
+    /// Keep one data unit the same length on both axes (for paths and curves).
+    pub equal_aspect: bool,
+    /// Picture size in pixels.
+    pub size: (u32, u32),
+}
+
+impl Chart {
+    /// An empty chart with the given title and axis labels.
+    pub fn new(
+        title: impl Into<String>,
+        x_label: impl Into<String>,
+        y_label: impl Into<String>,
+    ) -> Self {
+        Self {
+            title: title.into(),
+            x_label: x_label.into(),
+            y_label: y_label.into(),
+            series: Vec::new(),
+            x_range: None,
+            y_range: None,
+            h_lines: Vec::new(),
+            equal_aspect: false,
+            size: DEFAULT_SIZE,
+        }
+    }
+
+    /// Add a series (builder style).
+    pub fn with(mut self, series: Series) -> Self {
+        self.series.push(series);
+        self
+    }
+
+    /// Write `<stem>.png` and `<stem>.svg`; returns both paths.
+    pub fn write(&self, stem: &Path) -> Result<[PathBuf; 2], PlotError> {
+        register_font();
+        let ranges = self.ranges()?;
+        let png = stem.with_extension("png");
+        let svg = stem.with_extension("svg");
+        let draw_err = |path: &Path| {
+            let path = path.to_path_buf();
+            move |e: String| PlotError::Draw {
+                path: path.clone(),
+                message: e,
+            }
+        };
+        {
+            let root = BitMapBackend::new(&png, self.size).into_drawing_area();
+            self.draw(&root, ranges).map_err(draw_err(&png))?;
+            root.present()
+                .map_err(|e| e.to_string())
+                .map_err(draw_err(&png))?;
+        }
+        {
+            let root = SVGBackend::new(&svg, self.size).into_drawing_area();
+            self.draw(&root, ranges).map_err(draw_err(&svg))?;
+            root.present()
+                .map_err(|e| e.to_string())
+                .map_err(draw_err(&svg))?;
+        }
+        Ok([png, svg])
+    }
+
+    fn ranges(&self) -> Result<((f64, f64), (f64, f64)), PlotError> {
+        let finite = self
+            .series
+            .iter()
+            .flat_map(|s| s.points.iter())
+            .filter(|(x, y)| x.is_finite() && y.is_finite());
+        let mut xr = (f64::INFINITY, f64::NEG_INFINITY);
+        let mut yr = (f64::INFINITY, f64::NEG_INFINITY);
+        for &(x, y) in finite {
+            xr = (xr.0.min(x), xr.1.max(x));
+            yr = (yr.0.min(y), yr.1.max(y));
+        }
+        for (y, _) in &self.h_lines {
+            yr = (yr.0.min(*y), yr.1.max(*y));
+        }
+        let mut xr = self.x_range.unwrap_or(xr);
+        let mut yr = self.y_range.unwrap_or(yr);
+        if !(xr.0.is_finite() && xr.1.is_finite() && yr.0.is_finite() && yr.1.is_finite()) {
+            return Err(PlotError::Empty {
+                title: self.title.clone(),
+            });
+        }
+        let pad = |r: (f64, f64), fixed: bool| {
+            let span = r.1 - r.0;
+            if span <= f64::EPSILON * r.0.abs().max(r.1.abs()).max(1.0) {
+                (r.0 - 0.5, r.1 + 0.5)
+            } else if fixed {
+                r
+            } else {
+                (r.0 - 0.04 * span, r.1 + 0.04 * span)
+            }
+        };
+        xr = pad(xr, self.x_range.is_some());
+        yr = pad(yr, self.y_range.is_some());
+        if self.equal_aspect {
+            let (w, h) = (
+                f64::from(self.size.0.saturating_sub(100)),
+                f64::from(self.size.1.saturating_sub(100)),
+            );
+            let units_per_px = ((xr.1 - xr.0) / w).max((yr.1 - yr.0) / h);
+            let (cx, cy) = ((xr.0 + xr.1) / 2.0, (yr.0 + yr.1) / 2.0);
+            xr = (cx - units_per_px * w / 2.0, cx + units_per_px * w / 2.0);
+            yr = (cy - units_per_px * h / 2.0, cy + units_per_px * h / 2.0);
+        }
+        Ok((xr, yr))
+    }
+
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, Shift>,
+        (xr, yr): ((f64, f64), (f64, f64)),
+    ) -> Result<(), String> {
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let mut chart = ChartBuilder::on(root)
+            .caption(&self.title, ("sans-serif", 22))
+            .margin(14)
+            .x_label_area_size(44)
+            .y_label_area_size(70)
+            .build_cartesian_2d(xr.0..xr.1, yr.0..yr.1)
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .x_desc(self.x_label.as_str())
+            .y_desc(self.y_label.as_str())
+            .label_style(("sans-serif", 14))
+            .axis_desc_style(("sans-serif", 16))
+            .light_line_style(RGBColor(235, 235, 235))
+            .draw()
+            .map_err(|e| e.to_string())?;
+        let mut any_label = false;
+        for (y, label) in &self.h_lines {
+            let style = ShapeStyle::from(&RGBColor(200, 30, 30)).stroke_width(1);
+            let series = chart
+                .draw_series(DashedLineSeries::new(
+                    vec![(xr.0, *y), (xr.1, *y)],
+                    8,
+                    5,
+                    style,
+                ))
+                .map_err(|e| e.to_string())?;
+            if !label.is_empty() {
+                any_label = true;
+                series
+                    .label(label.as_str())
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+            }
+        }
+        for s in &self.series {
+            let colour = color(s.color);
+            let style = ShapeStyle::from(&colour).stroke_width(2);
+            let anno = match s.mark {
+                Mark::Line | Mark::Dashed => {
+                    // Split at non-finite points so gaps show as gaps.
+                    let mut runs: Vec<Vec<(f64, f64)>> = vec![Vec::new()];
+                    for &(x, y) in &s.points {
+                        if x.is_finite() && y.is_finite() {
+                            runs.last_mut().expect("runs is never empty").push((x, y));
+                        } else if !runs.last().expect("runs is never empty").is_empty() {
+                            runs.push(Vec::new());
+                        }
+                    }
+                    let mut last = None;
+                    for run in runs.into_iter().filter(|r| !r.is_empty()) {
+                        last = Some(if s.mark == Mark::Line {
+                            chart
+                                .draw_series(LineSeries::new(run, style))
+                                .map_err(|e| e.to_string())?
+                        } else {
+                            chart
+                                .draw_series(DashedLineSeries::new(run, 10, 6, style))
+                                .map_err(|e| e.to_string())?
+                        });
+                    }
+                    last
+                }
+                Mark::Points(r) => Some(
+                    chart
+                        .draw_series(
+                            s.points
+                                .iter()
+                                .filter(|(x, y)| x.is_finite() && y.is_finite())
+                                .map(|&p| Circle::new(p, r, colour.filled())),
+                        )
+                        .map_err(|e| e.to_string())?,
+                ),
+            };
+            if let (Some(anno), false) = (anno, s.label.is_empty()) {
+                any_label = true;
+                anno.label(s.label.as_str())
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+            }
+        }
+        if any_label {
+            chart
+                .configure_series_labels()
+                .position(SeriesLabelPosition::UpperRight)
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK)
+                .label_font(("sans-serif", 14))
+                .draw()
+                .map_err(|e| e.to_string())?;
+        }
+        Ok(())
+    }
+}
+
+/// The palette: colour-blind friendly (Okabe–Ito), cycled by index.
+pub fn color(index: usize) -> RGBColor {
+    const PALETTE: [RGBColor; 8] = [
+        RGBColor(0, 114, 178),
+        RGBColor(213, 94, 0),
+        RGBColor(0, 158, 115),
+        RGBColor(204, 121, 167),
+        RGBColor(230, 159, 0),
+        RGBColor(86, 180, 233),
+        RGBColor(0, 0, 0),
+        RGBColor(240, 228, 66),
+    ];
+    PALETTE[index % PALETTE.len()]
+}
+
+/// Register the embedded font with plotters (idempotent).
+pub fn register_font() {
+    REGISTER.call_once(|| {
+        if plotters::style::register_font("sans-serif", FontStyle::Normal, FONT).is_err() {
+            tracing::warn!("embedded plot font could not be registered; text may be missing");
+        }
+    });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Guards the embedded font and both backends: a chart with a gap (NaN) and a reference
+    /// line writes a PNG and an SVG that contain text.
+    #[test]
+    fn writes_png_and_svg_with_text() {
+        let dir = tempfile::tempdir().unwrap();
+        let pts: Vec<(f64, f64)> = (0..50)
+            .map(|i| {
+                let x = f64::from(i) / 10.0;
+                (x, if i == 25 { f64::NAN } else { x.sin() })
+            })
+            .collect();
+        let mut chart = Chart::new("sine", "x [rad]", "y [-]").with(Series::line("sin", pts, 0));
+        chart.h_lines.push((-0.5, "limit".into()));
+        let [png, svg] = chart.write(&dir.path().join("sine")).unwrap();
+        assert!(std::fs::metadata(&png).unwrap().len() > 1000);
+        let svg_text = std::fs::read_to_string(svg).unwrap();
+        assert!(svg_text.contains("sine") && svg_text.contains("limit"));
+    }
+
+    /// Guards the error path: a chart without finite data is an error, not a panic.
+    #[test]
+    fn empty_chart_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let chart =
+            Chart::new("empty", "x", "y").with(Series::line("nan", vec![(f64::NAN, 1.0)], 0));
+        assert!(matches!(
+            chart.write(&dir.path().join("e")),
+            Err(PlotError::Empty { .. })
+        ));
+    }
+}

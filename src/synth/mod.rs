@@ -1,0 +1,6 @@
+//! Synthesis: from a motion to K conjugate curve pairs with dynamic form closure.
+//!
+//! Owns the B-spline curve pair model, the energies and constraints of the paper, closure
+//! (signed distance to hulls of projected normals in 1–3 D), SLSQP candidates, the genetic
+//! combination, the K/d_x search and the `mechanism.json` file. It does not build meshes or
+//! talk to hardware.
