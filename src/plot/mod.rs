@@ -15,9 +15,6 @@ use plotters::prelude::*;
 static FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
 static REGISTER: Once = Once::new();
 
-/// Data ranges (x, y) of a chart, each (min, max).
-type Ranges = ((f64, f64), (f64, f64));
-
 /// Default picture size in pixels (width, height).
 pub const DEFAULT_SIZE: (u32, u32) = (1000, 600);
 
@@ -180,7 +177,9 @@ impl Chart {
         Ok([png, svg])
     }
 
-    fn ranges(&self) -> Result<Ranges, PlotError> {
+    /// The (x, y) data ranges, padded.
+    #[allow(clippy::type_complexity)] // two plain (min, max) pairs; an alias would hide that
+    fn ranges(&self) -> Result<((f64, f64), (f64, f64)), PlotError> {
         let finite = self
             .series
             .iter()
