@@ -38,19 +38,20 @@ fn recovers_driver_and_sensor_offsets() {
         rz.overall.rms
     );
     assert!(rz.unaligned.unwrap().rms > 4.0);
-    assert!(!a.phase_lag.separated_from_offset);
+    assert!(a.backlash.is_none());
 }
 
-/// Guards lag and backlash separation: with forward and reverse runs, a 2° dead band and a
-/// 50 ms lag (3° of driver angle at 10 rpm) on top of a 1.5° homing offset are recovered
-/// within 0.1° each, and the model-free hysteresis is at least the backlash.
+/// Guards backlash separation: with forward and reverse runs, a 2° driver-side dead band
+/// (the rig plant's kind), a 1° follower-side dead band and a 1.5° phase lag are recovered
+/// within 0.1° each, and the model-free hysteresis lies between the follower dead band and
+/// the sum of both effects at the law's steepest slope.
 #[test]
-fn recovers_lag_and_backlash_from_forward_and_reverse() {
+fn recovers_driver_and_follower_backlash_and_phase_lag() {
     let law = piecewise_half_turn(2.0 / 3.0);
     let bench = SyntheticBench {
         driver_offset_deg: 1.5,
-        lag_s: 0.05,
-        backlash: 2.0,
+        driver_backlash_deg: 2.0,
+        backlash: 1.0,
         noise: 0.02,
         forward_cycles: 3.0,
         reverse_cycles: 3.0,
@@ -59,27 +60,37 @@ fn recovers_lag_and_backlash_from_forward_and_reverse() {
     };
     let run = bench.generate(&law);
     let a = analyze(&run, &law, &opts()).unwrap();
-    let al = &a.alignment;
-    assert!(al.both_directions);
-    assert!(
-        (al.driver_offset_deg.value - 1.5).abs() < 0.1,
-        "{:?}",
-        al.driver_offset_deg
-    );
-    let lag = al.lag_driver_deg.unwrap();
-    assert!((lag.value - 3.0).abs() < 0.1, "lag {lag:?}");
-    assert!(
-        (a.phase_lag.ms.unwrap() - 50.0).abs() < 2.0,
-        "{:?}",
-        a.phase_lag
-    );
-    let b = al.dofs[0].backlash.unwrap();
-    assert!((b.value - 2.0).abs() < 0.1, "backlash {b:?}");
+    assert!(a.alignment.both_directions);
+    let lag = a.phase_lag.driver_deg;
+    assert!((lag.value - 1.5).abs() < 0.1, "phase lag {lag:?}");
+    let ms = a.phase_lag.ms.unwrap();
+    assert!((ms - 1.5 / 60.0 * 1e3).abs() < 2.0, "{ms} ms");
+    let b = a.backlash.as_ref().unwrap();
+    assert!((b.driver_deg.value - 2.0).abs() < 0.1, "driver backlash {:?}", b.driver_deg);
+    let (dof, fb) = b.follower[0];
+    assert_eq!(dof, mpc_rig::analysis::Dof::Rz);
+    assert!((fb.value - 1.0).abs() < 0.1, "follower backlash {fb:?}");
     let h = a.channels[0].hysteresis.unwrap();
-    assert!(
-        h.mean > 2.0 && h.mean < 2.0 + 2.0 * 1.5 * 3.0 + 0.2,
-        "hysteresis {h:?}"
-    );
+    assert!(h.mean > 1.0 && h.mean < 1.0 + 2.0 * 1.5 + 0.2, "hysteresis {h:?}");
+}
+
+/// Guards time-lag recovery: a 50 ms lag at 10 rpm (3° of driver angle, changing sign with
+/// the direction) appears as a 6° driver-side dead band equivalent within 0.1°.
+#[test]
+fn time_lag_shows_as_direction_dependent_offset() {
+    let law = smooth_turn();
+    let bench = SyntheticBench {
+        lag_s: 0.05,
+        noise: 0.02,
+        forward_cycles: 2.0,
+        reverse_cycles: 2.0,
+        seed: 12,
+        ..Default::default()
+    };
+    let a = analyze(&bench.generate(&law), &law, &opts()).unwrap();
+    let b = a.backlash.unwrap().driver_deg;
+    assert!((b.value - 6.0).abs() < 0.1, "{b:?}");
+    assert!(a.phase_lag.driver_deg.value.abs() < 0.1);
 }
 
 /// Guards the timing estimator's exactness: on a noiseless piecewise-linear 2:1 law (kinks

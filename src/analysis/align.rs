@@ -9,9 +9,11 @@
 //!
 //! with the measured driver angle φ_i, the run direction d_i (+1 forward, −1 reverse), the
 //! sign s_ij of the target's slope f_j′ and the unknowns: δ₀ a constant driver-angle offset
-//! (homing error; with forward runs only it also contains any lag), c_j a constant sensor
-//! offset per DOF, and, only when both directions were recorded, λ a direction-dependent
-//! driver-angle lag and β_j a backlash (dead band, follower units). The fit is a weighted
+//! (the follower acts as if the driver were δ₀ behind: a phase lag, or a homing error — the
+//! two look the same), c_j a constant sensor offset per DOF, and, only when both directions
+//! were recorded, λ a direction-dependent driver-angle offset (half a dead band between
+//! driver and follower, plus any time lag times the driver speed) and β_j a dead band on the
+//! follower side (follower units). The fit is a weighted
 //! Gauss–Newton least-squares over all measured samples, started from a grid search over δ₀;
 //! standard errors come from the normal matrix. Parameters that the data cannot separate
 //! (e.g. δ₀ and c for a uniform law) are flagged, not guessed.
@@ -121,7 +123,7 @@ pub struct DofOffsets {
     pub sensor_offset: Estimate,
     /// Whole turns removed from the sensor offset (degrees, a multiple of 360; 0 for tz).
     pub turn_shift: f64,
-    /// Backlash β (dead band width, DOF units), when both directions were recorded.
+    /// Follower-side dead band β (DOF units), when both directions were recorded.
     pub backlash: Option<Estimate>,
 }
 
@@ -147,8 +149,9 @@ pub struct Alignment {
     /// Constant driver-angle offset δ₀ in driver degrees (positive: the follower is where the
     /// target puts it δ₀ degrees of driver angle earlier, i.e. it lags).
     pub driver_offset_deg: Estimate,
-    /// Direction-dependent lag λ in driver degrees (forward runs see δ₀ + λ, reverse runs
-    /// δ₀ − λ); only when both directions were recorded.
+    /// Direction-dependent driver-angle offset λ in driver degrees (forward runs see δ₀ + λ,
+    /// reverse runs δ₀ − λ): half the driver-side backlash plus any time lag × speed. Only
+    /// when both directions were recorded.
     pub lag_driver_deg: Option<Estimate>,
     /// Scalar DOFs (1R, 1R1T).
     pub dofs: Vec<DofOffsets>,

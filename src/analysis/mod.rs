@@ -57,16 +57,23 @@ pub fn default_timing_levels(law: &TargetLaw) -> Option<Vec<f64>> {
     }
 }
 
-/// Phase lag of the follower behind the driver.
+/// Phase lag of the follower behind the driver: the constant driver-angle offset δ₀ (a
+/// homing error looks the same and cannot be told apart), and as a time at the forward speed.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct PhaseLag {
     /// Lag in degrees of driver angle.
     pub driver_deg: Estimate,
     /// The same as a time at the median forward driver speed, when the driver moved.
     pub ms: Option<f64>,
-    /// True when forward and reverse runs separated the lag from a static offset; false when
-    /// the lag is the driver-angle offset itself (forward runs only).
-    pub separated_from_offset: bool,
+}
+
+/// Backlash seen between the two run directions (only with forward and reverse runs).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Backlash {
+    /// Driver-side dead band 2λ in driver degrees (includes 2 × any time lag × speed).
+    pub driver_deg: Estimate,
+    /// Follower-side dead band per scalar DOF, in the DOF's unit (`rz` deg, `tz` mm).
+    pub follower: Vec<(Dof, Estimate)>,
 }
 
 /// Orientation error at one key pose of a 3R motion, over the cycles that pass it.
@@ -93,6 +100,8 @@ pub struct Analysis {
     pub alignment: Alignment,
     /// Phase lag.
     pub phase_lag: PhaseLag,
+    /// Backlash, when both directions were run.
+    pub backlash: Option<Backlash>,
     /// Sampling figures.
     pub sampling: SamplingStats,
     /// Per channel statistics (first the headline channel: rz or rotation).
@@ -122,19 +131,27 @@ pub fn analyze(
         .map(|e| metrics::channel_metrics(run, e))
         .collect();
     let phase_lag = {
-        let (driver, sep) = match alignment.lag_driver_deg {
-            Some(l) => (l, true),
-            None => (alignment.driver_offset_deg, false),
-        };
+        let driver = alignment.driver_offset_deg;
         PhaseLag {
             driver_deg: driver,
             ms: sampling
                 .driver_speed_forward_deg_per_s
                 .filter(|s| *s > 0.0)
                 .map(|s| driver.value / s * 1e3),
-            separated_from_offset: sep,
         }
     };
+    let backlash = alignment.lag_driver_deg.map(|l| Backlash {
+        driver_deg: Estimate {
+            value: 2.0 * l.value,
+            std_err: 2.0 * l.std_err,
+            determined: l.determined,
+        },
+        follower: alignment
+            .dofs
+            .iter()
+            .filter_map(|d| d.backlash.map(|b| (d.dof, b)))
+            .collect(),
+    });
     let levels = match &opts.timing_levels {
         Some(l) => Some(l.clone()),
         None => default_timing_levels(law),
@@ -189,6 +206,7 @@ pub fn analyze(
         class: law.class_name(),
         alignment,
         phase_lag,
+        backlash,
         sampling,
         channels,
         errors,

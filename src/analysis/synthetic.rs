@@ -33,8 +33,11 @@ pub struct SyntheticBench {
     pub driver_offset_deg: f64,
     /// Time lag of the follower behind the driver.
     pub lag_s: f64,
-    /// Dead band width (follower units: degrees for rz and per axis for 3R, mm for tz).
+    /// Follower-side dead band width (follower units: degrees for rz and per axis for 3R, mm
+    /// for tz).
     pub backlash: f64,
+    /// Driver-side dead band width in driver degrees (the rig plant's `backlash`).
+    pub driver_backlash_deg: f64,
     /// Constant sensor offset added to rz (degrees).
     pub rz_offset_deg: f64,
     /// Constant sensor offset added to tz (mm).
@@ -64,6 +67,7 @@ impl Default for SyntheticBench {
             driver_offset_deg: 0.0,
             lag_s: 0.0,
             backlash: 0.0,
+            driver_backlash_deg: 0.0,
             rz_offset_deg: 0.0,
             tz_offset_mm: 0.0,
             noise: 0.0,
@@ -130,7 +134,8 @@ impl SyntheticBench {
                 v
             }
         };
-        let start_phi = -self.driver_offset_deg - self.lag_s * omega;
+        let start_phi = -self.driver_offset_deg - self.driver_backlash_deg / 2.0;
+        let mut driver_input = start_phi + self.driver_offset_deg;
         let mut pos_rz = actual.rz_deg.as_ref().map_or(0.0, |t| t.value(start_phi));
         let mut pos_tz = actual.tz_mm.as_ref().map_or(0.0, |t| t.value(start_phi));
         let mut pos_rot = actual
@@ -148,7 +153,9 @@ impl SyntheticBench {
             };
             let phi = driver_at(t);
             // The follower responds to where the driver was lag_s ago.
-            let phi_eff = driver_at((t - self.lag_s).max(0.0)) - self.driver_offset_deg;
+            let lagged = driver_at((t - self.lag_s).max(0.0));
+            let phi_eff =
+                play(&mut driver_input, lagged, self.driver_backlash_deg / 2.0) - self.driver_offset_deg;
             let keep = self.drop_probability <= 0.0 || rng.random::<f64>() >= self.drop_probability;
             if let Some(table) = &actual.rz_deg {
                 let v = play(&mut pos_rz, table.value(phi_eff), half);
