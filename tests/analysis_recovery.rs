@@ -66,12 +66,19 @@ fn recovers_driver_and_follower_backlash_and_phase_lag() {
     let ms = a.phase_lag.ms.unwrap();
     assert!((ms - 1.5 / 60.0 * 1e3).abs() < 2.0, "{ms} ms");
     let b = a.backlash.as_ref().unwrap();
-    assert!((b.driver_deg.value - 2.0).abs() < 0.1, "driver backlash {:?}", b.driver_deg);
+    assert!(
+        (b.driver_deg.value - 2.0).abs() < 0.1,
+        "driver backlash {:?}",
+        b.driver_deg
+    );
     let (dof, fb) = b.follower[0];
     assert_eq!(dof, mpc_rig::analysis::Dof::Rz);
     assert!((fb.value - 1.0).abs() < 0.1, "follower backlash {fb:?}");
     let h = a.channels[0].hysteresis.unwrap();
-    assert!(h.mean > 1.0 && h.mean < 1.0 + 2.0 * 1.5 + 0.2, "hysteresis {h:?}");
+    assert!(
+        h.mean > 1.0 && h.mean < 1.0 + 2.0 * 1.5 + 0.2,
+        "hysteresis {h:?}"
+    );
 }
 
 /// Guards time-lag recovery: a 50 ms lag at 10 rpm (3° of driver angle, changing sign with

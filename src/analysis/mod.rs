@@ -20,7 +20,9 @@
 
 pub mod align;
 mod error;
+pub mod load;
 pub mod metrics;
+pub mod report;
 pub mod run;
 pub mod sampling;
 pub mod synthetic;
@@ -32,6 +34,7 @@ use nalgebra::UnitQuaternion;
 pub use align::{align, Alignment, Dof, Estimate};
 pub use error::AnalysisError;
 pub use metrics::{ChannelErrors, ChannelMetrics, ErrorStats};
+pub use report::{ReportOptions, Summary};
 pub use run::{MeasuredRun, Phase, Resolution};
 pub use sampling::SamplingStats;
 pub use target::TargetLaw;

@@ -78,6 +78,9 @@ pub struct MeasuredRun {
     pub tz_mm: Option<Vec<f64>>,
     /// Follower orientation (3R).
     pub rotation: Option<Vec<UnitQuaternion<f64>>>,
+    /// Per sample: the driver was still accelerating (excluded from timing). Empty means
+    /// never.
+    pub ramping: Vec<bool>,
     /// Sensor quantization steps.
     pub resolution: Resolution,
 }
@@ -106,6 +109,9 @@ impl MeasuredRun {
         }
         if self.driver_deg.len() != n {
             return Err(bad_len("driver_angle_deg", self.driver_deg.len()));
+        }
+        if !self.ramping.is_empty() && self.ramping.len() != n {
+            return Err(bad_len("ramping", self.ramping.len()));
         }
         check_finite("device_time", &self.time_s)?;
         check_finite("driver_angle_deg", &self.driver_deg)?;
@@ -151,6 +157,11 @@ impl MeasuredRun {
             ));
         }
         Ok(())
+    }
+
+    /// Whether sample `i` was taken while the driver was ramping.
+    pub fn is_ramping(&self, i: usize) -> bool {
+        self.ramping.get(i).copied().unwrap_or(false)
     }
 
     /// Indices of the samples that count (not settle).

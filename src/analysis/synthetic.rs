@@ -114,6 +114,7 @@ impl SyntheticBench {
             rz_deg: actual.rz_deg.as_ref().map(|_| Vec::with_capacity(n)),
             tz_mm: actual.tz_mm.as_ref().map(|_| Vec::with_capacity(n)),
             rotation: actual.rotation.as_ref().map(|_| Vec::with_capacity(n)),
+            ramping: Vec::new(),
             resolution: Resolution {
                 rz_deg: self.quantum,
                 tz_mm: self.quantum,
@@ -154,8 +155,8 @@ impl SyntheticBench {
             let phi = driver_at(t);
             // The follower responds to where the driver was lag_s ago.
             let lagged = driver_at((t - self.lag_s).max(0.0));
-            let phi_eff =
-                play(&mut driver_input, lagged, self.driver_backlash_deg / 2.0) - self.driver_offset_deg;
+            let phi_eff = play(&mut driver_input, lagged, self.driver_backlash_deg / 2.0)
+                - self.driver_offset_deg;
             let keep = self.drop_probability <= 0.0 || rng.random::<f64>() >= self.drop_probability;
             if let Some(table) = &actual.rz_deg {
                 let v = play(&mut pos_rz, table.value(phi_eff), half);

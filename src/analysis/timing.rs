@@ -305,9 +305,9 @@ fn forward_segments(run: &MeasuredRun) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
     let mut i = 0;
     while i < run.len() {
-        if run.phase[i] == Phase::Forward {
+        if run.phase[i] == Phase::Forward && !run.is_ramping(i) {
             let s = i;
-            while i < run.len() && run.phase[i] == Phase::Forward {
+            while i < run.len() && run.phase[i] == Phase::Forward && !run.is_ramping(i) {
                 i += 1;
             }
             if i - s >= 2 {
@@ -423,7 +423,7 @@ fn find_crossing(
     let a = b - 1;
     let seg_start = {
         let mut s = a;
-        while s > 0 && input.run.phase[s - 1] == Phase::Forward {
+        while s > 0 && input.run.phase[s - 1] == Phase::Forward && !input.run.is_ramping(s - 1) {
             s -= 1;
         }
         s
