@@ -9,6 +9,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 pub mod motion;
+pub mod ports;
 
 /// Design, fabricate and bench-verify multi-point conjugation mechanisms.
 #[derive(Debug, Parser)]
@@ -29,6 +30,8 @@ pub struct Cli {
 pub enum Command {
     /// Check, plot and sample motion specifications.
     Motion(motion::MotionArgs),
+    /// List serial ports with USB vendor/product/serial where known.
+    Ports(ports::PortsArgs),
 }
 
 /// Set up `tracing` output on stderr from the -v/-q flags (`RUST_LOG` overrides).
@@ -56,6 +59,7 @@ pub fn init_logging(verbose: u8, quiet: bool) {
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Motion(args) => motion::run(args),
+        Command::Ports(args) => ports::run(args),
     }
 }
 
