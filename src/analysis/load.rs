@@ -12,6 +12,7 @@ use std::path::{Path, PathBuf};
 use nalgebra::{Quaternion, UnitQuaternion};
 
 use super::run::{unwrap_in_place, MeasuredRun, Phase, Resolution};
+use super::target::TargetLaw;
 use super::AnalysisError;
 use crate::rig::config::{Dof as RigDof, SensorConfig};
 use crate::rig::recording::{flags, RecordingMeta, RecordingReader, RowBuf};
@@ -222,4 +223,158 @@ pub fn load_run(dir: &Path) -> Result<LoadedRecording, AnalysisError> {
         stale_rows: stale,
         sensors_used,
     })
+}
+
+/// Millimetres per model unit when the target is a motion file (no mechanism to say):
+/// the rig plant's default, so simulated benches and analysis agree.
+pub const DEFAULT_SCALE_MM: f64 = crate::rig::sim::plant::DEFAULT_SCALE_MM;
+
+/// Where the target law comes from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum TargetSource {
+    /// A `mechanism.json` (or the directory holding it).
+    Mechanism(PathBuf),
+    /// A motion file (`.toml` keyframes or `.csv` dense).
+    Motion(PathBuf),
+}
+
+impl TargetSource {
+    /// `mechanism` or `motion`.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            TargetSource::Mechanism(_) => "mechanism",
+            TargetSource::Motion(_) => "motion",
+        }
+    }
+
+    /// The path.
+    pub fn path(&self) -> &Path {
+        match self {
+            TargetSource::Mechanism(p) | TargetSource::Motion(p) => p,
+        }
+    }
+}
+
+/// `scale_mm` of a mechanism file (directory or file), or the default when absent.
+fn mechanism_scale_mm(path: &Path) -> Result<f64, AnalysisError> {
+    let file = if path.is_dir() {
+        path.join("mechanism.json")
+    } else {
+        path.to_path_buf()
+    };
+    let text = std::fs::read_to_string(&file).map_err(|e| AnalysisError::io(&file, e))?;
+    let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| AnalysisError::Target {
+        path: file.clone(),
+        message: e.to_string(),
+    })?;
+    match v.get("scale_mm") {
+        None => Ok(DEFAULT_SCALE_MM),
+        Some(x) => x
+            .as_f64()
+            .filter(|s| s.is_finite() && *s > 0.0)
+            .ok_or_else(|| AnalysisError::Target {
+                path: file,
+                message: format!("field `scale_mm`: {x} is not a positive number"),
+            }),
+    }
+}
+
+/// Load the target law.
+pub fn load_target(src: &TargetSource) -> Result<TargetLaw, AnalysisError> {
+    let err = |e: crate::motion::MotionError| AnalysisError::Target {
+        path: src.path().to_path_buf(),
+        message: e.to_string(),
+    };
+    match src {
+        TargetSource::Mechanism(p) => {
+            let m = crate::motion::Motion::from_mechanism_file(p).map_err(err)?;
+            Ok(TargetLaw::from_motion(&m, mechanism_scale_mm(p)?))
+        }
+        TargetSource::Motion(p) => {
+            let m = crate::motion::Motion::from_file(p).map_err(err)?;
+            Ok(TargetLaw::from_motion(&m, DEFAULT_SCALE_MM))
+        }
+    }
+}
+
+/// The target a recording names in its sidecar (relative paths are tried as given, then
+/// relative to the recording directory's parents).
+pub fn recorded_target(loaded: &LoadedRecording) -> Result<TargetSource, AnalysisError> {
+    let t = &loaded.meta.target;
+    let mut candidates = vec![t.path.clone()];
+    if t.path.is_relative() {
+        let mut d = Some(loaded.dir.as_path());
+        while let Some(dir) = d {
+            candidates.push(dir.join(&t.path));
+            d = dir.parent();
+        }
+    }
+    let path =
+        candidates
+            .into_iter()
+            .find(|p| p.exists())
+            .ok_or_else(|| AnalysisError::Target {
+                path: t.path.clone(),
+                message:
+                    "the recording's target file does not exist here; pass --mechanism or --motion"
+                        .into(),
+            })?;
+    match t.kind.as_str() {
+        "mechanism" => Ok(TargetSource::Mechanism(path)),
+        "motion" => Ok(TargetSource::Motion(path)),
+        other => Err(AnalysisError::Target {
+            path,
+            message: format!("unknown target kind `{other}` in the sidecar (mechanism or motion)"),
+        }),
+    }
+}
+
+/// Analyse a recording directory and write its report into `<recording_dir>/report/` (or
+/// `opts.out_dir`). The target is the one the sidecar names unless `opts` overrides it.
+pub fn analyze_and_report(
+    recording_dir: &Path,
+    opts: &super::ReportOptions,
+) -> Result<super::Summary, AnalysisError> {
+    let loaded = load_run(recording_dir)?;
+    let src = match (&opts.mechanism, &opts.motion) {
+        (Some(_), Some(_)) => {
+            return Err(AnalysisError::BadOption {
+                option: "--mechanism/--motion".into(),
+                message: "give one target, not both".into(),
+            })
+        }
+        (Some(m), None) => TargetSource::Mechanism(m.clone()),
+        (None, Some(m)) => TargetSource::Motion(m.clone()),
+        (None, None) => recorded_target(&loaded)?,
+    };
+    let law = load_target(&src)?;
+    if loaded.truncated_last_line {
+        tracing::warn!(
+            "{}: the last CSV line was cut off (crash or unplug) and was dropped",
+            recording_dir.display()
+        );
+    }
+    let analysis = super::analyze(
+        &loaded.run,
+        &law,
+        &super::AnalysisOptions {
+            timing_levels: opts.timing_levels.clone(),
+        },
+    )?;
+    let out_dir = opts
+        .out_dir
+        .clone()
+        .unwrap_or_else(|| recording_dir.join("report"));
+    let source = super::report::SourceInfo {
+        recording_dir: recording_dir.to_path_buf(),
+        complete: Some(loaded.meta.complete),
+        end_reason: loaded.meta.end_reason.clone(),
+        rows: loaded.rows,
+        stale_rows: loaded.stale_rows,
+        truncated_last_line: loaded.truncated_last_line,
+        device_counts: serde_json::to_value(loaded.meta.counts).unwrap_or_default(),
+        target_kind: src.kind().into(),
+        target_path: src.path().to_path_buf(),
+    };
+    super::report::write_report(&out_dir, &analysis, &loaded.run, &law, source, opts)
 }

@@ -7,7 +7,7 @@
 //! - [`load`]: a recording directory plus its rig calibration → [`MeasuredRun`], and a
 //!   mechanism or motion file → [`TargetLaw`];
 //! - [`target`]: the target law tabulated over the driver angle (follower at φ is M²(φ/2π));
-//! - [`align`]: constant driver-angle and sensor offsets (3R: frame offsets), lag and
+//! - [`mod@align`]: constant driver-angle and sensor offsets (3R: frame offsets), lag and
 //!   backlash when both directions were run, all reported with standard errors;
 //! - [`metrics`]: per-sample errors and their statistics per channel, direction and cycle;
 //!   repeatability and hysteresis;
@@ -33,6 +33,7 @@ use nalgebra::UnitQuaternion;
 
 pub use align::{align, Alignment, Dof, Estimate};
 pub use error::AnalysisError;
+pub use load::{analyze_and_report, load_run, load_target, TargetSource};
 pub use metrics::{ChannelErrors, ChannelMetrics, ErrorStats};
 pub use report::{ReportOptions, Summary};
 pub use run::{MeasuredRun, Phase, Resolution};

@@ -171,6 +171,9 @@ pub struct TargetLaw {
     pub rotation: Option<RotationTable>,
     /// Key poses (3R), for per-key-pose errors.
     pub key_poses: Vec<KeyPose>,
+    /// The motion the tables were built from, when there is one (its charts are reused so
+    /// the report draws the axis path on the same plot as `motion show`).
+    pub motion: Option<crate::motion::Motion>,
 }
 
 impl TargetLaw {
@@ -183,6 +186,7 @@ impl TargetLaw {
             tz_mm: None,
             rotation: None,
             key_poses: Vec::new(),
+            motion: None,
         }
     }
 
@@ -198,6 +202,7 @@ impl TargetLaw {
             tz_mm: Some(PeriodicTable::from_fn(TARGET_TABLE_SAMPLES, height_mm)),
             rotation: None,
             key_poses: Vec::new(),
+            motion: None,
         }
     }
 
@@ -213,7 +218,36 @@ impl TargetLaw {
             tz_mm: None,
             rotation: Some(RotationTable::from_fn(TARGET_TABLE_SAMPLES, rotation)),
             key_poses,
+            motion: None,
         }
+    }
+
+    /// The target law of a [`crate::motion::Motion`]: θ(t) from its unwrapped angle, h(t)
+    /// in millimetres (`scale_mm` per model unit), R(t) and the key poses for 3R.
+    pub fn from_motion(motion: &crate::motion::Motion, scale_mm: f64) -> Self {
+        use crate::motion::MotionClass;
+        let name = motion.name();
+        let angle = |t: f64| motion.angle_z(t).map_or(0.0, |a| a[0].to_degrees());
+        let mut law = match motion.class() {
+            MotionClass::R1 => Self::rotation_1r(name, angle),
+            MotionClass::R1T1 => Self::cylindrical(name, angle, |t| {
+                motion.height(t).map_or(0.0, |h| h[0] * scale_mm)
+            }),
+            MotionClass::R3 => Self::spherical(
+                name,
+                |t| motion.sample(t).rotation,
+                motion
+                    .keyframes()
+                    .iter()
+                    .map(|k| KeyPose {
+                        t: k.t,
+                        rotation: k.rotation,
+                    })
+                    .collect(),
+            ),
+        };
+        law.motion = Some(motion.clone());
+        law
     }
 
     /// The motion class this law describes: "1R", "1R1T" or "3R".

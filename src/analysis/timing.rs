@@ -16,7 +16,7 @@
 //! is the larger of the propagated one and the observed scatter, divided by √cycles, and is
 //! reported expanded (k = 2, ≈95 %).
 //!
-//! It does not align anything; it takes the sensor offset from [`super::align`].
+//! It does not align anything; it takes the sensor offset from [`mod@super::align`].
 
 use super::run::{MeasuredRun, Phase};
 use super::target::PeriodicTable;

@@ -317,15 +317,16 @@ pub fn timing_chart(
     ))
 }
 
-fn az_el(v: Vector3<f64>) -> (f64, f64) {
-    (
-        v.y.atan2(v.x).to_degrees(),
-        v.z.clamp(-1.0, 1.0).asin().to_degrees(),
-    )
+/// The projection `motion show` uses for the end-effector axis: azimuthal equidistant
+/// around the rest direction +z (tilt towards +x, tilt towards +y, degrees).
+fn project(v: Vector3<f64>) -> (f64, f64) {
+    let tilt = v.z.clamp(-1.0, 1.0).acos().to_degrees();
+    let az = v.y.atan2(v.x);
+    (tilt * az.cos(), tilt * az.sin())
 }
 
-/// 3R: the end-effector axis (follower +z) path as azimuth/elevation, measured (frame
-/// offsets removed) against target, with the key poses marked.
+/// 3R: the end-effector axis (follower +z) path, measured (frame offsets removed) on the
+/// same plot as `motion show` draws the target (its projection, tilt circle and keyframes).
 pub fn axis_chart(
     dir: &Path,
     run: &MeasuredRun,
@@ -338,49 +339,57 @@ pub fn axis_chart(
             "no orientation data to plot".into(),
         ));
     };
-    let unwrap_az = |pts: Vec<(f64, f64)>| -> Vec<(f64, f64)> {
-        // Break the line where the azimuth wraps.
-        let mut out = Vec::with_capacity(pts.len());
-        for (k, p) in pts.iter().enumerate() {
-            if k > 0 && (p.0 - pts[k - 1].0).abs() > 180.0 {
-                out.push((f64::NAN, f64::NAN));
-            }
-            out.push(*p);
-        }
-        out
-    };
-    let target: Vec<(f64, f64)> = (0..=720)
-        .map(|k| az_el(rot.eval(k as f64 * 0.5) * Vector3::z()))
-        .collect();
-    let d0 = a.alignment.driver_offset_deg.value;
-    let _ = d0;
     let measured: Vec<(f64, f64)> = run
         .measured_indices()
         .step_by(stride(run.len()))
-        .map(|i| az_el(off.world.inverse() * meas[i] * off.mount.inverse() * Vector3::z()))
+        .map(|i| project(off.world.inverse() * meas[i] * off.mount.inverse() * Vector3::z()))
         .collect();
-    let keys: Vec<(f64, f64)> = law
-        .key_poses
-        .iter()
-        .map(|k| az_el(k.rotation * Vector3::z()))
-        .collect();
-    let chart = Chart::new(
-        format!("{}: end-effector axis path (azimuth/elevation)", law.name),
-        "azimuth [°]",
-        "elevation [°]",
-    )
-    .with(Series::points(
-        "measured (frame offsets removed)",
-        measured,
-        2,
-        0,
-    ))
-    .with(Series::dashed("target", unwrap_az(target), 6))
-    .with(Series::points("key poses", keys, 7, 1));
+    let base = law.motion.as_ref().and_then(|m| {
+        crate::motion::figures::charts(m, 360)
+            .into_iter()
+            .find(|(name, _)| name == "axis-path")
+            .map(|(_, c)| c)
+    });
+    let mut chart = match base {
+        Some(mut c) => {
+            c.title = format!(
+                "{}: end-effector axis, measured vs target (seen from above)",
+                law.name
+            );
+            c
+        }
+        None => {
+            let target: Vec<(f64, f64)> = (0..=720)
+                .map(|k| project(rot.eval(k as f64 * 0.5) * Vector3::z()))
+                .collect();
+            let keys: Vec<(f64, f64)> = law
+                .key_poses
+                .iter()
+                .map(|k| project(k.rotation * Vector3::z()))
+                .collect();
+            let mut c = Chart::new(
+                format!(
+                    "{}: end-effector axis, measured vs target (seen from above)",
+                    law.name
+                ),
+                "tilt towards +x [deg]",
+                "tilt towards +y [deg]",
+            )
+            .with(Series::line("target axis path", target, 0))
+            .with(Series::points("keyframes", keys, 5, 1));
+            c.equal_aspect = true;
+            c.size = (900, 900);
+            c
+        }
+    };
+    // Measured first in the legend order does not matter; draw it under the target line.
+    chart
+        .series
+        .insert(0, Series::points("measured axis", measured, 2, 4));
     let stem = dir.join("axis_path");
     chart.write(&stem)?;
     Ok((
-        "End-effector axis (follower +z) on the sphere as azimuth/elevation: measured against target, key poses marked.".into(),
+        "End-effector axis (follower +z) seen from above (tilt from +z towards x and y): measured against the target path, key poses marked.".into(),
         stem.with_extension("png"),
     ))
 }
