@@ -16,6 +16,8 @@
 
 use std::time::Duration;
 
+pub mod stepper;
+
 use crate::rig::recording::{Counts, DeviceInfo};
 use crate::rig::RigError;
 
