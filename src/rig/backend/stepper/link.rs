@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 
 use mpc_wire::host::{CommandChannel, GapCounter, PollAction, RetryPolicy, TimestampUnwrapper};
 use mpc_wire::{
-    encode_frame, AckCode, Command, Decoder, EventKind, FrameError, Report, MAX_FRAME_LEN,
+    AckCode, Command, Decoder, EventKind, FrameError, Report, MAX_FRAME_LEN,
     PROTOCOL_VERSION,
 };
 

@@ -179,7 +179,7 @@ impl StepperBench {
             .name(format!("mpc-link {}", path.display()))
             .spawn(move || io.run())
             .map_err(|e| RigError::Setup(format!("cannot start the link thread: {e}")))?;
-        let mut bench = StepperBench {
+        let bench = StepperBench {
             path: path.to_path_buf(),
             driver: driver.clone(),
             rig: rig.clone(),
