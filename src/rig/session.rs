@@ -133,6 +133,9 @@ pub struct Progress {
     pub elapsed_s: f64,
 }
 
+/// A live progress callback.
+pub type ProgressFn = Box<dyn FnMut(&Progress) + Send>;
+
 /// Everything a session needs.
 pub struct MeasureOptions {
     /// Rig file.
@@ -154,7 +157,7 @@ pub struct MeasureOptions {
     /// Set to stop early (Ctrl-C); the recording is kept, marked incomplete.
     pub cancel: Arc<AtomicBool>,
     /// Called with live progress about every [`PROGRESS_INTERVAL`].
-    pub progress: Option<Box<dyn FnMut(&Progress) + Send>>,
+    pub progress: Option<ProgressFn>,
 }
 
 /// How a session ended.
@@ -222,7 +225,9 @@ pub fn check_plan(rig: &RigConfig, opts: &MeasureOptions) -> Result<(), RigError
         )));
     }
     if opts.cycles == 0 {
-        return Err(RigError::Safety("at least one measured cycle is needed".into()));
+        return Err(RigError::Safety(
+            "at least one measured cycle is needed".into(),
+        ));
     }
     let revs = f64::from(opts.cycles + opts.settle_cycles) * if opts.reverse { 2.0 } else { 1.0 };
     let planned_s = revs / (opts.speed_rpm / 60.0) * RUN_TIME_MARGIN;
@@ -588,8 +593,14 @@ mod tests {
         assert!(matches!(plan.step(1080.0), Step::Reverse));
         plan.turn = Some(1080.0);
         // Overshoot while decelerating moves the turning point.
-        assert!(matches!(plan.step(1085.0), Step::Continue(Phase::Settle, _)));
-        assert!(matches!(plan.step(1085.0 - 400.0), Step::Continue(Phase::Reverse, _)));
+        assert!(matches!(
+            plan.step(1085.0),
+            Step::Continue(Phase::Settle, _)
+        ));
+        assert!(matches!(
+            plan.step(1085.0 - 400.0),
+            Step::Continue(Phase::Reverse, _)
+        ));
         assert!(matches!(plan.step(1085.0 - 1081.0), Step::Done));
     }
 

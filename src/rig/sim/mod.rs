@@ -10,3 +10,4 @@
 
 pub mod plant;
 pub mod pty;
+pub mod stepper;

@@ -11,8 +11,7 @@ use std::time::{Duration, Instant};
 
 use mpc_wire::host::{CommandChannel, GapCounter, PollAction, RetryPolicy, TimestampUnwrapper};
 use mpc_wire::{
-    AckCode, Command, Decoder, EventKind, FrameError, Report, MAX_FRAME_LEN,
-    PROTOCOL_VERSION,
+    AckCode, Command, Decoder, EventKind, FrameError, Report, MAX_FRAME_LEN, PROTOCOL_VERSION,
 };
 
 use crate::rig::backend::Sample;
@@ -358,7 +357,9 @@ impl IoThread {
         let now = self.now_ms(st);
         match self.channel.poll(now, out) {
             Ok(PollAction::Resend { len }) => {
-                self.port.write_all(&out[..len]).map_err(|e| e.to_string())?;
+                self.port
+                    .write_all(&out[..len])
+                    .map_err(|e| e.to_string())?;
                 st.last_sent = Instant::now();
             }
             Ok(PollAction::GaveUp(o)) => {
@@ -385,7 +386,9 @@ impl IoThread {
                     .channel
                     .send(command, now, out)
                     .map_err(|e| format!("cannot encode {}: {e}", command.name()))?;
-                self.port.write_all(&out[..len]).map_err(|e| e.to_string())?;
+                self.port
+                    .write_all(&out[..len])
+                    .map_err(|e| e.to_string())?;
                 st.last_sent = Instant::now();
                 st.in_flight = next;
             }
@@ -475,7 +478,10 @@ impl IoThread {
     }
 
     fn reconnect(&mut self, st: &mut Loop, why: &str) -> Result<(), RigError> {
-        tracing::warn!("{}: link lost ({why}); trying to reconnect", self.path.display());
+        tracing::warn!(
+            "{}: link lost ({why}); trying to reconnect",
+            self.path.display()
+        );
         let give_up = Instant::now() + RECONNECT_WINDOW;
         let outage_start = Instant::now();
         loop {
@@ -534,9 +540,9 @@ impl IoThread {
             // The device clock may have restarted; keep ours monotonic across the outage.
             st.unwrap = TimestampUnwrapper::new();
             st.stream_start = None;
-            st.time_offset = st.last_device_us.map_or(0, |t| {
-                t + outage_start.elapsed().as_micros() as u64
-            });
+            st.time_offset = st
+                .last_device_us
+                .map_or(0, |t| t + outage_start.elapsed().as_micros() as u64);
             st.last_device_us = None;
             st.gaps = GapCounter::new();
             st.mark_next |= flags::RECONNECTED | flags::GAP_BEFORE;

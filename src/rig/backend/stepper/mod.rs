@@ -75,9 +75,9 @@ impl StepperBench {
                 rig.driver.kind()
             )));
         };
-        let port_cfg = rig.port(&driver.port).ok_or_else(|| {
-            RigError::Setup(format!("rig has no port named `{}`", driver.port))
-        })?;
+        let port_cfg = rig
+            .port(&driver.port)
+            .ok_or_else(|| RigError::Setup(format!("rig has no port named `{}`", driver.port)))?;
         let path = resolve_port(port_cfg)?;
         Self::open_path(rig, driver, &path, port_cfg.baud)
     }
@@ -113,10 +113,9 @@ impl StepperBench {
         }
         let (gear_motor, gear_output) = gear_fraction(driver.gear_ratio)?;
         let max_rpm = driver.max_speed_rpm.min(rig.safety.max_speed_rpm);
-        let usteps_per_rev = f64::from(driver.steps_per_rev)
-            * f64::from(driver.microsteps)
-            * f64::from(gear_motor)
-            / f64::from(gear_output);
+        let usteps_per_rev =
+            f64::from(driver.steps_per_rev) * f64::from(driver.microsteps) * f64::from(gear_motor)
+                / f64::from(gear_output);
         let step_rate = max_rpm / 60.0 * usteps_per_rev;
         if step_rate > f64::from(caps.max_step_rate_hz) {
             return Err(RigError::Safety(format!(
@@ -124,19 +123,20 @@ impl StepperBench {
                 caps.max_step_rate_hz
             )));
         }
-        let batch = (rate / FRAMES_PER_SECOND)
-            .round()
-            .clamp(1.0, (MAX_BATCH.min(usize::from(caps.max_batch.max(1)))) as f64)
-            as u8;
+        let batch = (rate / FRAMES_PER_SECOND).round().clamp(
+            1.0,
+            (MAX_BATCH.min(usize::from(caps.max_batch.max(1)))) as f64,
+        ) as u8;
         let imu_every = if caps.imu_rate_hz > 0 {
-            (rate / f64::from(caps.imu_rate_hz)).round().clamp(1.0, 255.0) as u8
+            (rate / f64::from(caps.imu_rate_hz))
+                .round()
+                .clamp(1.0, 255.0) as u8
         } else {
             1
         };
         let wire_config = Config {
-            steps_per_rev: u16::try_from(driver.steps_per_rev).map_err(|_| {
-                RigError::Setup("driver.steps_per_rev must fit in 16 bits".into())
-            })?,
+            steps_per_rev: u16::try_from(driver.steps_per_rev)
+                .map_err(|_| RigError::Setup("driver.steps_per_rev must fit in 16 bits".into()))?,
             microsteps: driver.microsteps as u16,
             gear_motor,
             gear_output,
@@ -399,7 +399,9 @@ impl SampleStream for StepperBench {
         if (rate_hz - f64::from(self.wire_config.sample_rate_hz)).abs() > 0.5 {
             let mut c = self.wire_config;
             c.sample_rate_hz = rate_hz.round().clamp(1.0, 65_535.0) as u16;
-            c.batch_len = (rate_hz / FRAMES_PER_SECOND).round().clamp(1.0, MAX_BATCH as f64) as u8;
+            c.batch_len = (rate_hz / FRAMES_PER_SECOND)
+                .round()
+                .clamp(1.0, MAX_BATCH as f64) as u8;
             c.validate()
                 .map_err(|e| RigError::Setup(format!("device configuration: {e}")))?;
             self.command(Command::Configure(c))?;
