@@ -96,7 +96,7 @@ pub fn load_run(dir: &Path) -> Result<LoadedRecording, AnalysisError> {
         rz_deg: rz.map(|_| Vec::with_capacity(guess)),
         tz_mm: tz.map(|_| Vec::with_capacity(guess)),
         rotation: imu.map(|_| Vec::with_capacity(guess)),
-        ramping: Vec::with_capacity(guess),
+        ramping: Vec::new(),
         resolution: Resolution {
             rz_deg: rz
                 .and_then(|(s, _)| s.counts_per_rev())
@@ -203,7 +203,6 @@ pub fn load_run(dir: &Path) -> Result<LoadedRecording, AnalysisError> {
             _ => Phase::Settle,
         });
         run.driver_deg.push(row.driver_angle_deg);
-        run.ramping.push(row.flags & flags::RAMPING != 0);
     }
     if let Some(v) = &mut run.rz_deg {
         // The incremental unwrap above is exact; this is a no-op guard for stale-row skips.

@@ -38,6 +38,12 @@ pub const TIMING_WINDOW_STEPS: f64 = 4.0;
 /// Resolution of the device clock, seconds. Default 1 µs (the recording's `device_time_us`).
 pub const CLOCK_RESOLUTION_S: f64 = 1e-6;
 
+/// A cycle is used for timing only when the driver speed over each of its durations
+/// (span / duration) stays within this fraction of the cycle's mean speed. Default 0.02: a
+/// stepper at constant commanded speed holds it to far better than 0.1 %; a cycle that
+/// includes an acceleration ramp or a stall would bias the time ratio and is left out.
+pub const TIMING_STEADY_SPEED: f64 = 0.02;
+
 /// Coverage factor for reported expanded uncertainties. Default 2 (≈95 % for normal errors).
 pub const COVERAGE_FACTOR: f64 = 2.0;
 
@@ -106,6 +112,9 @@ pub struct TimingReport {
     pub ratios: Vec<RatioEstimate>,
     /// Per complete forward cycle.
     pub cycles: Vec<CycleTiming>,
+    /// Complete cycles left out because the driver speed was not steady
+    /// ([`TIMING_STEADY_SPEED`]).
+    pub cycles_rejected_unsteady: usize,
 }
 
 /// Parse `--timing 0,180,360`: at least two strictly monotone, finite angles.
@@ -187,6 +196,7 @@ pub fn timing(input: &TimingInput<'_>) -> Result<TimingReport, AnalysisError> {
     let noise = noise_std(input.follower_deg, input.run);
     let step = input.quantum_deg.max(3.0 * noise);
     let mut cycles = Vec::new();
+    let mut rejected = 0;
     for (s, e) in forward_segments(input.run) {
         let phi = &input.run.driver_deg;
         let k0 = (phi[s] / 360.0).floor() as i64;
@@ -212,13 +222,19 @@ pub fn timing(input: &TimingInput<'_>) -> Result<TimingReport, AnalysisError> {
             }
             if crossings.len() == levels.len() {
                 start = i.saturating_sub(1).max(s);
-                cycles.push(cycle_timing(k, crossings));
+                let c = cycle_timing(k, crossings);
+                if steady(&c) {
+                    cycles.push(c);
+                } else {
+                    rejected += 1;
+                }
             }
         }
     }
     if cycles.is_empty() {
         return Err(AnalysisError::NotEnoughData(format!(
-            "no complete forward cycle passes all timing angles {levels:?}"
+            "no complete forward cycle at steady speed passes all timing angles {levels:?} \
+             ({rejected} complete cycles had an unsteady driver speed)"
         )));
     }
     let nl = levels.len();
@@ -265,7 +281,22 @@ pub fn timing(input: &TimingInput<'_>) -> Result<TimingReport, AnalysisError> {
         mean_spans_deg: mean_spans,
         ratios,
         cycles,
+        cycles_rejected_unsteady: rejected,
     })
+}
+
+/// Whether the driver speed was steady over the cycle's durations.
+fn steady(c: &CycleTiming) -> bool {
+    let total_t: f64 = c.durations_s.iter().sum();
+    let total_phi: f64 = c.spans_deg.iter().sum();
+    if total_t <= 0.0 || total_phi == 0.0 {
+        return false;
+    }
+    let mean = total_phi / total_t;
+    c.durations_s
+        .iter()
+        .zip(&c.spans_deg)
+        .all(|(d, s)| *d > 0.0 && ((s / d) / mean - 1.0).abs() <= TIMING_STEADY_SPEED)
 }
 
 fn cycle_timing(cycle: i64, crossings: Vec<Crossing>) -> CycleTiming {
