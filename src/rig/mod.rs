@@ -3,3 +3,5 @@
 //! session and the recording it writes.
 //!
 //! It does not judge the measurement: comparing against the target is [`crate::analysis`].
+
+pub mod sim;
