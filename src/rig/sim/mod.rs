@@ -1,4 +1,13 @@
-//! Simulated benches on pseudo-terminals: devices that look exactly like real ones to the
-//! host code, driven by the plant model.
+//! Simulated benches: the plant model and the simulated devices that serve it on
+//! pseudo-terminals, so the host code under test talks to them exactly as to real hardware.
+//!
+//! - [`plant`]: the follower's response to the driver (target law plus imperfections) and
+//!   the link faults, shared by every simulator.
+//! - [`dynamixel`]: a Protocol 2.0 bus with an XL430-class driver servo and a torque-off
+//!   follower servo.
+//!
+//! It owns no host-side protocol logic: the backends in [`crate::rig::backend`] are the
+//! same for real and simulated devices.
 
 pub mod dynamixel;
+pub mod plant;
