@@ -31,32 +31,70 @@ pub mod packet;
 pub mod server;
 pub mod servo;
 
+use std::f64::consts::TAU;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 
 pub use bus::{Bus, BusConfig, FollowerLaw};
-pub use server::{HardwareFault, LinkFaults, ServerEnd, ServerOptions};
+pub use server::{HardwareFault, ServerEnd, ServerOptions};
 
-/// What can go wrong when starting the simulated bus.
-#[derive(Debug, thiserror::Error)]
-pub enum SimDynamixelError {
-    /// The pseudo-terminal could not be created or configured.
-    #[error("simulated Dynamixel bus: pseudo-terminal: {0}")]
-    Pty(String),
-    /// The bench layout is inconsistent.
-    #[error("simulated Dynamixel bus: {0}")]
-    Config(String),
+use crate::rig::sim::plant::{FollowerState, Plant, PlantConfig, TargetLaw};
+use crate::rig::RigError;
+
+/// A target law shared between threads (the simulator's plant and its caller).
+#[derive(Clone)]
+pub struct SharedLaw(pub Arc<dyn TargetLaw>);
+
+impl TargetLaw for SharedLaw {
+    fn follower_at(&self, t: f64) -> FollowerState {
+        self.0.follower_at(t)
+    }
 }
 
-/// Everything the simulator needs besides the plant model.
-#[derive(Debug, Clone, PartialEq, Default)]
+impl std::fmt::Debug for SharedLaw {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("SharedLaw(..)")
+    }
+}
+
+/// Everything the simulated bus needs.
+#[derive(Debug, Clone)]
 pub struct SimDynamixelOptions {
+    /// The target law the follower obeys (a mechanism's or a motion file's).
+    pub target: SharedLaw,
+    /// Imperfections and link faults (`--fault key=value`).
+    pub plant: PlantConfig,
     /// Servo IDs, gear ratio and mounting offsets.
     pub bus: BusConfig,
-    /// Wire pacing and injected faults.
+    /// Wire pacing and injected hardware faults.
     pub server: ServerOptions,
+}
+
+impl SimDynamixelOptions {
+    /// Default bench (driver ID 1, follower ID 2, direct drive, no faults) for a target law.
+    pub fn new(target: Arc<dyn TargetLaw>) -> Self {
+        Self {
+            target: SharedLaw(target),
+            plant: PlantConfig::default(),
+            bus: BusConfig::default(),
+            server: ServerOptions::default(),
+        }
+    }
+}
+
+/// The follower servo's view of the plant: the true follower angle with the encoder's gain
+/// error, quantization and noise applied (the servo *is* the encoder), at 4096 counts/rev.
+struct PlantFollower(Arc<Mutex<Plant>>);
+
+impl FollowerLaw for PlantFollower {
+    fn follower_angle(&mut self, driver_angle: f64, _t_s: f64) -> f64 {
+        let mut plant = server::lock(&self.0);
+        let angle = plant.follower(driver_angle).angle_z;
+        let counts = plant.rotary_counts(angle, servo::PULSES_PER_REV);
+        counts as f64 / servo::PULSES_PER_REV * TAU
+    }
 }
 
 /// A running simulated bus. Dropping it (or [`SimDynamixelHandle::stop`]) ends the thread
@@ -77,7 +115,7 @@ impl SimDynamixelHandle {
 
     /// Lock the bus to inspect (or inject faults into) the simulated servos.
     pub fn bus(&self) -> MutexGuard<'_, Bus> {
-        self.bus.lock().unwrap_or_else(|p| p.into_inner())
+        server::lock(&self.bus)
     }
 
     /// Whether the server thread is still serving.
@@ -90,7 +128,7 @@ impl SimDynamixelHandle {
         self.shutdown()
     }
 
-    /// Block until the server ends by itself (a configured disconnect) or is stopped.
+    /// Block until the server ends by itself (a configured disconnect).
     pub fn wait(mut self) -> ServerEnd {
         self.thread.take().map_or(ServerEnd::Stopped, |t| {
             t.join().unwrap_or(ServerEnd::Stopped)
@@ -111,39 +149,56 @@ impl Drop for SimDynamixelHandle {
     }
 }
 
-/// Start a simulated bus on a new pseudo-terminal with the given follower law.
+/// Start a simulated bus on a new pseudo-terminal.
+pub fn spawn(options: SimDynamixelOptions) -> Result<SimDynamixelHandle, RigError> {
+    let plant = Arc::new(Mutex::new(Plant::new(
+        options.target.clone(),
+        options.plant.clone(),
+    )));
+    spawn_with_law(
+        options.bus,
+        options.server,
+        Box::new(PlantFollower(plant.clone())),
+        plant,
+    )
+}
+
+/// Start a simulated bus whose follower obeys `law` (tests with closed-form couplings);
+/// link faults come from `plant`'s configuration.
 pub fn spawn_with_law(
-    options: SimDynamixelOptions,
+    bus: BusConfig,
+    server: ServerOptions,
     law: Box<dyn FollowerLaw>,
-) -> Result<SimDynamixelHandle, SimDynamixelError> {
-    let b = &options.bus;
-    if b.follower_id == Some(b.driver_id) {
-        return Err(SimDynamixelError::Config(format!(
-            "driver and follower share ID {}",
-            b.driver_id
+    plant: Arc<Mutex<Plant>>,
+) -> Result<SimDynamixelHandle, RigError> {
+    if bus.follower_id == Some(bus.driver_id) {
+        return Err(RigError::Setup(format!(
+            "simulated Dynamixel bus: driver and follower share ID {}",
+            bus.driver_id
         )));
     }
-    for id in std::iter::once(b.driver_id).chain(b.follower_id) {
+    for id in std::iter::once(bus.driver_id).chain(bus.follower_id) {
         if id > 252 {
-            return Err(SimDynamixelError::Config(format!(
-                "servo ID {id} is outside 0..=252"
+            return Err(RigError::Setup(format!(
+                "simulated Dynamixel bus: servo ID {id} is outside 0..=252"
             )));
         }
     }
-    if !(b.gear_ratio.is_finite() && b.gear_ratio != 0.0) {
-        return Err(SimDynamixelError::Config(format!(
-            "gear ratio {} must be finite and non-zero",
-            b.gear_ratio
+    if !(bus.gear_ratio.is_finite() && bus.gear_ratio != 0.0) {
+        return Err(RigError::Setup(format!(
+            "simulated Dynamixel bus: gear ratio {} must be finite and non-zero",
+            bus.gear_ratio
         )));
     }
     let (master, slave, path) = server::open_raw_pty()?;
-    let bus = Arc::new(Mutex::new(Bus::new(options.bus.clone(), law)));
+    let bus = Arc::new(Mutex::new(Bus::new(bus, law)));
     let stop = Arc::new(AtomicBool::new(false));
     let thread = server::Server {
         master: std::fs::File::from(master),
         slave,
         bus: bus.clone(),
-        options: options.server,
+        plant,
+        options: server,
         stop: stop.clone(),
     }
     .spawn()?;

@@ -18,15 +18,13 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use super::bus::Bus;
+use super::packet::Decoder;
+use crate::rig::sim::plant::{LinkByte, LinkFaults, Plant};
+use crate::rig::RigError;
 use nix::fcntl::{fcntl, FcntlArg, OFlag};
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
 use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, SetArg};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
-
-use super::bus::Bus;
-use super::packet::Decoder;
-use super::SimDynamixelError;
 
 /// Inter-byte timeout after which a partial packet is discarded. Default 100 ms: far longer
 /// than any gap inside a packet from a host, short enough to recover quickly from a
@@ -36,19 +34,6 @@ pub const PARTIAL_PACKET_TIMEOUT: Duration = Duration::from_millis(100);
 /// How long the server thread waits for input before advancing the mechanics anyway.
 /// Default 2 ms: the follower keeps moving smoothly between host requests.
 pub const IDLE_POLL: Duration = Duration::from_millis(2);
-
-/// Faults on the serial link, applied to the bytes the simulator sends.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct LinkFaults {
-    /// Probability that a status byte is dropped. Default 0.
-    pub drop_probability: f64,
-    /// Probability that a status byte has one bit flipped. Default 0.
-    pub corrupt_probability: f64,
-    /// Close the pseudo-terminal (as if unplugged) this many seconds after start.
-    pub disconnect_at_s: Option<f64>,
-    /// Seed of the fault generator.
-    pub seed: u64,
-}
 
 /// A hardware error to raise on a servo at a given time (e.g. an overload mid-run).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -67,8 +52,6 @@ pub struct ServerOptions {
     /// Delay each status packet by its transmission time at the control table's baud rate
     /// (as a real half-duplex bus would). Default true.
     pub pace_wire: bool,
-    /// Link faults.
-    pub link: LinkFaults,
     /// Hardware faults to inject.
     pub hardware_faults: Vec<HardwareFault>,
 }
@@ -77,7 +60,6 @@ impl Default for ServerOptions {
     fn default() -> Self {
         Self {
             pace_wire: true,
-            link: LinkFaults::default(),
             hardware_faults: Vec::new(),
         }
     }
@@ -89,23 +71,22 @@ pub fn wire_time_s(bytes: usize, baud: u32) -> f64 {
 }
 
 /// Open a pseudo-terminal pair in raw mode; returns (master, slave, slave path).
-pub fn open_raw_pty() -> Result<(OwnedFd, OwnedFd, PathBuf), SimDynamixelError> {
-    let pty = nix::pty::openpty(None, None)
-        .map_err(|e| SimDynamixelError::Pty(format!("openpty: {e}")))?;
-    let mut t = tcgetattr(pty.slave.as_fd())
-        .map_err(|e| SimDynamixelError::Pty(format!("tcgetattr: {e}")))?;
+pub fn open_raw_pty() -> Result<(OwnedFd, OwnedFd, PathBuf), RigError> {
+    let pty = nix::pty::openpty(None, None).map_err(|e| RigError::Pty(format!("openpty: {e}")))?;
+    let mut t =
+        tcgetattr(pty.slave.as_fd()).map_err(|e| RigError::Pty(format!("tcgetattr: {e}")))?;
     cfmakeraw(&mut t);
     tcsetattr(pty.slave.as_fd(), SetArg::TCSANOW, &t)
-        .map_err(|e| SimDynamixelError::Pty(format!("tcsetattr: {e}")))?;
+        .map_err(|e| RigError::Pty(format!("tcsetattr: {e}")))?;
     let path = nix::unistd::ttyname(pty.slave.as_fd())
-        .map_err(|e| SimDynamixelError::Pty(format!("ttyname: {e}")))?;
+        .map_err(|e| RigError::Pty(format!("ttyname: {e}")))?;
     let flags = fcntl(pty.master.as_raw_fd(), FcntlArg::F_GETFL)
-        .map_err(|e| SimDynamixelError::Pty(format!("fcntl: {e}")))?;
+        .map_err(|e| RigError::Pty(format!("fcntl: {e}")))?;
     fcntl(
         pty.master.as_raw_fd(),
         FcntlArg::F_SETFL(OFlag::from_bits_truncate(flags) | OFlag::O_NONBLOCK),
     )
-    .map_err(|e| SimDynamixelError::Pty(format!("fcntl: {e}")))?;
+    .map_err(|e| RigError::Pty(format!("fcntl: {e}")))?;
     Ok((pty.master, pty.slave, path))
 }
 
@@ -122,21 +103,23 @@ pub(super) struct Server {
     pub master: File,
     pub slave: OwnedFd,
     pub bus: Arc<Mutex<Bus>>,
+    /// The plant, shared with the follower law: its link faults apply to every status byte.
+    pub plant: Arc<Mutex<Plant>>,
     pub options: ServerOptions,
     pub stop: Arc<AtomicBool>,
 }
 
 impl Server {
-    pub fn spawn(self) -> Result<JoinHandle<ServerEnd>, SimDynamixelError> {
+    pub fn spawn(self) -> Result<JoinHandle<ServerEnd>, RigError> {
         std::thread::Builder::new()
             .name("sim-dynamixel".into())
             .spawn(move || self.run())
-            .map_err(|e| SimDynamixelError::Pty(format!("spawning the simulator thread: {e}")))
+            .map_err(|e| RigError::Pty(format!("spawning the simulator thread: {e}")))
     }
 
     fn run(mut self) -> ServerEnd {
         let start = Instant::now();
-        let mut rng = ChaCha8Rng::seed_from_u64(self.options.link.seed);
+        let link: LinkFaults = lock(&self.plant).config().link.clone();
         let mut decoder = Decoder::new();
         let mut last_byte = Instant::now();
         let mut buf = [0u8; 4096];
@@ -147,12 +130,16 @@ impl Server {
                 break ServerEnd::Stopped;
             }
             let t = start.elapsed().as_secs_f64();
-            if self.options.link.disconnect_at_s.is_some_and(|d| t >= d) {
+            if link.disconnect_at_s.is_some_and(|d| t >= d) {
                 break ServerEnd::Disconnected;
             }
+            // A brief drop-out: the device neither hears nor answers for a while.
+            let silent = link
+                .dropout_at_s
+                .is_some_and(|d| t >= d && t < d + link.dropout_s);
             while pending_faults.first().is_some_and(|f| f.at_s <= t) {
                 let f = pending_faults.remove(0);
-                let mut bus = self.bus.lock().unwrap_or_else(|p| p.into_inner());
+                let mut bus = lock(&self.bus);
                 bus.advance(t);
                 let id = if f.driver {
                     bus.driver().id()
@@ -173,6 +160,7 @@ impl Server {
             };
             if readable {
                 match self.master.read(&mut buf) {
+                    Ok(n) if n > 0 && silent => {}
                     Ok(n) if n > 0 => {
                         decoder.push(&buf[..n]);
                         last_byte = Instant::now();
@@ -186,7 +174,7 @@ impl Server {
             while let Some(decoded) = decoder.next_packet() {
                 let now = start.elapsed().as_secs_f64();
                 let (replies, baud) = {
-                    let mut bus = self.bus.lock().unwrap_or_else(|p| p.into_inner());
+                    let mut bus = lock(&self.bus);
                     let replies = bus.handle(now, &decoded);
                     (replies, bus.driver().baud_rate())
                 };
@@ -196,7 +184,7 @@ impl Server {
                         wait += wire_time_s(r.bytes.len(), baud);
                     }
                     sleep_precise(Duration::from_secs_f64(wait));
-                    let bytes = self.apply_link_faults(&mut rng, r.bytes);
+                    let bytes = self.apply_link_faults(r.bytes);
                     // A full pty buffer (nobody reading) loses the bytes, as on a real bus.
                     let _ = self.master.write(&bytes);
                 }
@@ -216,24 +204,25 @@ impl Server {
         end
     }
 
-    fn apply_link_faults(&self, rng: &mut ChaCha8Rng, bytes: Vec<u8>) -> Vec<u8> {
-        let l = &self.options.link;
-        if l.drop_probability <= 0.0 && l.corrupt_probability <= 0.0 {
+    fn apply_link_faults(&self, bytes: Vec<u8>) -> Vec<u8> {
+        let mut plant = lock(&self.plant);
+        let l = &plant.config().link;
+        if l.drop_prob <= 0.0 && l.corrupt_prob <= 0.0 {
             return bytes;
         }
-        let mut out = Vec::with_capacity(bytes.len());
-        for b in bytes {
-            if rng.random::<f64>() < l.drop_probability {
-                continue;
-            }
-            if rng.random::<f64>() < l.corrupt_probability {
-                out.push(b ^ (1 << rng.random_range(0..8)));
-            } else {
-                out.push(b);
-            }
-        }
-        out
+        bytes
+            .into_iter()
+            .filter_map(|b| match plant.link_byte(b) {
+                LinkByte::Pass(b) | LinkByte::Corrupted(b) => Some(b),
+                LinkByte::Dropped => None,
+            })
+            .collect()
     }
+}
+
+/// Lock a mutex, recovering the data if another thread panicked while holding it.
+pub(super) fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
 /// Sleep for `d`, finishing with a short spin so sub-millisecond return delays are honoured
