@@ -78,3 +78,5 @@ pub trait SampleStream {
 pub trait Bench: Driver + SampleStream {}
 
 impl<T: Driver + SampleStream> Bench for T {}
+
+pub mod dynamixel;
