@@ -8,6 +8,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+pub mod motion;
 pub mod ports;
 
 /// Design, fabricate and bench-verify multi-point conjugation mechanisms.
@@ -27,6 +28,8 @@ pub struct Cli {
 /// The subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Check, plot and sample motion specifications.
+    Motion(motion::MotionArgs),
     /// List serial ports with USB vendor/product/serial where known.
     Ports(ports::PortsArgs),
 }
@@ -55,6 +58,7 @@ pub fn init_logging(verbose: u8, quiet: bool) {
 /// Run a parsed command line.
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
+        Command::Motion(args) => motion::run(args),
         Command::Ports(args) => ports::run(args),
     }
 }
