@@ -10,6 +10,7 @@ use clap::{Parser, Subcommand};
 
 pub mod motion;
 pub mod ports;
+pub mod sim_device;
 
 /// Design, fabricate and bench-verify multi-point conjugation mechanisms.
 #[derive(Debug, Parser)]
@@ -32,6 +33,8 @@ pub enum Command {
     Motion(motion::MotionArgs),
     /// List serial ports with USB vendor/product/serial where known.
     Ports(ports::PortsArgs),
+    /// Serve a simulated bench device on a pseudo-terminal (prints its path first).
+    SimDevice(sim_device::SimDeviceArgs),
 }
 
 /// Set up `tracing` output on stderr from the -v/-q flags (`RUST_LOG` overrides).
@@ -60,6 +63,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Motion(args) => motion::run(args),
         Command::Ports(args) => ports::run(args),
+        Command::SimDevice(args) => sim_device::run(args),
     }
 }
 

@@ -732,10 +732,7 @@ impl SampleStream for DynamixelBench {
     }
 
     fn counts(&self) -> Counts {
-        self.counts
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .clone()
+        *self.counts.lock().unwrap_or_else(|p| p.into_inner())
     }
 
     fn device_info(&self) -> DeviceInfo {

@@ -59,6 +59,36 @@ impl std::fmt::Debug for SharedLaw {
     }
 }
 
+/// A motion (from a motion file or a mechanism) as the follower law of the Dynamixel bench:
+/// the bench measures one rotation, so only 1R and 1R1T targets are accepted.
+#[derive(Debug, Clone)]
+pub struct MotionTarget(crate::motion::Motion);
+
+impl MotionTarget {
+    /// Wrap a motion; refuses a 3R motion, which a single follower servo cannot measure.
+    pub fn new(motion: crate::motion::Motion) -> Result<Self, RigError> {
+        if motion.angle_z(0.0).is_none() {
+            return Err(RigError::Setup(format!(
+                "motion `{}` is {:?}: a Dynamixel follower encoder measures one rotation about z; use a 1R or 1R1T target (3R needs the IMU bench)",
+                motion.name(),
+                motion.class()
+            )));
+        }
+        Ok(Self(motion))
+    }
+}
+
+impl TargetLaw for MotionTarget {
+    fn follower_at(&self, t: f64) -> FollowerState {
+        let pose = self.0.sample(t);
+        FollowerState {
+            angle_z: self.0.angle_z(t).map_or(0.0, |a| a[0]),
+            height: self.0.height(t).map_or(0.0, |h| h[0]),
+            rotation: pose.rotation,
+        }
+    }
+}
+
 /// Everything the simulated bus needs.
 #[derive(Debug, Clone)]
 pub struct SimDynamixelOptions {

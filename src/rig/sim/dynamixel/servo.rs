@@ -660,13 +660,11 @@ impl Servo {
                 self.vel = -self.vel;
                 self.turn_offset = -self.turn_offset;
             }
-            addr::GOAL_POSITION => {
-                if self.torque_enabled() && self.role == Role::Driver {
-                    let homing = self.value(addr::HOMING_OFFSET) as f64;
-                    self.profile = Some(PositionProfile {
-                        target: v as f64 - homing,
-                    });
-                }
+            addr::GOAL_POSITION if self.torque_enabled() && self.role == Role::Driver => {
+                let homing = self.value(addr::HOMING_OFFSET) as f64;
+                self.profile = Some(PositionProfile {
+                    target: v as f64 - homing,
+                });
             }
             _ => {}
         }
