@@ -8,6 +8,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+pub mod measure;
 pub mod motion;
 pub mod ports;
 pub mod sim_device;
@@ -35,6 +36,8 @@ pub enum Command {
     Ports(ports::PortsArgs),
     /// Serve a simulated bench device on a pseudo-terminal (prints its path first).
     SimDevice(sim_device::SimDeviceArgs),
+    /// Measure a mechanism on a bench (real or simulated) and record it.
+    Measure(measure::MeasureArgs),
 }
 
 /// Set up `tracing` output on stderr from the -v/-q flags (`RUST_LOG` overrides).
@@ -64,6 +67,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Motion(args) => motion::run(args),
         Command::Ports(args) => ports::run(args),
         Command::SimDevice(args) => sim_device::run(args),
+        Command::Measure(args) => measure::run(args),
     }
 }
 

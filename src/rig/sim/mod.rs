@@ -5,9 +5,12 @@
 //!   the link faults, shared by every simulator.
 //! - [`dynamixel`]: a Protocol 2.0 bus with an XL430-class driver servo and a torque-off
 //!   follower servo.
+//! - [`pty`]: pseudo-terminal pairs (and a stable symlink for re-plugging).
 //!
 //! It owns no host-side protocol logic: the backends in [`crate::rig::backend`] are the
 //! same for real and simulated devices.
 
 pub mod dynamixel;
 pub mod plant;
+pub mod pty;
+pub mod stepper;

@@ -48,11 +48,6 @@ pub const BUS_WATCHDOG_UNIT_MS: u32 = 20;
 /// watchdog period. Default 1/4: three heartbeats can be lost before the servo stops.
 pub const HEARTBEAT_FRACTION: u32 = 4;
 
-/// Present Velocity within this many units (0.229 rpm) of the goal counts as "at speed";
-/// outside it samples carry the RAMPING flag. Default 2 units (≈ 0.46 rpm): above the
-/// servo's velocity quantization, below any meaningful ramp.
-pub const AT_SPEED_TOLERANCE_UNITS: i32 = 2;
-
 // Control table addresses used by the backend (X-series, e-manual).
 const OPERATING_MODE: u16 = 11;
 const VELOCITY_LIMIT: u16 = 44;
@@ -78,10 +73,6 @@ struct Follower {
 struct Shared {
     /// Driver present position taken as 0° (pulses).
     home_pulses: f64,
-    /// Last commanded goal velocity (units) in velocity mode, for the RAMPING flag.
-    goal_units: i32,
-    /// Whether a constant-speed run is commanded (RAMPING is only meaningful then).
-    running: bool,
     /// Emergency stop latched.
     estop: bool,
     /// Operating mode currently set on the driver.
@@ -214,8 +205,6 @@ impl DynamixelBench {
             counts,
             shared: Shared {
                 home_pulses: 0.0,
-                goal_units: 0,
-                running: false,
                 estop: false,
                 mode: MODE_VELOCITY,
                 enabled: false,
@@ -536,7 +525,6 @@ impl Driver for DynamixelBench {
     fn disable(&mut self) -> Result<(), RigError> {
         self.write_u8(self.driver.id, TORQUE_ENABLE, 0, "torque off")?;
         self.shared.enabled = false;
-        self.shared.running = false;
         Ok(())
     }
 
@@ -581,15 +569,12 @@ impl Driver for DynamixelBench {
                 )?;
             }
         }
-        self.shared.goal_units = units;
-        self.shared.running = units != 0;
         Ok(())
     }
 
     fn move_to(&mut self, deg: f64) -> Result<(), RigError> {
         self.check_lost()?;
         let target = self.shared.home_pulses + deg * self.pulses_per_deg();
-        self.shared.running = false;
         if self.shared.mode == MODE_EXTENDED_POSITION
             && self.driver.mode == DynamixelMode::ExtendedPosition
         {
@@ -609,8 +594,6 @@ impl Driver for DynamixelBench {
     }
 
     fn stop(&mut self) -> Result<(), RigError> {
-        self.shared.running = false;
-        self.shared.goal_units = 0;
         if self.shared.mode == MODE_VELOCITY {
             self.write_i32(self.driver.id, GOAL_VELOCITY, 0, "stop (goal velocity 0)")
         } else {
@@ -626,7 +609,6 @@ impl Driver for DynamixelBench {
 
     fn estop(&mut self) -> Result<(), RigError> {
         self.shared.estop = true;
-        self.shared.running = false;
         self.disable()
     }
 
@@ -705,13 +687,7 @@ impl SampleStream for DynamixelBench {
                     if self.shared.estop {
                         f |= flags::ESTOP;
                     }
-                    if self.shared.running
-                        && self.shared.mode == MODE_VELOCITY
-                        && (raw.driver_velocity - self.shared.goal_units).abs()
-                            > AT_SPEED_TOLERANCE_UNITS
-                    {
-                        f |= flags::RAMPING;
-                    }
+
                     out.push(Sample {
                         device_time_us: raw.device_time_us,
                         driver_angle_deg: self.driver_deg(raw.driver_position),
