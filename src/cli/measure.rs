@@ -54,6 +54,15 @@ pub struct MeasureArgs {
     /// Recording directory (default out/measure/<UTC timestamp>).
     #[arg(short, long, value_name = "DIR")]
     pub output: Option<PathBuf>,
+    /// Do not analyse the recording at the end (run `mpc-rig analyze DIR` later).
+    #[arg(long)]
+    pub no_analysis: bool,
+    /// Tolerance on the RMS rotation error in degrees for the analysis at the end.
+    #[arg(long, value_parser = crate::cli::analyze::positive)]
+    pub tol_deg: Option<f64>,
+    /// Tolerance on every timing ratio for the analysis at the end.
+    #[arg(long, value_parser = crate::cli::analyze::positive)]
+    pub tol_ratio: Option<f64>,
 }
 
 /// Run the session; print where the recording is and how it ended.
@@ -104,8 +113,27 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
         "samples {}  gaps {} ({} samples missing)  crc errors {}  reconnects {}",
         c.samples, c.gaps, c.missing_samples, c.crc_errors, c.reconnects
     );
+    // Analyse whatever was recorded (an incomplete recording is still valid).
+    let mut analysis_code = ExitCode::SUCCESS;
+    if !args.no_analysis && c.samples > 0 {
+        let opts = crate::analysis::ReportOptions {
+            tol_deg: args.tol_deg,
+            tol_ratio: args.tol_ratio,
+            ..Default::default()
+        };
+        match crate::analysis::analyze_and_report(&outcome.dir, &opts) {
+            Ok(summary) => {
+                crate::cli::analyze::print_summary(&summary, &outcome.dir.join("report"));
+                analysis_code = crate::cli::analyze::exit_code(&summary);
+            }
+            Err(e) => eprintln!(
+                "warning: analysis failed: {e}; the recording is kept, retry with `mpc-rig analyze {}`",
+                outcome.dir.display()
+            ),
+        }
+    }
     let (code, what) = match &outcome.end {
-        EndReason::Finished => return Ok(ExitCode::SUCCESS),
+        EndReason::Finished => return Ok(analysis_code),
         EndReason::Cancelled => (EXIT_CANCELLED, "cancelled"),
         EndReason::Disconnected(_) => (EXIT_DISCONNECTED, "device disconnected"),
         EndReason::MaxRunTime | EndReason::Error(_) => (EXIT_INCOMPLETE, "run stopped early"),
