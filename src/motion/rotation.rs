@@ -5,7 +5,7 @@
 //! (each one is negated if that brings it closer to its predecessor, so consecutive keys are
 //! at most 180° apart on the quaternion sphere and the path never takes the long way round).
 //! The four components are then interpolated by one periodic cubic spline
-//! ([`super::spline`]), and the result p(t) is normalized: q(t) = p(t)/|p(t)|. If the loop
+//! (the `spline` module), and the result p(t) is normalized: q(t) = p(t)/|p(t)|. If the loop
 //! of keys closes with a sign flip (the last key is nearer to −q₀ than to q₀: the motion
 //! contains a net turn that is not contractible in SO(3)), the spline is anti-periodic,
 //! p(t + 1) = −p(t), which describes the same rotations. Normalization keeps every key
@@ -14,7 +14,7 @@
 //!
 //! **Derivatives.** With r = |p|: q′ = (p′ − q r′)/r and q″ = (p″ − 2q′r′ − q r″)/r where
 //! r′ = q·p′ and r″ = (|p′|² + p·p″ − r′²)/r. The angular velocity in the reference frame R
-//! (dR/dt = [ω]ₓR) is ω = 2·vec(q′ q̄) and its derivative is ω′ = 2·vec(q″ q̄) (the term
+//! (dR/dt = \[ω\]ₓR) is ω = 2·vec(q′ q̄) and its derivative is ω′ = 2·vec(q″ q̄) (the term
 //! q′ q̄′ = |q′|² is real).
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3, Vector4};
