@@ -3,8 +3,11 @@
 //!
 //! - [`plant`]: the follower's response to the driver (target law plus imperfections) and
 //!   the link faults, shared by every simulator.
+//! - [`pty`]: pseudo-terminal pairs (and a stable symlink for re-plugging).
 //!
 //! It owns no host-side protocol logic: the backends in [`crate::rig::backend`] are the
 //! same for real and simulated devices.
 
 pub mod plant;
+pub mod pty;
+pub mod stepper;
