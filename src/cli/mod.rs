@@ -12,6 +12,7 @@ pub mod analyze;
 pub mod measure;
 pub mod motion;
 pub mod ports;
+pub mod sim_device;
 
 /// Design, fabricate and bench-verify multi-point conjugation mechanisms.
 #[derive(Debug, Parser)]
@@ -37,6 +38,8 @@ pub enum Command {
     Motion(motion::MotionArgs),
     /// List serial ports with USB vendor/product/serial where known.
     Ports(ports::PortsArgs),
+    /// Serve a simulated bench device on a pseudo-terminal (prints its path first).
+    SimDevice(sim_device::SimDeviceArgs),
     /// Measure a mechanism on a bench (real or simulated) and record it.
     Measure(measure::MeasureArgs),
 }
@@ -68,6 +71,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Analyze(args) => analyze::run(args),
         Command::Motion(args) => motion::run(args),
         Command::Ports(args) => ports::run(args),
+        Command::SimDevice(args) => sim_device::run(args),
         Command::Measure(args) => measure::run(args),
     }
 }
