@@ -360,3 +360,66 @@ fn cli_check_reports_errors() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
 }
+
+/// Guards the acceleration warning: a fast swing loads, with one warning naming the
+/// magnitude beyond the documented threshold.
+#[test]
+fn large_angular_acceleration_is_a_warning() {
+    let m = Motion::from_file(&data("large-acceleration.toml")).unwrap();
+    let found: Vec<f64> = m
+        .warnings()
+        .iter()
+        .filter_map(|w| match w.kind {
+            WarningKind::LargeAngularAcceleration { value, .. } => Some(value),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(found.len(), 1);
+    assert!(found[0] > mpc_rig::motion::MAX_ANGULAR_ACCELERATION);
+    assert!(m.warnings()[0]
+        .to_string()
+        .contains("large-acceleration.toml:"));
+}
+
+/// Guards the 3R key step limit: nearly opposite consecutive orientations are rejected at
+/// the second key's line.
+#[test]
+fn three_r_step_too_large() {
+    let e = error_of("step-too-large-3r.toml");
+    assert!(matches!(e, MotionError::Invalid { .. }));
+    assert_message(
+        "step-too-large-3r.toml",
+        &e,
+        Some(10),
+        &["key[1]", "175.0°"],
+    );
+}
+
+/// Guards robustness: a file that is not text, and an empty file, are errors (not panics)
+/// naming the file.
+#[test]
+fn garbage_files_are_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let bin = dir.path().join("garbage.toml");
+    std::fs::write(&bin, [0xff_u8, 0xfe, 0x00, 0x80, 0x13]).unwrap();
+    let e = Motion::from_file(&bin).unwrap_err();
+    assert!(matches!(e, MotionError::Io { .. }));
+    assert!(e.to_string().contains("garbage.toml"));
+
+    let empty = dir.path().join("empty.csv");
+    std::fs::write(&empty, "").unwrap();
+    let e = Motion::from_file(&empty).unwrap_err();
+    assert!(e.to_string().contains("empty.csv"), "{e}");
+
+    let empty = dir.path().join("empty.toml");
+    std::fs::write(&empty, "").unwrap();
+    let e = Motion::from_file(&empty).unwrap_err();
+    assert!(e.to_string().contains("empty.toml"), "{e}");
+
+    let other = dir.path().join("motion.yaml");
+    std::fs::write(&other, "class: 1R").unwrap();
+    assert!(matches!(
+        Motion::from_file(&other).unwrap_err(),
+        MotionError::UnknownFormat { .. }
+    ));
+}
