@@ -322,7 +322,7 @@ fn align_scalar(run: &MeasuredRun, dofs: &[ScalarDof<'_>], idx: &[usize], both: 
                 jtj[(a, b)] = jtj[(b, a)];
             }
         }
-        let step = solve_ridge(&jtj, &jtr);
+        let step = solve_pinv(&jtj, &jtr);
         let mut step = step;
         let lim = |v: f64| v.clamp(-ALIGN_MAX_STEP_DEG, ALIGN_MAX_STEP_DEG);
         step[0] = lim(step[0]);
@@ -370,30 +370,54 @@ fn align_scalar(run: &MeasuredRun, dofs: &[ScalarDof<'_>], idx: &[usize], both: 
     }
 }
 
-fn ridge(jtj: &DMatrix<f64>) -> DMatrix<f64> {
-    let scale = jtj.diagonal().iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    let mut m = jtj.clone();
-    for k in 0..m.nrows() {
-        m[(k, k)] += 1e-12 * scale.max(1e-300);
-    }
-    m
+/// Singular values below this fraction of the largest count as zero in the normal
+/// matrix. Default 10⁻⁹: exact collinearity (a uniform law's driver and sensor offsets)
+/// shows up at round-off level (≈10⁻¹⁶), while genuinely separable parameters stay many
+/// orders above it.
+pub const SINGULAR_RELATIVE: f64 = 1e-9;
+
+/// Minimum-norm least-squares step (pseudo-inverse of the normal matrix): directions the
+/// data do not determine get no step at all, so nothing drifts along them.
+fn solve_pinv(jtj: &DMatrix<f64>, jtr: &DVector<f64>) -> DVector<f64> {
+    let svd = jtj.clone().svd(true, true);
+    let smax = svd.singular_values.max();
+    svd.solve(jtr, (SINGULAR_RELATIVE * smax).max(1e-300))
+        .unwrap_or_else(|_| DVector::zeros(jtr.len()))
 }
 
-fn solve_ridge(jtj: &DMatrix<f64>, jtr: &DVector<f64>) -> DVector<f64> {
-    let m = ridge(jtj);
-    m.clone()
-        .cholesky()
-        .map(|c| c.solve(jtr))
-        .or_else(|| m.lu().solve(jtr))
-        .unwrap_or_else(|| DVector::zeros(jtr.len()))
-}
-
+/// Covariance σ²·(JᵀJ)⁺, with infinite variance for parameters that lie in the normal
+/// matrix's null space (not determined by the data).
 fn covariance(jtj: &DMatrix<f64>, sigma2: f64) -> DMatrix<f64> {
     let n = jtj.nrows();
-    let inv = ridge(jtj)
-        .try_inverse()
-        .unwrap_or_else(|| DMatrix::from_element(n, n, f64::INFINITY));
-    inv * sigma2
+    let svd = jtj.clone().svd(true, true);
+    let smax = svd.singular_values.max();
+    let tol = SINGULAR_RELATIVE * smax;
+    let Some(v_t) = svd.v_t.as_ref() else {
+        return DMatrix::from_element(n, n, f64::INFINITY);
+    };
+    let mut cov = DMatrix::<f64>::zeros(n, n);
+    let mut null_weight = vec![0.0; n];
+    for (i, &sv) in svd.singular_values.iter().enumerate() {
+        let v = v_t.row(i);
+        if sv > tol {
+            for a in 0..n {
+                for b in 0..n {
+                    cov[(a, b)] += v[a] * v[b] / sv;
+                }
+            }
+        } else {
+            for (k, w) in null_weight.iter_mut().enumerate() {
+                *w += v[k] * v[k];
+            }
+        }
+    }
+    cov *= sigma2;
+    for (k, w) in null_weight.iter().enumerate() {
+        if *w > 1e-6 {
+            cov[(k, k)] = f64::INFINITY;
+        }
+    }
+    cov
 }
 
 /// Sign-aligned chordal mean of unit quaternions.
@@ -511,7 +535,7 @@ fn gauss_newton_rotation(
                 jtj[(a, b)] = jtj[(b, a)];
             }
         }
-        let step = -solve_ridge(&jtj, &jtr);
+        let step = -solve_pinv(&jtj, &jtr);
         let lim = |v: f64| v.clamp(-ALIGN_MAX_STEP_DEG, ALIGN_MAX_STEP_DEG);
         world = UnitQuaternion::from_scaled_axis(nalgebra::Vector3::new(step[0], step[1], step[2]))
             * world;
@@ -565,5 +589,64 @@ fn align_rotation(
         rotation: Some(RotationOffsets { world, mount }),
         both_directions: both,
         samples: idx.len(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::analysis::synthetic::{smooth_turn, SyntheticBench};
+
+    /// Guards identifiability reporting: on a uniform law (θ = φ) a driver offset and a
+    /// sensor offset are indistinguishable, and the fit says so instead of inventing a split.
+    #[test]
+    fn uniform_law_flags_driver_offset_as_undetermined() {
+        let law = TargetLaw::rotation_1r("uniform", |t| 360.0 * t);
+        let run = SyntheticBench {
+            driver_offset_deg: 2.0,
+            noise: 0.01,
+            seed: 3,
+            ..Default::default()
+        }
+        .generate(&law);
+        let al = align(&run, &law).unwrap();
+        assert!(
+            !al.driver_offset_deg.determined,
+            "{:?}",
+            al.driver_offset_deg
+        );
+        // The sum is what the data determine: follower = φ − 2 → c − δ₀ = −2.
+        let c = al.dofs[0].total_offset();
+        assert!((c - al.driver_offset_deg.value + 2.0).abs() < 0.01);
+    }
+
+    /// Guards the grid search range: a large driver offset (−150°) is found, not a nearby
+    /// local minimum.
+    #[test]
+    fn large_driver_offset_is_found() {
+        let law = smooth_turn();
+        let run = SyntheticBench {
+            driver_offset_deg: -150.0,
+            noise: 0.02,
+            seed: 8,
+            ..Default::default()
+        }
+        .generate(&law);
+        let al = align(&run, &law).unwrap();
+        assert!(
+            (al.driver_offset_deg.value + 150.0).abs() < 0.02,
+            "{:?}",
+            al.driver_offset_deg
+        );
+        assert!(al.driver_offset_deg.determined);
+    }
+
+    /// Guards the input checks: a 3R target without an IMU column is a clear mismatch.
+    #[test]
+    fn missing_sensor_is_a_mismatch() {
+        let law = TargetLaw::spherical("s", |_| UnitQuaternion::identity(), Vec::new());
+        let run = SyntheticBench::default().generate(&smooth_turn());
+        let e = align(&run, &law).unwrap_err().to_string();
+        assert!(e.contains("IMU"), "{e}");
     }
 }

@@ -554,3 +554,56 @@ fn find_crossing(
         b,
     ))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::analysis::synthetic::{piecewise_half_turn, SyntheticBench};
+
+    /// Guards the steady-speed rule: a cycle whose second half runs 5 % faster (a speed
+    /// change, not the mechanism) is rejected rather than reported as a ratio change.
+    #[test]
+    fn unsteady_cycle_is_rejected() {
+        let law = piecewise_half_turn(2.0 / 3.0);
+        let mut run = SyntheticBench::default().generate(&law);
+        // Compress time after driver angle 1000° by 5 %: the driver sped up there.
+        let i0 = run.driver_deg.iter().position(|p| *p > 1000.0).unwrap();
+        let t0 = run.time_s[i0];
+        for t in &mut run.time_s[i0..] {
+            *t = t0 + (*t - t0) / 1.05;
+        }
+        let table = law.rz_deg.as_ref().unwrap();
+        let follower = run.rz_deg.clone().unwrap();
+        let r = timing(&TimingInput {
+            run: &run,
+            follower_deg: &follower,
+            target: table,
+            quantum_deg: 0.0,
+            levels_deg: &[0.0, 180.0, 360.0],
+        })
+        .unwrap();
+        assert_eq!(
+            r.cycles_rejected_unsteady,
+            1,
+            "{:?}",
+            r.cycles.iter().map(|c| c.cycle).collect::<Vec<_>>()
+        );
+        assert!((r.ratios[0].measured - 2.0).abs() < 1e-9);
+    }
+
+    /// Guards option parsing messages.
+    #[test]
+    fn level_parsing_rejects_bad_lists() {
+        assert_eq!(parse_levels("0,180,360").unwrap(), vec![0.0, 180.0, 360.0]);
+        assert_eq!(parse_levels("0,-180").unwrap(), vec![0.0, -180.0]);
+        assert!(parse_levels("90")
+            .unwrap_err()
+            .to_string()
+            .contains("at least two"));
+        assert!(parse_levels("0,180,90")
+            .unwrap_err()
+            .to_string()
+            .contains("monotone"));
+        assert!(parse_levels("0,nan").is_err());
+    }
+}
