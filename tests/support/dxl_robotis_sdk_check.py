@@ -61,6 +61,13 @@ def main():
     ok("read stuffed", res, err, ph)
     if value != 0x00FDFFFF:
         fail("read stuffed", hex(value))
+    # Three FF before FD (a small negative velocity followed by an FD byte looks like this).
+    res, err = ph.write4ByteTxRx(port, 2, 224, 0xFDFFFFFF)
+    ok("write FF FF FF FD", res, err, ph)
+    value, res, err = ph.read4ByteTxRx(port, 2, 224)
+    ok("read FF FF FF FD", res, err, ph)
+    if value != 0xFDFFFFFF:
+        fail("read FF FF FF FD", hex(value))
 
     sync_read = GroupSyncRead(port, ph, 132, 4)
     for dxl_id in (1, 2):
