@@ -140,7 +140,10 @@ fn extended_position_move_to_lands_on_target() {
     }
     assert!((at - 540.0).abs() < 0.1, "ended at {at}°");
     bench.move_by(-90.0).unwrap();
-    std::thread::sleep(Duration::from_millis(900));
+    let end = Instant::now() + Duration::from_secs(5);
+    while Instant::now() < end && (bench.position_deg().unwrap() - 450.0).abs() >= 0.1 {
+        std::thread::sleep(Duration::from_millis(50));
+    }
     assert!((bench.position_deg().unwrap() - 450.0).abs() < 0.1);
 }
 

@@ -73,6 +73,9 @@ pub struct RawSample {
     pub flags: u32,
     /// Whether any servo set the alert bit (a hardware error is latched).
     pub alert: bool,
+    /// On the first sample after failed reads: how long the bus was silent (the servos'
+    /// bus watchdog may have stopped the driver meanwhile).
+    pub resumed_after: Option<Duration>,
 }
 
 /// What the worker reports while streaming.
@@ -131,6 +134,8 @@ struct Streamer {
     last_followers: Vec<i32>,
     failures_in_a_row: u32,
     gap_pending: bool,
+    /// When the last sample was read successfully.
+    last_success: Instant,
 }
 
 /// Run the worker until [`Message::Quit`] or the sender is dropped.
@@ -166,6 +171,7 @@ pub fn run(
                     last_followers: vec![0; setup.follower_ids.len()],
                     failures_in_a_row: 0,
                     gap_pending: false,
+                    last_success: Instant::now(),
                 });
                 continue;
             }
@@ -261,10 +267,13 @@ fn sample_once(
     }
     s.last_tick = Some(tick);
     let mut sample_flags = 0;
+    let mut resumed_after = None;
     if s.gap_pending {
         sample_flags |= flags::GAP_BEFORE;
         s.gap_pending = false;
+        resumed_after = Some(s.last_success.elapsed());
     }
+    s.last_success = Instant::now();
     let mut followers = Vec::with_capacity(ids.len() - 1);
     for (k, block) in blocks.iter().enumerate().skip(1) {
         match block {
@@ -288,6 +297,7 @@ fn sample_once(
         followers,
         flags: sample_flags,
         alert,
+        resumed_after,
     }));
     None
 }
