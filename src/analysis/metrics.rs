@@ -407,6 +407,9 @@ pub fn channel_metrics(run: &MeasuredRun, ch: &ChannelErrors) -> ChannelMetrics 
         });
         profile.cycles.push((direction, cycle, means));
     }
+    // Forward cycles first, then reverse, each in cycle order.
+    per_cycle.sort_by_key(|c: &CycleStats| (c.direction != Phase::Forward, c.cycle));
+    profile.cycles.sort_by_key(|c| (c.0 != Phase::Forward, c.1));
     for (di, target) in [&mut profile.forward, &mut profile.reverse]
         .into_iter()
         .enumerate()

@@ -59,14 +59,23 @@ pub fn markdown(blocks: &[Block]) -> String {
                 let _ = writeln!(s, "> **{t}**\n");
             }
             Block::Table(h, rows) => {
-                let _ = writeln!(s, "| {} |", h.join(" | "));
+                let cell = |c: &String| c.replace('|', "\\|");
+                let _ = writeln!(
+                    s,
+                    "| {} |",
+                    h.iter().map(cell).collect::<Vec<_>>().join(" | ")
+                );
                 let _ = writeln!(
                     s,
                     "|{}|",
                     h.iter().map(|_| "---").collect::<Vec<_>>().join("|")
                 );
                 for r in rows {
-                    let _ = writeln!(s, "| {} |", r.join(" | "));
+                    let _ = writeln!(
+                        s,
+                        "| {} |",
+                        r.iter().map(cell).collect::<Vec<_>>().join(" | ")
+                    );
                 }
                 s.push('\n');
             }

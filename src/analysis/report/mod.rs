@@ -22,6 +22,11 @@ use super::timing::TimingReport;
 use super::{Analysis, AnalysisError, KeyPoseError};
 use doc::Block;
 
+/// Cycles covering less of the revolution than this are left out of the per-cycle table
+/// of `report.md`/`report.html` (they stay in `summary.json`). Default 0.05: the few
+/// samples a run ends with past its last whole cycle say nothing about that cycle.
+pub const REPORT_MIN_COVERAGE: f64 = 0.05;
+
 /// Format tag of `summary.json`.
 pub const SUMMARY_FORMAT: &str = "mpcrig-summary/1";
 
@@ -536,9 +541,16 @@ fn blocks(s: &Summary, a: &Analysis, pictures: &[plots::Picture]) -> Vec<Block> 
         }
     }
     b.push(Block::Table(
-        ["channel", "samples", "RMS", "mean", "max |e|", "95 % |e|"]
-            .map(String::from)
-            .to_vec(),
+        [
+            "channel",
+            "samples",
+            "RMS",
+            "mean",
+            "largest",
+            "95 % within",
+        ]
+        .map(String::from)
+        .to_vec(),
         rows,
     ));
     let mut rows = Vec::new();
@@ -560,7 +572,7 @@ fn blocks(s: &Summary, a: &Analysis, pictures: &[plots::Picture]) -> Vec<Block> 
     }
     if let Some(hy) = s.lag.rotation_hysteresis {
         rows.push(vec![
-            "rotation hysteresis |ē_fwd − ē_rev|".into(),
+            "rotation hysteresis (forward vs reverse)".into(),
             format!("mean {} deg", f3(hy.mean)),
             format!("max {} deg", f3(hy.max_abs)),
         ]);
@@ -576,6 +588,7 @@ fn blocks(s: &Summary, a: &Analysis, pictures: &[plots::Picture]) -> Vec<Block> 
         let rows = c
             .per_cycle
             .iter()
+            .filter(|k| k.coverage >= REPORT_MIN_COVERAGE)
             .map(|k| {
                 vec![
                     format!("{} {}", k.direction.as_str(), k.cycle),
@@ -587,7 +600,7 @@ fn blocks(s: &Summary, a: &Analysis, pictures: &[plots::Picture]) -> Vec<Block> 
             })
             .collect();
         b.push(Block::Table(
-            ["cycle", "coverage", "RMS", "mean", "max |e|"]
+            ["cycle", "coverage", "RMS", "mean", "largest"]
                 .map(String::from)
                 .to_vec(),
             rows,

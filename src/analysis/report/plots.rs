@@ -129,7 +129,7 @@ pub fn error_chart(
     let u = unit_label(ch.unit);
     let mut chart = Chart::new(
         format!(
-            "{} error over driver angle — RMS {:.3}{u}, max |e| {:.3}{u}",
+            "{} error over driver angle — RMS {:.3}{u}, largest {:.3}{u}",
             ch.name, m.overall.rms, m.overall.max_abs
         ),
         "driver angle [°]",

@@ -1,0 +1,343 @@
+//! `mpc-rig demo`: the main job on a machine without hardware.
+//!
+//! Synthesizes the example mechanism (or reuses the cached one under `out/demo/`, keyed by
+//! the motion file's SHA-256, the seed, the synthesis settings and the tool version), starts
+//! a simulated bench in-process on a pseudo-terminal (our firmware core behind the stepper
+//! bench, or the Protocol 2.0 Dynamixel bus), measures a few cycles through the real serial
+//! session, analyses the recording and prints where the mechanism and the report are, with
+//! the headline figures. Options choose another example, the bench and injected faults
+//! (`--fault backlash=2`). Every step is a library call; this file only orchestrates.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Instant, SystemTime};
+
+use anyhow::{bail, Context as _};
+use clap::{Args, ValueEnum};
+use sha2::{Digest, Sha256};
+
+use crate::analysis::{analyze_and_report, ReportOptions};
+use crate::motion::Motion;
+use crate::rig::config::RigConfig;
+use crate::rig::recording::utc_dir_stamp;
+use crate::rig::session::{self, MeasureOptions, Progress, TargetSpec};
+use crate::rig::sim::plant::PlantConfig;
+use crate::synth::{Mechanism, SynthOptions, SynthProgress};
+
+/// Which simulated bench the demo measures on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum DemoBench {
+    /// Our firmware core driving a stepper, an AS5600 on the follower (rigs/sim-stepper.toml).
+    Stepper,
+    /// A Dynamixel driver servo and a torque-off follower servo (rigs/sim-dynamixel.toml).
+    Dynamixel,
+}
+
+/// Run the main job on a simulated bench: synthesize, measure, analyse, report.
+#[derive(Debug, Args)]
+pub struct DemoArgs {
+    /// Example motion from data/motions (file stem).
+    #[arg(long, default_value = "half-turn-2to1", conflicts_with = "motion")]
+    pub example: String,
+    /// A motion file instead of an example.
+    #[arg(long, value_name = "FILE")]
+    pub motion: Option<PathBuf>,
+    /// Simulated bench.
+    #[arg(long, value_enum, default_value_t = DemoBench::Stepper)]
+    pub bench: DemoBench,
+    /// Injected imperfection of the simulated mechanism or link, repeatable:
+    /// backlash=2, phase_lag=1, encoder_noise=2, ... (see `mpc-rig sim-device --help`).
+    #[arg(long = "fault", value_name = "KEY=VALUE")]
+    pub faults: Vec<String>,
+    /// Measured cycles per direction.
+    #[arg(long, default_value_t = 3)]
+    pub cycles: u32,
+    /// Driver speed, rpm.
+    #[arg(long, default_value_t = 30.0)]
+    pub speed: f64,
+    /// Measure forward only (no reverse run, so no backlash figure).
+    #[arg(long)]
+    pub no_reverse: bool,
+    /// Output directory (mechanism cache, recordings, reports).
+    #[arg(short, long, default_value = "out/demo")]
+    pub out: PathBuf,
+    /// Synthesis seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Reduced synthesis effort (fewer candidates and GA generations): faster, maybe a worse
+    /// mechanism. Used by the tests.
+    #[arg(long)]
+    pub quick: bool,
+    /// Synthesize again even when a cached mechanism exists.
+    #[arg(long)]
+    pub resynthesize: bool,
+    /// Tolerance on the RMS rotation error (degrees) for a pass/fail verdict.
+    #[arg(long, value_parser = crate::cli::analyze::positive)]
+    pub tol_deg: Option<f64>,
+    /// Tolerance on the timing ratio for a pass/fail verdict.
+    #[arg(long, value_parser = crate::cli::analyze::positive)]
+    pub tol_ratio: Option<f64>,
+}
+
+/// Short fault names the demo accepts besides the plant's own keys: `backlash=2` is
+/// `backlash_deg=2`, and likewise `phase_lag`, `imu_noise`, `imu_bias` (degrees) and
+/// `encoder_noise` (counts).
+fn fault_alias(fault: &str) -> String {
+    const ALIASES: [(&str, &str); 5] = [
+        ("backlash", "backlash_deg"),
+        ("phase_lag", "phase_lag_deg"),
+        ("imu_noise", "imu_noise_deg"),
+        ("imu_bias", "imu_bias_deg"),
+        ("encoder_noise", "encoder_noise_counts"),
+    ];
+    match fault.split_once('=') {
+        Some((k, v)) => ALIASES
+            .iter()
+            .find(|(short, _)| *short == k.trim())
+            .map_or_else(|| fault.to_string(), |(_, long)| format!("{long}={v}")),
+        None => fault.to_string(),
+    }
+}
+
+/// Find a file shipped with the repository: relative to the working directory first, then
+/// to the source tree the binary was built from.
+fn shipped(rel: &str) -> PathBuf {
+    let here = PathBuf::from(rel);
+    if here.exists() {
+        here
+    } else {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)
+    }
+}
+
+/// The synthesis settings of the demo.
+fn synth_options(args: &DemoArgs) -> SynthOptions {
+    let mut o = SynthOptions {
+        seed: args.seed,
+        ..SynthOptions::default()
+    };
+    if args.quick {
+        o.candidates = 8;
+        o.generations = 60;
+        o.population = 16;
+    }
+    o
+}
+
+/// Cache key: motion bytes, seed, synthesis settings, tool version.
+fn cache_key(motion_bytes: &[u8], o: &SynthOptions) -> String {
+    let mut h = Sha256::new();
+    h.update(motion_bytes);
+    h.update(
+        format!(
+            "seed={} k={:?} dx={:?} n={} m={} g={} p={} e={} scale={} version={}",
+            o.seed,
+            o.k,
+            o.dx,
+            o.samples,
+            o.candidates,
+            o.generations,
+            o.population,
+            o.max_eval,
+            o.scale_mm,
+            env!("CARGO_PKG_VERSION")
+        )
+        .as_bytes(),
+    );
+    h.finalize()
+        .iter()
+        .take(6)
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+/// Synthesis progress on stderr: attempts and GA generations.
+struct StderrProgress;
+
+impl SynthProgress for StderrProgress {
+    fn attempt_started(&self, k: usize, dx: f64, new_candidates: usize) {
+        eprintln!("      trying K = {k}, d_x = {dx}: {new_candidates} candidates to solve");
+    }
+}
+
+/// Synthesize or reuse the cached mechanism; returns its path and whether it was cached.
+fn mechanism_for(
+    args: &DemoArgs,
+    motion_path: &Path,
+    motion: &Motion,
+) -> anyhow::Result<(PathBuf, bool)> {
+    let bytes = std::fs::read(motion_path)
+        .with_context(|| format!("reading {}", motion_path.display()))?;
+    let o = synth_options(args);
+    let dir = args
+        .out
+        .join(format!("mechanism-{}-{}", motion.name(), cache_key(&bytes, &o)));
+    let file = dir.join("mechanism.json");
+    if file.exists() && !args.resynthesize {
+        match Mechanism::load(&file) {
+            Ok(_) => return Ok((file, true)),
+            Err(e) => eprintln!("      cached mechanism unusable ({e}); synthesizing again"),
+        }
+    }
+    let t0 = Instant::now();
+    let mech = crate::synth::synthesize(motion, &o, &StderrProgress)
+        .with_context(|| format!("synthesizing a mechanism for {}", motion.name()))?;
+    mech.save(&file)
+        .with_context(|| format!("saving {}", file.display()))?;
+    eprintln!("      synthesized in {:.1} s", t0.elapsed().as_secs_f64());
+    Ok((file, false))
+}
+
+/// Run `demo`.
+pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
+    let motion_path = match &args.motion {
+        Some(p) => p.clone(),
+        None => {
+            let p = shipped(&format!("data/motions/{}.toml", args.example));
+            if !p.exists() {
+                bail!(
+                    "no example `{}` (looked for {}); the examples are the files in data/motions",
+                    args.example,
+                    p.display()
+                );
+            }
+            p
+        }
+    };
+    let motion = Motion::from_file(&motion_path)
+        .with_context(|| format!("loading {}", motion_path.display()))?;
+    let faults: Vec<String> = args.faults.iter().map(|f| fault_alias(f)).collect();
+    let plant = PlantConfig::from_faults(&faults)?;
+    let rig_path = shipped(match args.bench {
+        DemoBench::Stepper => "rigs/sim-stepper.toml",
+        DemoBench::Dynamixel => "rigs/sim-dynamixel.toml",
+    });
+    let rig = RigConfig::load(&rig_path)?;
+
+    eprintln!("[1/4] mechanism for {} ({})", motion.name(), motion.class());
+    let (mech_path, cached) = mechanism_for(&args, &motion_path, &motion)?;
+    eprintln!(
+        "      {} {}",
+        if cached { "reusing" } else { "wrote" },
+        mech_path.display()
+    );
+    let target = Motion::from_mechanism_file(&mech_path)
+        .with_context(|| format!("reading the target law of {}", mech_path.display()))?;
+
+    eprintln!("[2/4] starting the simulated {:?} bench", args.bench);
+    let sim = Sim::spawn(args.bench, target, plant, &rig)?;
+    eprintln!("      device on {}", sim.path().display());
+
+    eprintln!(
+        "[3/4] measuring {} cycle(s){} at {} rpm",
+        args.cycles,
+        if args.no_reverse { "" } else { " forward and reverse" },
+        args.speed
+    );
+    let run_dir = args.out.join("runs").join(format!(
+        "{}-{}-{}",
+        utc_dir_stamp(SystemTime::now()),
+        motion.name(),
+        match args.bench {
+            DemoBench::Stepper => "stepper",
+            DemoBench::Dynamixel => "dynamixel",
+        }
+    ));
+    let cancel = Arc::new(AtomicBool::new(false));
+    {
+        let cancel = cancel.clone();
+        // Only the first handler wins; in tests the process may already have one.
+        let _ = ctrlc::set_handler(move || cancel.store(true, Ordering::Relaxed));
+    }
+    let mut last = Instant::now();
+    let mut opts = MeasureOptions {
+        rig_path: rig_path.clone(),
+        ports: vec![sim.path().display().to_string()],
+        target: TargetSpec::Mechanism(mech_path.clone()),
+        speed_rpm: args.speed,
+        cycles: args.cycles,
+        settle_cycles: session::DEFAULT_SETTLE_CYCLES,
+        reverse: !args.no_reverse,
+        out_dir: Some(run_dir.clone()),
+        cancel,
+        progress: Some(Box::new(move |p: &Progress| {
+            if last.elapsed().as_secs_f64() >= 1.0 {
+                eprintln!(
+                    "      [{:>7}] cycle {:.2}/{}  {} samples  {:.0} Hz{}",
+                    p.phase.as_str(),
+                    p.cycle,
+                    p.cycles,
+                    p.samples,
+                    p.sample_rate_hz,
+                    p.error_deg
+                        .map_or(String::new(), |e| format!("  error {e:+.2}°"))
+                );
+                last = Instant::now();
+            }
+        })),
+    };
+    let outcome = session::measure(&mut opts).context("measuring on the simulated bench")?;
+    drop(sim);
+    if !outcome.complete {
+        eprintln!(
+            "      the session ended early ({}); analysing what was recorded",
+            outcome.end
+        );
+    }
+
+    eprintln!("[4/4] analysing {}", outcome.dir.display());
+    let report = ReportOptions {
+        tol_deg: args.tol_deg,
+        tol_ratio: args.tol_ratio,
+        ..Default::default()
+    };
+    let summary = analyze_and_report(&outcome.dir, &report)
+        .with_context(|| format!("analysing {}", outcome.dir.display()))?;
+    println!();
+    println!("mechanism: {}{}", mech_path.display(), if cached { " (cached)" } else { "" });
+    println!("recording: {}", outcome.dir.display());
+    crate::cli::analyze::print_summary(&summary, &outcome.dir.join("report"));
+    Ok(crate::cli::analyze::exit_code(&summary))
+}
+
+/// A running simulated bench of either kind (stopped when dropped).
+enum Sim {
+    Stepper(crate::rig::sim::stepper::SimHandle),
+    Dynamixel(crate::rig::sim::dynamixel::SimDynamixelHandle),
+}
+
+impl Sim {
+    fn spawn(
+        bench: DemoBench,
+        target: Motion,
+        plant: PlantConfig,
+        rig: &RigConfig,
+    ) -> anyhow::Result<Sim> {
+        Ok(match bench {
+            DemoBench::Stepper => {
+                let opts = crate::rig::sim::stepper::SimStepperOptions {
+                    target,
+                    plant,
+                    mechanics: crate::rig::sim::stepper::Mechanics::from_rig(rig)?,
+                    link: None,
+                };
+                Sim::Stepper(crate::rig::sim::stepper::spawn(opts)?)
+            }
+            DemoBench::Dynamixel => {
+                let law = crate::rig::sim::dynamixel::MotionTarget::new(target)?;
+                let mut opts = crate::rig::sim::dynamixel::SimDynamixelOptions::new(Arc::new(law));
+                opts.plant = plant;
+                Sim::Dynamixel(crate::rig::sim::dynamixel::spawn(opts)?)
+            }
+        })
+    }
+
+    fn path(&self) -> &Path {
+        match self {
+            Sim::Stepper(h) => h.path(),
+            Sim::Dynamixel(h) => h.path(),
+        }
+    }
+}
