@@ -4,3 +4,7 @@
 //! (signed distance to hulls of projected normals in 1–3 D), SLSQP candidates, the genetic
 //! combination, the K/d_x search and the `mechanism.json` file. It does not build meshes or
 //! talk to hardware.
+
+pub mod bspline;
+pub mod closure;
+pub mod dual;
