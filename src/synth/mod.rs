@@ -8,3 +8,6 @@
 pub mod bspline;
 pub mod closure;
 pub mod dual;
+pub mod model;
+pub mod pose;
+pub mod energy;
