@@ -11,3 +11,6 @@ pub mod dual;
 pub mod model;
 pub mod pose;
 pub mod energy;
+pub mod optimizer;
+pub mod candidate;
+pub mod ga;
