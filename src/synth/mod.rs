@@ -14,3 +14,11 @@ pub mod energy;
 pub mod optimizer;
 pub mod candidate;
 pub mod ga;
+pub mod error;
+pub mod mechanism;
+pub mod search;
+
+pub use closure::Class;
+pub use error::SynthError;
+pub use mechanism::{CheckReport, Mechanism};
+pub use search::{synthesize_track, NoProgress, SynthOptions, SynthProgress};
