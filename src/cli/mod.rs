@@ -8,6 +8,9 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+pub mod motion;
+pub mod ports;
+
 /// Design, fabricate and bench-verify multi-point conjugation mechanisms.
 #[derive(Debug, Parser)]
 #[command(name = "mpc-rig", version, about, long_about = None)]
@@ -24,7 +27,12 @@ pub struct Cli {
 
 /// The subcommands.
 #[derive(Debug, Subcommand)]
-pub enum Command {}
+pub enum Command {
+    /// Check, plot and sample motion specifications.
+    Motion(motion::MotionArgs),
+    /// List serial ports with USB vendor/product/serial where known.
+    Ports(ports::PortsArgs),
+}
 
 /// Set up `tracing` output on stderr from the -v/-q flags (`RUST_LOG` overrides).
 pub fn init_logging(verbose: u8, quiet: bool) {
@@ -49,7 +57,10 @@ pub fn init_logging(verbose: u8, quiet: bool) {
 
 /// Run a parsed command line.
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
-    match cli.command {}
+    match cli.command {
+        Command::Motion(args) => motion::run(args),
+        Command::Ports(args) => ports::run(args),
+    }
 }
 
 /// Exit code for an error that reached the binary edge: 1 unless a subcommand asked for

@@ -177,6 +177,8 @@ impl Chart {
         Ok([png, svg])
     }
 
+    /// The (x, y) data ranges, padded.
+    #[allow(clippy::type_complexity)] // two plain (min, max) pairs; an alias would hide that
     fn ranges(&self) -> Result<((f64, f64), (f64, f64)), PlotError> {
         let finite = self
             .series

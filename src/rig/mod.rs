@@ -3,3 +3,18 @@
 //! session and the recording it writes.
 //!
 //! It does not judge the measurement: comparing against the target is [`crate::analysis`].
+//!
+//! - [`config`]: `rigs/*.toml` schema, validation and sensor calibration helpers.
+//! - [`recording`]: the recording directory (CSV + JSON sidecar), writer and reader.
+//! - [`backend`]: the driver and sample-stream traits, one folder per backend.
+//! - [`link`]: serial port listing and resolution.
+//! - [`sim`]: the plant model and the simulated devices behind pseudo-terminals.
+
+pub mod backend;
+pub mod config;
+pub mod error;
+pub mod link;
+pub mod recording;
+pub mod sim;
+
+pub use error::RigError;

@@ -1,0 +1,209 @@
+//! `mpc-rig motion check|show|sample`: validate, plot and sample motion specifications.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::{bail, Context};
+use clap::{Args, Subcommand};
+
+use crate::motion::{self, Motion, MotionClass, DEFAULT_SAMPLES};
+
+/// Work with motion specifications (.toml keyframes, .csv dense samples).
+#[derive(Debug, Args)]
+pub struct MotionArgs {
+    #[command(subcommand)]
+    pub command: MotionCommand,
+}
+
+/// The `motion` subcommands.
+#[derive(Debug, Subcommand)]
+pub enum MotionCommand {
+    /// Load and validate motion files; print a summary and any warnings.
+    Check {
+        /// Motion files (.toml or .csv) or mechanism.json files/directories.
+        #[arg(required = true)]
+        files: Vec<PathBuf>,
+        /// Treat warnings as errors (exit code 2).
+        #[arg(long)]
+        strict: bool,
+    },
+    /// Plot a motion (PNG and SVG): angles/heights over t, and for 3R the end-effector
+    /// axis path with the keyframes marked.
+    Show {
+        /// Motion file (.toml or .csv) or mechanism.json.
+        file: PathBuf,
+        /// Output directory (created if missing).
+        #[arg(short, long, default_value = "out/motion")]
+        output: PathBuf,
+        /// Samples per period for the curves.
+        #[arg(short = 'n', long, default_value_t = 4 * DEFAULT_SAMPLES)]
+        samples: usize,
+    },
+    /// Write the motion sampled at t_i = i/N as CSV (the dense format, readable again).
+    Sample {
+        /// Motion file (.toml or .csv) or mechanism.json.
+        file: PathBuf,
+        /// Number of samples per period.
+        #[arg(short = 'n', long, default_value_t = DEFAULT_SAMPLES)]
+        samples: usize,
+        /// Output file; standard output when absent.
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+        /// Add angular velocity/acceleration and velocity/acceleration columns.
+        #[arg(long)]
+        derivatives: bool,
+    },
+}
+
+/// Load a motion file, or the target law of a mechanism (a .json file or a directory).
+pub fn load(path: &std::path::Path) -> anyhow::Result<Motion> {
+    let is_mechanism = path.is_dir()
+        || path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("json"));
+    let motion = if is_mechanism {
+        Motion::from_mechanism_file(path)
+    } else {
+        Motion::from_file(path)
+    };
+    motion.with_context(|| format!("invalid motion {}", path.display()))
+}
+
+/// Run a `motion` subcommand.
+pub fn run(args: MotionArgs) -> anyhow::Result<ExitCode> {
+    match args.command {
+        MotionCommand::Check { files, strict } => check(&files, strict),
+        MotionCommand::Show {
+            file,
+            output,
+            samples,
+        } => {
+            let m = load(&file)?;
+            report_warnings(&m);
+            let written = motion::figures::write_all(&m, &output, samples)?;
+            for p in written {
+                println!("{}", p.display());
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        MotionCommand::Sample {
+            file,
+            samples,
+            output,
+            derivatives,
+        } => {
+            if samples == 0 {
+                bail!("--samples must be at least 1");
+            }
+            let m = load(&file)?;
+            report_warnings(&m);
+            let s = m.samples(samples);
+            match output {
+                Some(path) => {
+                    let f = std::fs::File::create(&path)
+                        .with_context(|| format!("cannot create {}", path.display()))?;
+                    motion::dense::write_csv(f, &m, &s, derivatives)
+                        .with_context(|| format!("cannot write {}", path.display()))?;
+                }
+                None => motion::dense::write_csv(std::io::stdout().lock(), &m, &s, derivatives)
+                    .context("cannot write to standard output")?,
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}
+
+fn report_warnings(m: &Motion) {
+    for w in m.warnings() {
+        tracing::warn!("{w}");
+    }
+}
+
+fn check(files: &[PathBuf], strict: bool) -> anyhow::Result<ExitCode> {
+    let mut failed = 0;
+    let mut warned = 0;
+    for path in files {
+        let m = match load(path) {
+            Ok(m) => m,
+            Err(e) => {
+                // Report every file; fail at the end.
+                eprintln!("error: {e:#}");
+                failed += 1;
+                continue;
+            }
+        };
+        println!("{}", summary(&m, path));
+        for w in m.warnings() {
+            println!("  warning: {w}");
+        }
+        if !m.warnings().is_empty() {
+            warned += 1;
+        }
+    }
+    if failed > 0 {
+        return Err(crate::cli::ExitStatusError {
+            code: 1,
+            message: format!("{failed} of {} motion file(s) invalid", files.len()),
+        }
+        .into());
+    }
+    if strict && warned > 0 {
+        return Err(crate::cli::ExitStatusError {
+            code: 2,
+            message: format!("{warned} motion file(s) have warnings (--strict)"),
+        }
+        .into());
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// One-paragraph description of a loaded motion.
+fn summary(m: &Motion, path: &std::path::Path) -> String {
+    let n = motion::WARNING_SCAN_SAMPLES;
+    let samples = m.samples(n);
+    let max = |f: &dyn Fn(&motion::PoseSample) -> f64| samples.iter().map(f).fold(0.0, f64::max);
+    let w = max(&|s| s.angular_velocity.norm());
+    let a = max(&|s| s.angular_acceleration.norm());
+    let mut out = format!(
+        "ok: {} — {} \"{}\", {} keyframe(s)",
+        path.display(),
+        m.class(),
+        m.name(),
+        m.keyframes().len()
+    );
+    match m.class() {
+        MotionClass::R1 | MotionClass::R1T1 => {
+            let (lo, hi) = samples
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |r, s| {
+                    let th = m.angle_z(s.t).map_or(0.0, |x| x[0]).to_degrees();
+                    (r.0.min(th), r.1.max(th))
+                });
+            out += &format!(
+                ", net {} turn(s), angle {lo:.1}°..{hi:.1}° ({} scheme)",
+                m.net_turns(),
+                m.angle_scheme().map_or("-".into(), |s| s.to_string())
+            );
+            if m.class() == MotionClass::R1T1 {
+                let (lo, hi) = samples
+                    .iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |r, s| {
+                        (r.0.min(s.translation.z), r.1.max(s.translation.z))
+                    });
+                out += &format!(", height {lo:.3}..{hi:.3}");
+            }
+        }
+        MotionClass::R3 => {
+            let tilt = samples
+                .iter()
+                .map(|s| motion::rotation::tilt_deg(&s.rotation))
+                .fold(0.0, f64::max);
+            out += &format!(", max tilt {tilt:.1}°");
+        }
+    }
+    out += &format!(
+        ", max |ω| {w:.2} rad/period, max |ω'| {a:.1} rad/period², {} warning(s)",
+        m.warnings().len()
+    );
+    out
+}

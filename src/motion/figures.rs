@@ -1,0 +1,273 @@
+//! The pictures of a motion (`mpc-rig motion show`), drawn through [`crate::plot`].
+//!
+//! - every class: angular velocity and acceleration over t;
+//! - 1R/1R1T: the unwrapped angle θ(t) with the keyframes marked; 1R1T also the height;
+//! - 3R: ZYX Euler angles over t (for reading only: the law itself is interpolated on
+//!   SO(3)), and the path of the end-effector axis (follower-local +z) in an azimuthal
+//!   equidistant projection around its rest direction, with keyframes, the start and the
+//!   [`super::MAX_TILT_DEG`] circle.
+//!
+//! This module decides what to plot; [`crate::plot`] owns how charts look.
+
+use std::path::{Path, PathBuf};
+
+use crate::plot::{Chart, PlotError, Series};
+
+use super::rotation::end_effector_axis;
+use super::{Motion, MotionClass};
+
+/// Unwrap a sequence of angles in degrees (remove ±360° jumps).
+fn unwrap_deg(values: &mut [f64]) {
+    for i in 1..values.len() {
+        let d = values[i] - values[i - 1];
+        values[i] -= 360.0 * (d / 360.0).round();
+    }
+}
+
+/// Build the charts for `motion` sampled at `n` points (plus the closing point t = 1).
+pub fn charts(motion: &Motion, n: usize) -> Vec<(String, Chart)> {
+    let n = n.max(8);
+    let ts: Vec<f64> = (0..=n).map(|i| i as f64 / n as f64).collect();
+    let samples: Vec<_> = ts.iter().map(|&t| motion.sample(t)).collect();
+    let name = motion.name();
+    let mut out = Vec::new();
+    let xr = Some((0.0, 1.0));
+    let t_label = "t [fraction of the period]";
+
+    match motion.class() {
+        MotionClass::R1 | MotionClass::R1T1 => {
+            let angle = |t: f64| motion.angle_z(t).map_or(0.0, |a| a[0]).to_degrees();
+            let mut c = Chart::new(
+                format!(
+                    "{name}: rotation about z ({} turn(s) per period)",
+                    motion.net_turns()
+                ),
+                t_label,
+                "θ [deg]",
+            )
+            .with(Series::line(
+                "θ(t)",
+                ts.iter().map(|&t| (t, angle(t))).collect(),
+                0,
+            ))
+            .with(Series::points(
+                "keyframes",
+                motion
+                    .keyframes()
+                    .iter()
+                    .map(|k| (k.t, angle(k.t)))
+                    .collect(),
+                5,
+                1,
+            ));
+            c.x_range = xr;
+            out.push(("angle".to_string(), c));
+            if motion.class() == MotionClass::R1T1 {
+                let h = |t: f64| motion.height(t).map_or(0.0, |h| h[0]);
+                let mut c = Chart::new(
+                    format!("{name}: height along z"),
+                    t_label,
+                    "h [model units]",
+                )
+                .with(Series::line(
+                    "h(t)",
+                    ts.iter().map(|&t| (t, h(t))).collect(),
+                    2,
+                ))
+                .with(Series::points(
+                    "keyframes",
+                    motion.keyframes().iter().map(|k| (k.t, h(k.t))).collect(),
+                    5,
+                    1,
+                ));
+                c.x_range = xr;
+                out.push(("height".to_string(), c));
+                let mut c = Chart::new(
+                    format!("{name}: vertical velocity and acceleration"),
+                    t_label,
+                    "dh/dt [units/period], d²h/dt² [units/period²]",
+                )
+                .with(Series::line(
+                    "dh/dt",
+                    samples.iter().map(|s| (s.t, s.velocity.z)).collect(),
+                    0,
+                ))
+                .with(Series::line(
+                    "d²h/dt²",
+                    samples.iter().map(|s| (s.t, s.acceleration.z)).collect(),
+                    1,
+                ));
+                c.x_range = xr;
+                out.push(("height-rates".to_string(), c));
+            }
+        }
+        MotionClass::R3 => {
+            // Euler angles for reading.
+            let mut e: [Vec<f64>; 3] = [Vec::new(), Vec::new(), Vec::new()];
+            for s in &samples {
+                let (roll, pitch, yaw) = s.rotation.euler_angles();
+                e[0].push(yaw.to_degrees());
+                e[1].push(pitch.to_degrees());
+                e[2].push(roll.to_degrees());
+            }
+            for v in &mut e {
+                unwrap_deg(v);
+            }
+            let mut c = Chart::new(
+                format!("{name}: orientation as ZYX Euler angles (interpolated on SO(3))"),
+                t_label,
+                "angle [deg]",
+            );
+            for (k, label) in ["yaw (z)", "pitch (y)", "roll (x)"].iter().enumerate() {
+                c.series.push(Series::line(
+                    *label,
+                    ts.iter().zip(&e[k]).map(|(&t, &v)| (t, v)).collect(),
+                    k,
+                ));
+            }
+            // Keyframes: mark on each curve at its sample nearest in value continuity.
+            let key_points = |k: usize| -> Vec<(f64, f64)> {
+                motion
+                    .keyframes()
+                    .iter()
+                    .map(|kf| {
+                        let i = ((kf.t * n as f64).round() as usize).min(n);
+                        let (roll, pitch, yaw) = kf.rotation.euler_angles();
+                        let raw = [yaw, pitch, roll][k].to_degrees();
+                        // Same branch as the unwrapped curve near that time.
+                        let v = raw - 360.0 * ((raw - e[k][i]) / 360.0).round();
+                        (kf.t, v)
+                    })
+                    .collect()
+            };
+            for k in 0..3 {
+                c.series.push(Series::points(
+                    if k == 0 { "keyframes" } else { "" },
+                    key_points(k),
+                    5,
+                    6,
+                ));
+            }
+            c.x_range = xr;
+            out.push(("euler".to_string(), c));
+
+            // End-effector axis path.
+            let project = |q: &nalgebra::UnitQuaternion<f64>| {
+                let a = q * end_effector_axis();
+                let tilt = a.z.clamp(-1.0, 1.0).acos().to_degrees();
+                let az = a.y.atan2(a.x);
+                (tilt * az.cos(), tilt * az.sin())
+            };
+            let circle: Vec<(f64, f64)> = (0..=180)
+                .map(|i| {
+                    let a = f64::from(i) / 180.0 * std::f64::consts::TAU;
+                    (super::MAX_TILT_DEG * a.cos(), super::MAX_TILT_DEG * a.sin())
+                })
+                .collect();
+            let mut c = Chart::new(
+                format!("{name}: end-effector axis (follower +z), seen from above"),
+                "tilt towards +x [deg]",
+                "tilt towards +y [deg]",
+            )
+            .with(Series::dashed(
+                format!("{}° tilt", super::MAX_TILT_DEG),
+                circle,
+                6,
+            ))
+            .with(Series::line(
+                "axis path",
+                samples.iter().map(|s| project(&s.rotation)).collect(),
+                0,
+            ))
+            .with(Series::points(
+                "keyframes",
+                motion
+                    .keyframes()
+                    .iter()
+                    .map(|k| project(&k.rotation))
+                    .collect(),
+                5,
+                1,
+            ))
+            .with(Series::points(
+                "t = 0",
+                vec![project(&samples[0].rotation)],
+                8,
+                2,
+            ));
+            c.equal_aspect = true;
+            c.size = (900, 900);
+            out.push(("axis-path".to_string(), c));
+        }
+    }
+
+    // Rates, all classes.
+    let comps = |f: &dyn Fn(&super::PoseSample) -> nalgebra::Vector3<f64>| -> [Vec<(f64, f64)>; 3] {
+        let mut r: [Vec<(f64, f64)>; 3] = [Vec::new(), Vec::new(), Vec::new()];
+        for s in &samples {
+            let v = f(s);
+            for k in 0..3 {
+                r[k].push((s.t, v[k]));
+            }
+        }
+        r
+    };
+    for (stem, title, unit, f) in [
+        (
+            "angular-velocity",
+            "angular velocity ω (frame R)",
+            "ω [rad/period]",
+            (&|s: &super::PoseSample| s.angular_velocity) as &dyn Fn(&super::PoseSample) -> _,
+        ),
+        (
+            "angular-acceleration",
+            "angular acceleration dω/dt (frame R)",
+            "dω/dt [rad/period²]",
+            &|s: &super::PoseSample| s.angular_acceleration,
+        ),
+    ] {
+        let [x, y, z] = comps(f);
+        let mut c = Chart::new(format!("{name}: {title}"), t_label, unit);
+        if motion.class() == MotionClass::R3 {
+            c.series.push(Series::line("x", x, 0));
+            c.series.push(Series::line("y", y, 1));
+        }
+        c.series.push(Series::line("z", z, 2));
+        c.x_range = xr;
+        out.push((stem.to_string(), c));
+    }
+    out
+}
+
+/// Write every chart of `motion` as `<dir>/<name>-<chart>.png` and `.svg`; returns the
+/// files written.
+pub fn write_all(motion: &Motion, dir: &Path, n: usize) -> Result<Vec<PathBuf>, FigureError> {
+    std::fs::create_dir_all(dir).map_err(|source| FigureError::Dir {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let mut written = Vec::new();
+    for (stem, chart) in charts(motion, n) {
+        let [png, svg] = chart.write(&dir.join(format!("{}-{stem}", motion.name())))?;
+        written.push(png);
+        written.push(svg);
+    }
+    Ok(written)
+}
+
+/// Why the figures could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum FigureError {
+    /// The output directory could not be created.
+    #[error("cannot create output directory {path}")]
+    Dir {
+        /// The directory.
+        path: PathBuf,
+        /// The operating system's error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A chart could not be drawn.
+    #[error(transparent)]
+    Plot(#[from] PlotError),
+}

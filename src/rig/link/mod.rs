@@ -1,0 +1,8 @@
+//! Serial links: finding ports (by path or USB serial number) and listing them.
+//!
+//! Owns port enumeration and resolution of a rig's `[[ports]]` entries to device paths. It
+//! does not speak any protocol; backends open the resolved paths themselves.
+
+mod ports;
+
+pub use ports::{list_ports, resolve_port, PortInfo};

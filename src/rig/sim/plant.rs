@@ -1,0 +1,554 @@
+//! The plant model shared by the simulated benches: where the follower is for a given
+//! driver angle, with the imperfections of a real printed mechanism and real sensors.
+//!
+//! The ideal follower obeys the target law (follower at driver angle φ is `M²(φ/2π)`,
+//! `docs/conventions.md`). [`PlantConfig`] adds, in this order:
+//! 1. **missed steps** — the physical driver loses a microstep with a given probability
+//!    (the simulator asks [`Plant::step_missed`] for each pulse and feeds the *physical*
+//!    angle back in);
+//! 2. **backlash** — a dead band of `backlash_deg` between driver and follower input: the
+//!    follower input only moves when the driver pushes on one side of the gap. It starts in
+//!    contact on the forward side (the follower lags `backlash/2` behind going forward);
+//! 3. **phase lag** — the follower acts as if the driver were `phase_lag_deg` behind;
+//! 4. sensor imperfections: **gain error** (encoder scale, `reading = true·(1+gain)`),
+//!    **quantization** (`encoder_resolution` counts per turn), Gaussian **encoder noise**,
+//!    IMU **bias** (a constant rotation) and Gaussian **IMU noise** (a random small
+//!    rotation per reading).
+//!
+//! Link faults (dropped or corrupted bytes, a disconnect, a brief drop-out) are parsed here
+//! too, so one `--fault key=value` list configures a whole simulated bench, but they are
+//! applied by the simulator's link ([`Plant::link_byte`]).
+//!
+//! Randomness comes from ChaCha8 streams seeded by `seed`, one stream for sensors and one
+//! for the link, so the same seed gives the same run and link faults do not change sensor
+//! noise. The model does not know about serial ports, firmware or Dynamixel registers.
+
+use std::f64::consts::TAU;
+
+use nalgebra::{UnitQuaternion, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// Default seed of the simulated imperfections (any fixed value; runs are reproducible).
+pub const DEFAULT_SEED: u64 = 0x6d70_6372_6967;
+
+/// Default millimetres per model unit for heights, the mechanism file's conventional
+/// `scale_mm` (conventions.md: the project's default is 10 mm per model unit).
+pub const DEFAULT_SCALE_MM: f64 = 10.0;
+
+/// Axis of the simulated IMU bias rotation: fixed (not random) and tilted off every
+/// coordinate axis so a bias shows up in all three angles.
+pub const IMU_BIAS_AXIS: [f64; 3] = [1.0, 1.0, 0.5];
+
+/// Error in a `--fault` option.
+#[derive(Debug, thiserror::Error)]
+pub enum PlantError {
+    /// Not `key=value`, unknown key or bad value.
+    #[error("--fault `{given}`: {message}")]
+    Fault {
+        /// The option as given.
+        given: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// The target law the plant follows: the follower pose at a fraction `t` of the period.
+///
+/// `crate::motion::Motion` implements it; tests use small closed-form laws.
+pub trait TargetLaw: Send + Sync {
+    /// Follower state at `t` (any real `t`; 1R/1R1T angles unwrapped across periods).
+    fn follower_at(&self, t: f64) -> FollowerState;
+}
+
+/// Follower state.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FollowerState {
+    /// Unwrapped rotation about +z in radians (1R/1R1T; 0 for 3R).
+    pub angle_z: f64,
+    /// Height along z in model units (1R1T; 0 otherwise).
+    pub height: f64,
+    /// Full orientation R₂.
+    pub rotation: UnitQuaternion<f64>,
+}
+
+/// Link fault settings (applied by the simulators' serial side).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct LinkFaults {
+    /// Probability that a byte sent to the host is dropped.
+    pub drop_prob: f64,
+    /// Probability that a byte sent to the host has a bit flipped.
+    pub corrupt_prob: f64,
+    /// Close the pseudo-terminal for good at this time (s since the simulator started).
+    pub disconnect_at_s: Option<f64>,
+    /// Start of a brief drop-out (s): the device disappears and comes back on the same path.
+    pub dropout_at_s: Option<f64>,
+    /// Length of the drop-out (s).
+    pub dropout_s: f64,
+    /// Protocol version the simulated firmware claims (to test version checks).
+    pub protocol_version: Option<u16>,
+}
+
+/// Imperfections of a simulated bench.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlantConfig {
+    /// Dead band between driver and follower input, degrees of driver angle.
+    pub backlash_deg: f64,
+    /// The follower acts as if the driver were this many degrees behind.
+    pub phase_lag_deg: f64,
+    /// Relative encoder scale error (0.01 = reads 1 % large).
+    pub gain_error: f64,
+    /// Standard deviation of encoder noise, in counts.
+    pub encoder_noise_counts: f64,
+    /// Quantization of the simulated encoders, counts per turn (`None`: the sensor's own).
+    pub encoder_resolution: Option<f64>,
+    /// Standard deviation of IMU noise, degrees (angle of a random rotation).
+    pub imu_noise_deg: f64,
+    /// IMU bias: a constant rotation of this angle about [`IMU_BIAS_AXIS`], degrees.
+    pub imu_bias_deg: f64,
+    /// Probability that one step pulse does not move the motor.
+    pub missed_step_prob: f64,
+    /// Millimetres per model unit for the follower height.
+    pub scale_mm: f64,
+    /// Link faults.
+    pub link: LinkFaults,
+    /// Seed of all randomness.
+    pub seed: u64,
+}
+
+impl Default for PlantConfig {
+    fn default() -> Self {
+        PlantConfig {
+            backlash_deg: 0.0,
+            phase_lag_deg: 0.0,
+            gain_error: 0.0,
+            encoder_noise_counts: 0.0,
+            encoder_resolution: None,
+            imu_noise_deg: 0.0,
+            imu_bias_deg: 0.0,
+            missed_step_prob: 0.0,
+            scale_mm: DEFAULT_SCALE_MM,
+            link: LinkFaults::default(),
+            seed: DEFAULT_SEED,
+        }
+    }
+}
+
+/// The `--fault` keys, with a short description each (for help texts and errors).
+pub const FAULT_KEYS: &[(&str, &str)] = &[
+    ("backlash_deg", "dead band between driver and follower, deg"),
+    (
+        "phase_lag_deg",
+        "follower lags the driver by this angle, deg",
+    ),
+    ("gain_error", "relative encoder scale error, e.g. 0.01"),
+    (
+        "encoder_noise_counts",
+        "encoder noise standard deviation, counts",
+    ),
+    (
+        "encoder_resolution",
+        "encoder quantization, counts per turn",
+    ),
+    ("imu_noise_deg", "IMU noise standard deviation, deg"),
+    ("imu_bias_deg", "IMU constant rotation bias, deg"),
+    ("missed_step_prob", "probability a step pulse is lost"),
+    ("scale_mm", "mm per model unit for heights"),
+    ("drop_prob", "probability a byte to the host is dropped"),
+    (
+        "corrupt_prob",
+        "probability a byte to the host is corrupted",
+    ),
+    ("disconnect_at_s", "unplug for good at this time, s"),
+    ("dropout_at_s", "brief unplug starting at this time, s"),
+    ("dropout_s", "length of the brief unplug, s (default 0.5)"),
+    (
+        "protocol_version",
+        "protocol version the simulated device claims",
+    ),
+    ("seed", "seed of the simulated randomness"),
+];
+
+/// Default length of a brief drop-out when only `dropout_at_s` is given: half a second,
+/// like a USB cable wiggled loose and back.
+pub const DEFAULT_DROPOUT_S: f64 = 0.5;
+
+impl PlantConfig {
+    /// Parse repeated `--fault key=value` options (see [`FAULT_KEYS`]).
+    pub fn from_faults<S: AsRef<str>>(faults: &[S]) -> Result<PlantConfig, PlantError> {
+        let mut cfg = PlantConfig::default();
+        cfg.link.dropout_s = DEFAULT_DROPOUT_S;
+        for given in faults {
+            cfg.apply(given.as_ref())?;
+        }
+        Ok(cfg)
+    }
+
+    /// Apply one `key=value`.
+    pub fn apply(&mut self, given: &str) -> Result<(), PlantError> {
+        let fail = |message: String| PlantError::Fault {
+            given: given.to_string(),
+            message,
+        };
+        let (key, value) = given
+            .split_once('=')
+            .ok_or_else(|| fail("expected key=value".into()))?;
+        let (key, value) = (key.trim(), value.trim());
+        let num = || -> Result<f64, PlantError> {
+            let v: f64 = value
+                .parse()
+                .map_err(|_| fail(format!("`{value}` is not a number")))?;
+            if v.is_finite() {
+                Ok(v)
+            } else {
+                Err(fail("must be finite".into()))
+            }
+        };
+        let nonneg = || -> Result<f64, PlantError> {
+            let v = num()?;
+            if v < 0.0 {
+                Err(fail("must not be negative".into()))
+            } else {
+                Ok(v)
+            }
+        };
+        let prob = || -> Result<f64, PlantError> {
+            let v = num()?;
+            if (0.0..=1.0).contains(&v) {
+                Ok(v)
+            } else {
+                Err(fail("a probability must be in [0, 1]".into()))
+            }
+        };
+        match key {
+            "backlash_deg" => self.backlash_deg = nonneg()?,
+            "phase_lag_deg" => self.phase_lag_deg = num()?,
+            "gain_error" => {
+                let g = num()?;
+                if g <= -1.0 {
+                    return Err(fail("must be > -1".into()));
+                }
+                self.gain_error = g;
+            }
+            "encoder_noise_counts" => self.encoder_noise_counts = nonneg()?,
+            "encoder_resolution" => {
+                let r = num()?;
+                if r < 1.0 {
+                    return Err(fail("must be at least 1 count per turn".into()));
+                }
+                self.encoder_resolution = Some(r);
+            }
+            "imu_noise_deg" => self.imu_noise_deg = nonneg()?,
+            "imu_bias_deg" => self.imu_bias_deg = num()?,
+            "missed_step_prob" => self.missed_step_prob = prob()?,
+            "scale_mm" => {
+                let s = num()?;
+                if s <= 0.0 {
+                    return Err(fail("must be positive".into()));
+                }
+                self.scale_mm = s;
+            }
+            "drop_prob" => self.link.drop_prob = prob()?,
+            "corrupt_prob" => self.link.corrupt_prob = prob()?,
+            "disconnect_at_s" => self.link.disconnect_at_s = Some(nonneg()?),
+            "dropout_at_s" => self.link.dropout_at_s = Some(nonneg()?),
+            "dropout_s" => self.link.dropout_s = nonneg()?,
+            "protocol_version" => {
+                self.link.protocol_version = Some(
+                    value
+                        .parse()
+                        .map_err(|_| fail(format!("`{value}` is not a version number")))?,
+                )
+            }
+            "seed" => {
+                self.seed = value
+                    .parse()
+                    .map_err(|_| fail(format!("`{value}` is not an unsigned integer")))?
+            }
+            _ => {
+                let keys: Vec<&str> = FAULT_KEYS.iter().map(|(k, _)| *k).collect();
+                return Err(fail(format!(
+                    "unknown key `{key}`; known: {}",
+                    keys.join(", ")
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// What happened to one byte on a faulty link.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LinkByte {
+    /// Delivered as is.
+    Pass(u8),
+    /// Delivered with a bit flipped.
+    Corrupted(u8),
+    /// Lost.
+    Dropped,
+}
+
+/// A simulated mechanism with its sensors.
+pub struct Plant {
+    target: Box<dyn TargetLaw>,
+    cfg: PlantConfig,
+    /// Follower input angle after the backlash gap, rad (None before the first call).
+    input: Option<f64>,
+    sensor_rng: ChaCha8Rng,
+    link_rng: ChaCha8Rng,
+    step_rng: ChaCha8Rng,
+    imu_bias: UnitQuaternion<f64>,
+}
+
+impl Plant {
+    /// A plant following `target` with the imperfections of `cfg`.
+    pub fn new<T: TargetLaw + 'static>(target: T, cfg: PlantConfig) -> Plant {
+        let stream = |n: u64| {
+            let mut r = ChaCha8Rng::seed_from_u64(cfg.seed);
+            r.set_stream(n);
+            r
+        };
+        let axis = nalgebra::Unit::new_normalize(Vector3::from(IMU_BIAS_AXIS));
+        Plant {
+            target: Box::new(target),
+            input: None,
+            sensor_rng: stream(1),
+            link_rng: stream(2),
+            step_rng: stream(3),
+            imu_bias: UnitQuaternion::from_axis_angle(&axis, cfg.imu_bias_deg.to_radians()),
+            cfg,
+        }
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &PlantConfig {
+        &self.cfg
+    }
+
+    /// The ideal follower state at driver angle `phi` (rad), no imperfections.
+    pub fn ideal(&self, phi: f64) -> FollowerState {
+        self.target.follower_at(phi / TAU)
+    }
+
+    /// The true follower state for the physical driver angle `phi` (rad, unwrapped). Call
+    /// with successive angles: backlash is stateful.
+    pub fn follower(&mut self, phi: f64) -> FollowerState {
+        let half_gap = self.cfg.backlash_deg.to_radians() / 2.0;
+        let input = match self.input {
+            None => phi - half_gap,
+            Some(prev) => {
+                if phi - prev > half_gap {
+                    phi - half_gap
+                } else if prev - phi > half_gap {
+                    phi + half_gap
+                } else {
+                    prev
+                }
+            }
+        };
+        self.input = Some(input);
+        let effective = input - self.cfg.phase_lag_deg.to_radians();
+        self.target.follower_at(effective / TAU)
+    }
+
+    /// Whether the next step pulse is lost (missed-step fault).
+    pub fn step_missed(&mut self) -> bool {
+        self.cfg.missed_step_prob > 0.0 && self.step_rng.random::<f64>() < self.cfg.missed_step_prob
+    }
+
+    /// A rotary encoder reading, in (unwrapped, fractional-free) counts of a sensor with
+    /// `counts_per_rev`, for the follower rotation `angle` (rad): gain error, quantization to
+    /// `encoder_resolution` and noise applied. The caller wraps it as the sensor does.
+    pub fn rotary_counts(&mut self, angle: f64, counts_per_rev: f64) -> i64 {
+        let turns = angle / TAU * (1.0 + self.cfg.gain_error);
+        let turns = match self.cfg.encoder_resolution {
+            Some(res) => (turns * res).round() / res,
+            None => turns,
+        };
+        let noise = self.gaussian() * self.cfg.encoder_noise_counts;
+        (turns * counts_per_rev + noise).round() as i64
+    }
+
+    /// A linear encoder reading in counts of `mm_per_count` for a height in model units.
+    pub fn linear_counts(&mut self, height: f64, mm_per_count: f64) -> i64 {
+        let mm = height * self.cfg.scale_mm * (1.0 + self.cfg.gain_error);
+        let noise = self.gaussian() * self.cfg.encoder_noise_counts;
+        (mm / mm_per_count + noise).round() as i64
+    }
+
+    /// The IMU's orientation reading for a follower rotation: bias, then noise (a rotation
+    /// about a random axis by a Gaussian angle).
+    pub fn imu_reading(&mut self, rotation: UnitQuaternion<f64>) -> UnitQuaternion<f64> {
+        let mut q = self.imu_bias * rotation;
+        if self.cfg.imu_noise_deg > 0.0 {
+            let axis = Vector3::new(self.gaussian(), self.gaussian(), self.gaussian());
+            if let Some(axis) = nalgebra::Unit::try_new(axis, 1e-12) {
+                let angle = self.gaussian() * self.cfg.imu_noise_deg.to_radians();
+                q = UnitQuaternion::from_axis_angle(&axis, angle) * q;
+            }
+        }
+        q
+    }
+
+    /// Pass one byte to the host through the faulty link.
+    pub fn link_byte(&mut self, byte: u8) -> LinkByte {
+        let l = &self.cfg.link;
+        if l.drop_prob > 0.0 && self.link_rng.random::<f64>() < l.drop_prob {
+            return LinkByte::Dropped;
+        }
+        if l.corrupt_prob > 0.0 && self.link_rng.random::<f64>() < l.corrupt_prob {
+            let bit = self.link_rng.random_range(0..8);
+            return LinkByte::Corrupted(byte ^ (1 << bit));
+        }
+        LinkByte::Pass(byte)
+    }
+
+    /// A standard normal variate (Box–Muller).
+    fn gaussian(&mut self) -> f64 {
+        let u1: f64 = self.sensor_rng.random::<f64>().max(f64::MIN_POSITIVE);
+        let u2: f64 = self.sensor_rng.random();
+        (-2.0 * u1.ln()).sqrt() * (TAU * u2).cos()
+    }
+}
+
+/// A closed-form 1R law for tests and benchmarks: the follower turns one full turn per
+/// period, `θ(t) = 2π·t + a·sin(2π·t)` (monotone for |a| < 1).
+#[derive(Debug, Clone, Copy)]
+pub struct WobbleTurn {
+    /// Amplitude of the sinusoidal deviation from uniform rotation, rad.
+    pub amplitude: f64,
+}
+
+impl TargetLaw for WobbleTurn {
+    fn follower_at(&self, t: f64) -> FollowerState {
+        let a = TAU * t + self.amplitude * (TAU * t).sin();
+        FollowerState {
+            angle_z: a,
+            height: 0.0,
+            rotation: UnitQuaternion::from_axis_angle(&Vector3::z_axis(), a),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const LAW: WobbleTurn = WobbleTurn { amplitude: 0.3 };
+
+    /// Guards: without faults the plant is exactly the target law.
+    #[test]
+    fn ideal_plant_follows_target_law() {
+        let mut p = Plant::new(LAW, PlantConfig::default());
+        for i in 0..100 {
+            let phi = i as f64 * 0.1;
+            assert_eq!(p.follower(phi), LAW.follower_at(phi / TAU));
+        }
+    }
+
+    /// Guards: backlash makes forward and reverse readings differ by the gap.
+    #[test]
+    fn backlash_shows_as_hysteresis() {
+        let cfg = PlantConfig::from_faults(&["backlash_deg=2"]).unwrap();
+        let mut p = Plant::new(WobbleTurn { amplitude: 0.0 }, cfg);
+        let mut fwd = 0.0;
+        for i in 0..=360 {
+            fwd = p.follower(f64::from(i).to_radians()).angle_z;
+        }
+        assert!((fwd.to_degrees() - 359.0).abs() < 1e-9);
+        // Reverse: nothing moves for the first 2°, then the follower trails by 1° the
+        // other way.
+        let back1 = p.follower(359.0_f64.to_radians()).angle_z;
+        assert!((back1 - fwd).abs() < 1e-12);
+        let mut back = 0.0;
+        for i in (180..=358).rev() {
+            back = p.follower(f64::from(i).to_radians()).angle_z;
+        }
+        assert!((back.to_degrees() - 181.0).abs() < 1e-9);
+    }
+
+    /// Guards: phase lag shifts the follower by the lag angle.
+    #[test]
+    fn phase_lag_shifts() {
+        let cfg = PlantConfig::from_faults(&["phase_lag_deg=5"]).unwrap();
+        let mut p = Plant::new(LAW, cfg);
+        let s = p.follower(1.0);
+        assert_eq!(s, LAW.follower_at((1.0 - 5f64.to_radians()) / TAU));
+    }
+
+    /// Guards: quantization and gain error in encoder counts.
+    #[test]
+    fn encoder_gain_and_quantization() {
+        let cfg = PlantConfig::from_faults(&["gain_error=0.01", "encoder_resolution=360"]).unwrap();
+        let mut p = Plant::new(LAW, cfg);
+        // 90.4° × 1.01 = 91.304° → quantized to 91° of 360 → 91/360·4096 = 1035.4 → 1035.
+        assert_eq!(p.rotary_counts(90.4f64.to_radians(), 4096.0), 1035);
+    }
+
+    /// Guards: noise is seeded — two plants with one seed agree, other seeds differ.
+    #[test]
+    fn noise_is_reproducible_by_seed() {
+        let run = |seed: u64| {
+            let mut cfg =
+                PlantConfig::from_faults(&["encoder_noise_counts=3", "drop_prob=0.2"]).unwrap();
+            cfg.seed = seed;
+            let mut p = Plant::new(LAW, cfg);
+            (0..200)
+                .map(|i| {
+                    (
+                        p.rotary_counts(f64::from(i) * 0.01, 4096.0),
+                        p.link_byte(i as u8),
+                    )
+                })
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(run(7), run(7));
+        assert_ne!(run(7), run(8));
+        // The noise has roughly the asked-for spread.
+        let cfg = PlantConfig::from_faults(&["encoder_noise_counts=3"]).unwrap();
+        let mut p = Plant::new(LAW, cfg);
+        let xs: Vec<f64> = (0..4000)
+            .map(|_| p.rotary_counts(0.0, 4096.0) as f64)
+            .collect();
+        let sd = (xs.iter().map(|x| x * x).sum::<f64>() / xs.len() as f64).sqrt();
+        assert!((sd - 3.0).abs() < 0.3, "{sd}");
+    }
+
+    /// Guards: IMU bias is a fixed rotation of the given angle.
+    #[test]
+    fn imu_bias_angle() {
+        let cfg = PlantConfig::from_faults(&["imu_bias_deg=2"]).unwrap();
+        let mut p = Plant::new(LAW, cfg);
+        let q = UnitQuaternion::from_euler_angles(0.1, 0.2, 0.3);
+        let r = p.imu_reading(q);
+        assert!((r.angle_to(&q).to_degrees() - 2.0).abs() < 1e-9);
+    }
+
+    /// Guards: bad `--fault` options are rejected with the key named.
+    #[test]
+    fn bad_faults_are_rejected() {
+        for bad in [
+            "backlash",
+            "backlash_deg=-1",
+            "drop_prob=2",
+            "wobble=1",
+            "seed=x",
+        ] {
+            let err = PlantConfig::from_faults(&[bad]).unwrap_err().to_string();
+            assert!(err.contains(bad), "{err}");
+        }
+        let cfg = PlantConfig::from_faults(&["dropout_at_s=2", "protocol_version=9"]).unwrap();
+        assert_eq!(cfg.link.dropout_at_s, Some(2.0));
+        assert_eq!(cfg.link.dropout_s, DEFAULT_DROPOUT_S);
+        assert_eq!(cfg.link.protocol_version, Some(9));
+    }
+
+    /// Guards: missed steps happen at about the configured rate.
+    #[test]
+    fn missed_step_rate() {
+        let cfg = PlantConfig::from_faults(&["missed_step_prob=0.01"]).unwrap();
+        let mut p = Plant::new(LAW, cfg);
+        let n = (0..100_000).filter(|_| p.step_missed()).count();
+        assert!((800..1200).contains(&n), "{n}");
+    }
+}
