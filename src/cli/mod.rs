@@ -10,6 +10,7 @@ use clap::{Parser, Subcommand};
 
 pub mod motion;
 pub mod ports;
+pub mod synth;
 
 /// Design, fabricate and bench-verify multi-point conjugation mechanisms.
 #[derive(Debug, Parser)]
@@ -32,6 +33,8 @@ pub enum Command {
     Motion(motion::MotionArgs),
     /// List serial ports with USB vendor/product/serial where known.
     Ports(ports::PortsArgs),
+    /// Synthesize conjugate curve pairs with dynamic form closure, or check a mechanism file.
+    Synth(synth::SynthArgs),
 }
 
 /// Set up `tracing` output on stderr from the -v/-q flags (`RUST_LOG` overrides).
@@ -60,6 +63,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Motion(args) => motion::run(args),
         Command::Ports(args) => ports::run(args),
+        Command::Synth(args) => synth::run(args),
     }
 }
 

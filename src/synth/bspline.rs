@@ -102,7 +102,11 @@ mod tests {
         (0..8)
             .map(|i| {
                 let a = i as f64 * 0.8;
-                [a.cos() * 2.0 + 0.1 * i as f64, a.sin() * 1.5, (a * 1.7).sin()]
+                [
+                    a.cos() * 2.0 + 0.1 * i as f64,
+                    a.sin() * 1.5,
+                    (a * 1.7).sin(),
+                ]
             })
             .collect()
     }
@@ -120,8 +124,14 @@ mod tests {
             for a in 0..3 {
                 let fd1 = (ep[0][a] - em[0][a]) / (2.0 * h);
                 let fd2 = (ep[1][a] - em[1][a]) / (2.0 * h);
-                assert!((fd1 - e[1][a]).abs() < 1e-5 * (1.0 + fd1.abs()), "d1 at t={t}");
-                assert!((fd2 - e[2][a]).abs() < 1e-4 * (1.0 + fd2.abs()), "d2 at t={t}");
+                assert!(
+                    (fd1 - e[1][a]).abs() < 1e-5 * (1.0 + fd1.abs()),
+                    "d1 at t={t}"
+                );
+                assert!(
+                    (fd2 - e[2][a]).abs() < 1e-4 * (1.0 + fd2.abs()),
+                    "d2 at t={t}"
+                );
             }
         }
     }

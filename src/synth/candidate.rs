@@ -99,7 +99,9 @@ fn fit_spline(n_cps: usize, values: &[Vec<f64>]) -> Vec<Vec<f64>> {
         }
     }
     let ata = a.transpose() * &a;
-    let chol = ata.cholesky().expect("uniform B-spline normal matrix is SPD for N ≥ n");
+    let chol = ata
+        .cholesky()
+        .expect("uniform B-spline normal matrix is SPD for N ≥ n");
     let mut out = vec![vec![0.0; dim]; n_cps];
     for d in 0..dim {
         let y = DVector::from_iterator(n, values.iter().map(|v| v[d]));
@@ -126,14 +128,16 @@ fn curve_length(x: &[f64], n: usize) -> f64 {
 /// Build the initial design of candidate `index` in band `band`.
 pub fn initial_guess(pb: &PairProblem, seed: u64, band: usize, index: usize) -> Vec<f64> {
     let mut rng = ChaCha8Rng::seed_from_u64(
-        seed ^ (band as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (index as u64 + 1).wrapping_mul(0xD1B5_4A32_D192_ED03),
+        seed ^ (band as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            ^ (index as u64 + 1).wrapping_mul(0xD1B5_4A32_D192_ED03),
     );
     let poses = &pb.poses.samples;
     let n = poses.len();
     let (zlo, zhi) = pb.band;
     let zc = 0.5 * (zlo + zhi);
     let zh = 0.5 * (zhi - zlo);
-    let psi0 = rng.random_range(-50f64..50.0).to_radians();
+    let psi0 =
+        rng.random_range(15f64..55.0).to_radians() * if rng.random_bool(0.5) { 1.0 } else { -1.0 };
     // Tube winding: the contact circles a torus-like tube m times per period, so (ṙ, ż)
     // never vanish together and a normal with a steady circumferential part exists.
     let m_wind = rng.random_range(2..=3) as f64;
@@ -184,27 +188,56 @@ pub fn initial_guess(pb: &PairProblem, seed: u64, band: usize, index: usize) -> 
             scale *= (target_len / len).clamp(0.3, 3.0);
         }
     }
-    // Normal angles from the desired start normal.
+    // Start normals: for 1R/1R1T the exact conjugate normal ±T² × T¹ (continuous sign,
+    // overall sign chosen so that the mean torque has the candidate's sign); where T¹ ∥ T²
+    // the previous normal is kept (projected). For 3R, T̂² × p̂ (inside the cone).
+    let contacts: Vec<_> = poses
+        .iter()
+        .map(|pose| model::contact_f64(&x, pose, pb.dx))
+        .collect();
+    let wants: Vec<[f64; 3]> = match pb.class {
+        Class::R3 => contacts
+            .iter()
+            .map(|c| {
+                let v = c.t2.unit().cross(c.p.unit());
+                let l = v.norm().max(1e-12);
+                v.scalec(sign / l).vals()
+            })
+            .collect(),
+        _ => {
+            let mut out: Vec<V3<f64>> = Vec::with_capacity(n);
+            let mut prev: Option<V3<f64>> = None;
+            for c in &contacts {
+                let t2 = c.t2.unit();
+                let cr = t2.cross(c.t1.unit());
+                let mut v = if cr.norm() > 0.05 {
+                    cr.unit()
+                } else if let Some(pv) = prev {
+                    (pv - t2.scale(pv.dot(t2))).unit()
+                } else {
+                    V3::cst(circumferential_normal(c.p.vals(), c.t2.vals(), 1.0))
+                };
+                if let Some(pv) = prev {
+                    if v.dot(pv) < 0.0 {
+                        v = -v;
+                    }
+                }
+                prev = Some(v);
+                out.push(v);
+            }
+            let torque: f64 = out
+                .iter()
+                .zip(&contacts)
+                .map(|(v, c)| c.p.cross(*v).z)
+                .sum();
+            let flip = if torque * sign < 0.0 { -1.0 } else { 1.0 };
+            out.iter().map(|v| v.scalec(flip).vals()).collect()
+        }
+    };
     let mut thetas = Vec::with_capacity(n);
     let mut prev: Option<f64> = None;
-    for pose in poses.iter() {
-        let c = model::contact_f64(&x, pose, pb.dx);
-        let p = c.p.vals();
-        let t2 = c.t2.vals();
-        let want = match pb.class {
-            Class::R3 => {
-                let pl = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt().max(1e-12);
-                let ph = [p[0] / pl, p[1] / pl, p[2] / pl];
-                let v = [
-                    t2[1] * ph[2] - t2[2] * ph[1],
-                    t2[2] * ph[0] - t2[0] * ph[2],
-                    t2[0] * ph[1] - t2[1] * ph[0],
-                ];
-                let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt().max(1e-12);
-                [sign * v[0] / l, sign * v[1] / l, sign * v[2] / l]
-            }
-            _ => circumferential_normal(p, t2, sign),
-        };
+    for ((pose, c), want) in poses.iter().zip(&contacts).zip(&wants) {
+        let want = *want;
         // Express in the local frame: θ = atan2(n·B, n·N) with N, B rotated into R.
         let th0 = model::contact_f64(
             &{
@@ -300,7 +333,9 @@ pub fn solve(
         }
         residual = worst_residual(pb, &x, OVERSAMPLE);
         if reason.is_none() && residual > MAX_RESIDUAL_DEG {
-            reason = Some(format!("conjugation residual {residual:.2}° > {MAX_RESIDUAL_DEG}°"));
+            reason = Some(format!(
+                "conjugation residual {residual:.2}° > {MAX_RESIDUAL_DEG}°"
+            ));
         }
         for pose in &pb.poses.samples {
             let c = model::contact_f64(&x, pose, pb.dx);
@@ -327,7 +362,7 @@ pub fn solve(
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::synth::energy::W_CLOSURE;
+    use crate::synth::energy::{W_CLOSURE, W_ROBUST};
     use crate::synth::optimizer::SlsqpRs;
     use crate::synth::pose::{pose_1r, PoseFn, PoseTrack};
     use std::sync::Arc;
@@ -350,6 +385,10 @@ pub(crate) mod tests {
             band: (-0.5, 0.5),
             vary: None,
             w_closure: W_CLOSURE,
+            w_robust: std::env::var("WROB")
+                .ok()
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(W_ROBUST),
         }
     }
 
@@ -357,19 +396,41 @@ pub(crate) mod tests {
     #[test]
     #[ignore]
     fn explore_candidates_1r() {
-        let w: f64 = std::env::var("WCL").ok().and_then(|v| v.parse().ok()).unwrap_or(W_CLOSURE);
+        let w: f64 = std::env::var("WCL")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(W_CLOSURE);
         let mut pb = problem_1r(360);
         pb.w_closure = w;
-        for i in 0..6 {
+        let mut tot = 0;
+        for i in 0..12 {
             let t0 = std::time::Instant::now();
+            let x0 = initial_guess(&pb, 1, 0, i);
+            let e0 = pb.evaluate(&x0);
+            eprintln!(
+                "start cons {:?}",
+                e0.cons_exact
+                    .iter()
+                    .map(|v| format!("{v:.3}"))
+                    .collect::<Vec<_>>()
+            );
             let c = solve(&pb, &SlsqpRs, 1, 0, i, 400);
             let nrob = c.robust.iter().filter(|r| **r).count();
-            let pos = c.ntilde.iter().zip(&c.robust).filter(|(v, r)| **r && v.is_some_and(|v| v[0] > 0.0)).count();
+            let pos = c
+                .ntilde
+                .iter()
+                .zip(&c.robust)
+                .filter(|(v, r)| **r && v.is_some_and(|v| v[0] > 0.0))
+                .count();
             eprintln!(
                 "cand {i}: f={:.2} status={:?} evals={} valid={} reason={:?} res={:.3}° robust={} pos={} {:.2}s",
                 c.f, c.status, c.evals, c.valid, c.reason, c.residual_deg, nrob, pos,
                 t0.elapsed().as_secs_f64()
             );
+            if c.valid {
+                tot += nrob;
+            }
         }
+        eprintln!("total robust samples over valid candidates: {tot}");
     }
 }

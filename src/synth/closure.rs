@@ -313,7 +313,11 @@ pub fn signed_dist_3d(pts: &[[f64; 3]]) -> f64 {
                 }
                 any_facet = true;
                 // Orient u outward (away from the other points).
-                let (u, off) = if pos { ([-u[0], -u[1], -u[2]], -off) } else { (u, off) };
+                let (u, off) = if pos {
+                    ([-u[0], -u[1], -u[2]], -off)
+                } else {
+                    (u, off)
+                };
                 // Signed distance of the origin below the plane, positive when inside.
                 let s0 = off - 0.0 * u[0];
                 if s0 <= 0.0 {
@@ -586,7 +590,10 @@ mod tests {
         let tangential = [0.0, 1.0, 0.0];
         let radial = [-1.0, 0.0, 0.0];
         assert_eq!(project(Class::R1, p, tangential), Some([1.0, 0.0, 0.0]));
-        assert_eq!(project(Class::R1, p, [0.0, -1.0, 0.0]), Some([-1.0, 0.0, 0.0]));
+        assert_eq!(
+            project(Class::R1, p, [0.0, -1.0, 0.0]),
+            Some([-1.0, 0.0, 0.0])
+        );
         assert!(is_robust(Class::R1, p, tangential));
         assert!(!is_robust(Class::R1, p, radial));
         let slight = [-(1.0f64 - 0.05f64.powi(2)).sqrt(), 0.05, 0.0];

@@ -263,11 +263,7 @@ impl<S: Scalar> V3<S> {
     }
     /// Apply a constant 3×3 matrix (row-major).
     pub fn rot(self, m: &[[f64; 3]; 3]) -> Self {
-        Self::new(
-            self.dotc(m[0]),
-            self.dotc(m[1]),
-            self.dotc(m[2]),
-        )
+        Self::new(self.dotc(m[0]), self.dotc(m[1]), self.dotc(m[2]))
     }
     /// Apply the transpose of a constant 3×3 matrix (row-major).
     pub fn rot_t(self, m: &[[f64; 3]; 3]) -> Self {
@@ -316,11 +312,10 @@ mod tests {
         let f = (x * y).sin() / (x + y).sqrt() + x.exp() * y.ln() - y * 2.0;
         let (xv, yv) = (0.7f64, 1.3f64);
         let s = (xv + yv).sqrt();
-        let dfdx = (xv * yv).cos() * yv / s - 0.5 * (xv * yv).sin() / (s * s * s)
-            + xv.exp() * yv.ln();
-        let dfdy = (xv * yv).cos() * xv / s - 0.5 * (xv * yv).sin() / (s * s * s)
-            + xv.exp() / yv
-            - 2.0;
+        let dfdx =
+            (xv * yv).cos() * yv / s - 0.5 * (xv * yv).sin() / (s * s * s) + xv.exp() * yv.ln();
+        let dfdy =
+            (xv * yv).cos() * xv / s - 0.5 * (xv * yv).sin() / (s * s * s) + xv.exp() / yv - 2.0;
         assert!((f.g[0] - dfdx).abs() < 1e-12, "{} vs {}", f.g[0], dfdx);
         assert!((f.g[1] - dfdy).abs() < 1e-12, "{} vs {}", f.g[1], dfdy);
     }

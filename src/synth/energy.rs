@@ -11,6 +11,10 @@
 //! 34-entry gradient. E_vary couples two samples half a period apart and uses a full
 //! 34-slot dual.
 //!
+//! **Scale.** The objective is the paper's sum over samples (E_vary added once, as in the
+//! paper) divided by N: the weights keep the paper's ratios, and values of order 1–10 keep
+//! SLSQP's first quasi-Newton steps (identity Hessian) sensible.
+//!
 //! **Constraints** (all written g ≤ 0): curve length L₁ ≤ Length(c²) ≤ L₂; the height band
 //! by bounds on the control points' z (B-spline convex hull); minimum distance of the contact
 //! from the follower joint axis (1R/1R1T) or centre (3R) and of c¹ from the driver axis;
@@ -37,6 +41,17 @@ pub const W_NORM: f64 = 1.0e4;
 pub const W_PLAN: f64 = 1.0;
 /// Weight of E_closure_1R / E_closure_1R1T: 0.1 (supplementary notes).
 pub const W_CLOSURE: f64 = 0.1;
+/// Weight of E_robust (ours, 1R and 1R1T): Σᵢ max(0, a₀ − |aᵢ|)² where aᵢ = n·(ẑ×p̂) is the
+/// contact's torque arm per unit radius. Default 20: a contact with no arm then costs
+/// 20·a₀² ≈ 1.8 per sample, comparable to E_plan's worst case, so the optimizer shortens
+/// the intervals in which a contact cannot drive, while contacts above the threshold feel
+/// nothing (E_plan and conjugation are not disturbed). Set to 0 for the paper's energy.
+pub const W_ROBUST: f64 = 20.0;
+/// Threshold a₀ of E_robust. Default 0.3: comfortably above sin γ₀ = sin 10° ≈ 0.17, the
+/// robust-closure limit, so contacts that meet it count robustly with margin.
+pub const ROBUST_ARM: f64 = 0.3;
+/// Smoothing of |a| in E_robust (|a| ≈ √(a² + δ²)). Default 1e-3.
+pub const ROBUST_SMOOTH: f64 = 1.0e-3;
 /// Weight of E_vary: 20 (supplementary notes).
 pub const W_VARY: f64 = 20.0;
 /// Follower curve length bounds L₁ = 4π, L₂ = 6π (paper §5.1).
@@ -84,6 +99,8 @@ pub struct PairProblem {
     pub vary: Option<usize>,
     /// Weight of E_closure (1R, 1R1T).
     pub w_closure: f64,
+    /// Weight of E_robust (1R, 1R1T).
+    pub w_robust: f64,
 }
 
 /// Names of the constraints, in evaluation order.
@@ -257,6 +274,11 @@ impl PairProblem {
                     cl = cl - c.n.z * c.n.z;
                 }
                 e += cl * self.w_closure;
+                let arm = (circ * circ + ROBUST_SMOOTH * ROBUST_SMOOTH).sqrt();
+                if arm.v < ROBUST_ARM {
+                    let d = -arm + ROBUST_ARM;
+                    e += d * d * self.w_robust;
+                }
             }
             f += e.v;
             scatter(&mut grad, j0, ja, &e.g, 1.0);
@@ -272,7 +294,11 @@ impl PairProblem {
             let c1xy = (c.c1.x * c.c1.x + c.c1.y * c.c1.y).sqrt();
             ks_rd.push(-c1xy + MIN_DRIVER_RADIUS, j0, ja);
             let slope = c.c2d.z / speed;
-            ks_sl.push(slope * slope - MAX_TANGENT_SLOPE * MAX_TANGENT_SLOPE, j0, ja);
+            ks_sl.push(
+                slope * slope - MAX_TANGENT_SLOPE * MAX_TANGENT_SLOPE,
+                j0,
+                ja,
+            );
             if self.class == Class::R3 {
                 let d = c.n.dot(c.p) / c.p.norm();
                 ks_cone.push(d * d - one * (sin_g * sin_g), j0, ja);
@@ -284,6 +310,12 @@ impl PairProblem {
             for (a, b) in grad.iter_mut().zip(g.iter()) {
                 *a += W_VARY * b;
             }
+        }
+        // Mean per sample: the same ratios as the paper's sums, but an objective of order
+        // 1–10 keeps SLSQP's first (unit-Hessian) steps sensible.
+        f /= n as f64;
+        for g in grad.iter_mut() {
+            *g /= n as f64;
         }
         let mut cons = Vec::with_capacity(6);
         let mut cons_grad = Vec::with_capacity(6);
@@ -366,9 +398,16 @@ mod tests {
         let at: PoseFn = match class {
             Class::R3 => Arc::new(|t: f64| {
                 let a = std::f64::consts::TAU * t;
-                let q = nalgebra::UnitQuaternion::from_euler_angles(0.3 * a.sin(), 0.2 * a.cos(), a);
+                let q =
+                    nalgebra::UnitQuaternion::from_euler_angles(0.3 * a.sin(), 0.2 * a.cos(), a);
                 let w = nalgebra::Vector3::new(0.3, -0.1, 1.0) * std::f64::consts::TAU;
-                Pose::new(t, &q, nalgebra::Vector3::zeros(), w, nalgebra::Vector3::zeros())
+                Pose::new(
+                    t,
+                    &q,
+                    nalgebra::Vector3::zeros(),
+                    w,
+                    nalgebra::Vector3::zeros(),
+                )
             }),
             _ => Arc::new(move |t: f64| {
                 let a = std::f64::consts::TAU;
@@ -399,6 +438,7 @@ mod tests {
                 band: (-0.5, 0.5),
                 vary: Some(3),
                 w_closure: W_CLOSURE,
+                w_robust: W_ROBUST,
             },
             x,
         )

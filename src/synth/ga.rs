@@ -222,11 +222,26 @@ mod tests {
     #[test]
     fn fitness_ordering_is_lexicographic() {
         use Ordering::*;
-        assert_eq!(f(1.0, 0.1, 0.5, 9.0).cmp_better(&f(0.9, 1.0, -1.0, -1.0)), Greater);
-        assert_eq!(f(1.0, 1.0, -0.1, -0.1).cmp_better(&f(1.0, 0.9, -1.0, -1.0)), Greater);
-        assert_eq!(f(1.0, 1.0, -0.3, 5.0).cmp_better(&f(1.0, 1.0, -0.2, -1.0)), Greater);
-        assert_eq!(f(1.0, 1.0, -1.0, -0.5).cmp_better(&f(1.0, 1.0, -1.0, -0.4)), Greater);
-        assert_eq!(f(1.0, 1.0, -1.0, -0.5).cmp_better(&f(1.0, 1.0, -1.0, -0.5)), Equal);
+        assert_eq!(
+            f(1.0, 0.1, 0.5, 9.0).cmp_better(&f(0.9, 1.0, -1.0, -1.0)),
+            Greater
+        );
+        assert_eq!(
+            f(1.0, 1.0, -0.1, -0.1).cmp_better(&f(1.0, 0.9, -1.0, -1.0)),
+            Greater
+        );
+        assert_eq!(
+            f(1.0, 1.0, -0.3, 5.0).cmp_better(&f(1.0, 1.0, -0.2, -1.0)),
+            Greater
+        );
+        assert_eq!(
+            f(1.0, 1.0, -1.0, -0.5).cmp_better(&f(1.0, 1.0, -1.0, -0.4)),
+            Greater
+        );
+        assert_eq!(
+            f(1.0, 1.0, -1.0, -0.5).cmp_better(&f(1.0, 1.0, -1.0, -0.5)),
+            Equal
+        );
     }
 
     /// Builds a 1R pool where only one combination closes robustly at every sample.
@@ -251,7 +266,11 @@ mod tests {
                 };
                 let nt = (0..n)
                     .map(|i| {
-                        let s = if (band, c) == (0, 4) || (band, c) == (1, 7) || (band, c) == (2, 3) || i < n / 2 {
+                        let s = if (band, c) == (0, 4)
+                            || (band, c) == (1, 7)
+                            || (band, c) == (2, 3)
+                            || i < n / 2
+                        {
                             sign
                         } else {
                             -sign
@@ -259,7 +278,9 @@ mod tests {
                         Some([s, 0.0, 0.0])
                     })
                     .collect();
-                let rob = (0..n).map(|i| (band, c) == (0, 4) || (band, c) == (2, 3) || i % 3 == 0).collect();
+                let rob = (0..n)
+                    .map(|i| (band, c) == (0, 4) || (band, c) == (2, 3) || i % 3 == 0)
+                    .collect();
                 cands.push((nt, rob));
             }
             bands.push(cands);
@@ -276,7 +297,11 @@ mod tests {
             class: Class::R1,
             bands: data
                 .iter()
-                .map(|b| b.iter().map(|(n, r)| (n.as_slice(), r.as_slice())).collect())
+                .map(|b| {
+                    b.iter()
+                        .map(|(n, r)| (n.as_slice(), r.as_slice()))
+                        .collect()
+                })
                 .collect(),
         };
         let s = GaSettings {

@@ -348,12 +348,18 @@ impl Mechanism {
         }
         let n = self.samples;
         if n < 8 {
-            return Err(bad("samples".into(), format!("{n} samples is too few (≥ 8)")));
+            return Err(bad(
+                "samples".into(),
+                format!("{n} samples is too few (≥ 8)"),
+            ));
         }
         if self.follower_motion.len() != n {
             return Err(bad(
                 "follower_motion".into(),
-                format!("{} entries, expected samples = {n}", self.follower_motion.len()),
+                format!(
+                    "{} entries, expected samples = {n}",
+                    self.follower_motion.len()
+                ),
             ));
         }
         if self.curve_pairs.is_empty() {
@@ -398,7 +404,10 @@ impl Mechanism {
         if self.closure.dist.len() != n {
             return Err(bad(
                 "closure.dist".into(),
-                format!("{} entries, expected samples = {n}", self.closure.dist.len()),
+                format!(
+                    "{} entries, expected samples = {n}",
+                    self.closure.dist.len()
+                ),
             ));
         }
         for (i, fm) in self.follower_motion.iter().enumerate() {

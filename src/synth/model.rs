@@ -87,7 +87,11 @@ pub fn angle_at<S: Scalar>(b: &Basis, th: &dyn Fn(usize) -> S) -> S {
 
 /// Tangent-only part of the model (no normal): p, c¹, ċ¹, T¹, T² — used for the
 /// smoothness term at the next sample.
-pub fn tangents<S: Scalar>(pose: &Pose, dx: f64, c2: [V3<S>; 3]) -> (V3<S>, V3<S>, V3<S>, V3<S>, V3<S>) {
+pub fn tangents<S: Scalar>(
+    pose: &Pose,
+    dx: f64,
+    c2: [V3<S>; 3],
+) -> (V3<S>, V3<S>, V3<S>, V3<S>, V3<S>) {
     let q = c2[0].rot(&pose.rot);
     let p = q + V3::cst(pose.trans);
     let t2 = c2[1].rot(&pose.rot);
@@ -195,7 +199,13 @@ mod tests {
         let x = design();
         let dx = 6.0;
         let rate = -std::f64::consts::TAU;
-        let pose = |t: f64| pose_1r(t, rate * t + 0.3 * (std::f64::consts::TAU * t).sin(), rate + 0.3 * std::f64::consts::TAU * (std::f64::consts::TAU * t).cos());
+        let pose = |t: f64| {
+            pose_1r(
+                t,
+                rate * t + 0.3 * (std::f64::consts::TAU * t).sin(),
+                rate + 0.3 * std::f64::consts::TAU * (std::f64::consts::TAU * t).cos(),
+            )
+        };
         for k in 0..20 {
             let t = k as f64 / 20.0 + 0.01;
             let c = contact_f64(&x, &pose(t), dx);
@@ -213,7 +223,10 @@ mod tests {
             ];
             let an = c.c1d.vals();
             for a in 0..3 {
-                assert!((fd[a] - an[a]).abs() < 1e-5 * (1.0 + an[a].abs()), "t={t} axis {a}");
+                assert!(
+                    (fd[a] - an[a]).abs() < 1e-5 * (1.0 + an[a].abs()),
+                    "t={t} axis {a}"
+                );
             }
             // Normal is unit and perpendicular to T².
             assert!((c.n.norm() - 1.0).abs() < 1e-12);

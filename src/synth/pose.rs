@@ -84,6 +84,22 @@ impl PoseTrack {
         Self { samples, at }
     }
 
+    /// From a motion specification (poses and derivatives from `Motion::sample`).
+    pub fn from_motion(motion: &crate::motion::Motion, n: usize) -> Self {
+        let m = motion.clone();
+        let at: PoseFn = Arc::new(move |t: f64| {
+            let s = m.sample(t);
+            Pose::new(
+                t,
+                &s.rotation,
+                s.translation,
+                s.angular_velocity,
+                s.velocity,
+            )
+        });
+        Self::from_fn(n, at)
+    }
+
     /// Number of samples N.
     pub fn len(&self) -> usize {
         self.samples.len()

@@ -25,7 +25,7 @@ use rayon::prelude::*;
 
 use super::candidate::{self, Candidate, OVERSAMPLE};
 use super::closure::{self, Class, ClosureSummary};
-use super::energy::{PairProblem, LENGTH_BOUNDS, W_CLOSURE};
+use super::energy::{PairProblem, LENGTH_BOUNDS, W_CLOSURE, W_ROBUST};
 use super::error::SynthError;
 use super::ga::{self, Fitness, GaSettings, Pool};
 use super::mechanism::*;
@@ -205,19 +205,20 @@ fn search(
     let mut best: Option<Best> = None;
     let mut k_tried = Vec::new();
     let mut dx_tried = Vec::new();
-    let info = |attempts: &[Attempt], k_tried: &[usize], dx_tried: &[f64], accepted, partial| SolveInfo {
-        seed: opts.seed,
-        seconds: start.elapsed().as_secs_f64(),
-        k_tried: k_tried.to_vec(),
-        dx_tried: dx_tried.to_vec(),
-        backend: minimizer.name().to_string(),
-        threads,
-        candidates_per_band: opts.candidates,
-        generations: opts.generations,
-        attempts: attempts.to_vec(),
-        accepted,
-        partial,
-    };
+    let info =
+        |attempts: &[Attempt], k_tried: &[usize], dx_tried: &[f64], accepted, partial| SolveInfo {
+            seed: opts.seed,
+            seconds: start.elapsed().as_secs_f64(),
+            k_tried: k_tried.to_vec(),
+            dx_tried: dx_tried.to_vec(),
+            backend: minimizer.name().to_string(),
+            threads,
+            candidates_per_band: opts.candidates,
+            generations: opts.generations,
+            attempts: attempts.to_vec(),
+            accepted,
+            partial,
+        };
     'dx: for &dx in &dx_list {
         dx_tried.push(dx);
         let mut bands: Vec<Vec<Candidate>> = Vec::new();
@@ -233,7 +234,10 @@ fn search(
                 if cancelled(opts) {
                     break 'dx;
                 }
-                if cands.iter().all(|c| c.reason.as_deref() == Some("optimizer returned NaN")) {
+                if cands
+                    .iter()
+                    .all(|c| c.reason.as_deref() == Some("optimizer returned NaN"))
+                {
                     return Err(SynthError::Numerical(format!(
                         "every candidate of band {b} at d_x = {dx} came back as NaN from SLSQP ({})",
                         minimizer.name()
@@ -356,7 +360,13 @@ fn search(
             let shown: Vec<String> = worst
                 .iter()
                 .take(5)
-                .map(|(i, d)| format!("t = {:.3} (dist {:.3})", *i as f64 / m.samples as f64, d.min(99.0)))
+                .map(|(i, d)| {
+                    format!(
+                        "t = {:.3} (dist {:.3})",
+                        *i as f64 / m.samples as f64,
+                        d.min(99.0)
+                    )
+                })
                 .collect();
             format!(
                 "motion too wild for the tried K {:?} and d_x {:?}: best E_valiTime {:.3} \
@@ -388,6 +398,7 @@ pub fn band_problem(class: Class, poses: &Arc<PoseTrack>, dx: f64, b: usize) -> 
         band: band(b),
         vary: None,
         w_closure: W_CLOSURE,
+        w_robust: W_ROBUST,
     }
 }
 
@@ -466,7 +477,9 @@ pub fn assemble(
             s.c1.push(ct.c1.vals());
             s.c2.push(ct.c2.vals());
             let phi = tau * pose.t;
-            let n1 = super::dual::V3::<f64>::cst(nn).rot_t(&model::rz(phi)).vals();
+            let n1 = super::dual::V3::<f64>::cst(nn)
+                .rot_t(&model::rz(phi))
+                .vals();
             s.n1.push(n1);
             let n2 = super::dual::V3::<f64>::cst(neg(nn)).rot_t(&pose.rot).vals();
             s.n2.push(n2);
@@ -494,7 +507,9 @@ pub fn assemble(
             .map(|p| (p.samples.p[i], p.samples.n[i]))
             .collect()
     };
-    let (dist, rdist): (Vec<f64>, Vec<f64>) = (0..n).map(|i| closure::dist_at(class, &contacts_at(i))).unzip();
+    let (dist, rdist): (Vec<f64>, Vec<f64>) = (0..n)
+        .map(|i| closure::dist_at(class, &contacts_at(i)))
+        .unzip();
     let summary = ClosureSummary::from_dists(dist, rdist);
     // Oversampled closure from the splines.
     let m = n * OVERSAMPLE;
@@ -564,6 +579,80 @@ pub fn assemble(
 mod tests {
     use super::*;
     use crate::synth::candidate::tests::half_turn_like;
+
+    fn small_opts(threads: usize) -> SynthOptions {
+        SynthOptions {
+            seed: 11,
+            k: Some(2),
+            dx: Some(6.0),
+            samples: 48,
+            threads: Some(threads),
+            candidates: 4,
+            generations: 20,
+            population: 8,
+            max_eval: 60,
+            ..Default::default()
+        }
+    }
+
+    fn outcome(r: Result<Mechanism, SynthError>) -> Mechanism {
+        match r {
+            Ok(m) => m,
+            Err(SynthError::Infeasible { best: Some(m), .. }) => *m,
+            Err(e) => panic!("unexpected error {e}"),
+        }
+    }
+
+    /// Guards determinism: the same seed gives the same mechanism with 1 and 2 threads
+    /// (candidates and GA fitness run in parallel with rayon).
+    #[test]
+    fn synthesis_is_deterministic_across_thread_counts() {
+        let track = half_turn_like(48);
+        let a = outcome(synthesize_track(
+            Class::R1,
+            track.clone(),
+            "t",
+            &small_opts(1),
+            &NoProgress,
+        ));
+        let b = outcome(synthesize_track(
+            Class::R1,
+            track,
+            "t",
+            &small_opts(2),
+            &NoProgress,
+        ));
+        assert_eq!(a.curve_pairs, b.curve_pairs);
+        assert_eq!(a.closure, b.closure);
+        assert_eq!(a.solve.attempts, b.solve.attempts);
+    }
+
+    /// Guards that bad requests are typed errors, not panics.
+    #[test]
+    fn bad_requests_are_rejected_with_a_message() {
+        let track = half_turn_like(48);
+        let mut o = small_opts(1);
+        o.k = Some(1);
+        let e = synthesize_track(Class::R1, track.clone(), "t", &o, &NoProgress).unwrap_err();
+        assert!(e.to_string().contains("--k 1"), "{e}");
+        let mut o = small_opts(1);
+        o.dx = Some(-1.0);
+        let e = synthesize_track(Class::R1, track, "t", &o, &NoProgress).unwrap_err();
+        assert!(e.to_string().contains("--dx"), "{e}");
+    }
+
+    /// Guards the band layout: bands are disjoint, equal height, and K bands are a prefix of
+    /// K + 1 bands.
+    #[test]
+    fn bands_are_disjoint_and_nested() {
+        let b: Vec<_> = (0..7).map(band).collect();
+        for i in 0..7 {
+            assert!((b[i].1 - b[i].0 - BAND_HEIGHT).abs() < 1e-12);
+            for j in i + 1..7 {
+                assert!(b[i].1 + BAND_GAP - 1e-12 <= b[j].0 || b[j].1 + BAND_GAP - 1e-12 <= b[i].0);
+            }
+        }
+    }
 
     /// Exploration aid (ignored): full 1R search on a half-turn-like motion.
     #[test]
