@@ -72,12 +72,16 @@ impl Fitness {
     }
 }
 
+/// One candidate as the GA sees it: ñ per sample (None where it vanishes) and whether the
+/// contact counts for the robust closure per sample.
+pub type CandidateView<'a> = (&'a [Option<[f64; 3]>], &'a [bool]);
+
 /// What the GA needs of a candidate: per-sample ñ and robust flags.
 pub struct Pool<'a> {
     /// Class.
     pub class: Class,
     /// Per band: the usable candidates' (ñ per sample, robust per sample).
-    pub bands: Vec<Vec<(&'a [Option<[f64; 3]>], &'a [bool])>>,
+    pub bands: Vec<Vec<CandidateView<'a>>>,
 }
 
 impl Pool<'_> {
@@ -245,7 +249,9 @@ mod tests {
     }
 
     /// Builds a 1R pool where only one combination closes robustly at every sample.
-    fn pool_data() -> Vec<Vec<(Vec<Option<[f64; 3]>>, Vec<bool>)>> {
+    type OwnedCandidate = (Vec<Option<[f64; 3]>>, Vec<bool>);
+
+    fn pool_data() -> Vec<Vec<OwnedCandidate>> {
         let n = 20;
         let mut bands = Vec::new();
         for band in 0..3 {

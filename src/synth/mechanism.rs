@@ -394,7 +394,7 @@ impl Mechanism {
                     ));
                 }
             }
-            if !(cp.slab[0] < cp.slab[1]) {
+            if cp.slab[0].partial_cmp(&cp.slab[1]) != Some(std::cmp::Ordering::Less) {
                 return Err(bad(
                     format!("curve_pairs[{k}].slab"),
                     format!("z_min {} must be below z_max {}", cp.slab[0], cp.slab[1]),
@@ -413,7 +413,7 @@ impl Mechanism {
         for (i, fm) in self.follower_motion.iter().enumerate() {
             let q = fm.rotation;
             let l = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
-            if !((l - 1.0).abs() < 1e-6) {
+            if (l - 1.0).abs().partial_cmp(&1e-6) != Some(std::cmp::Ordering::Less) {
                 return Err(bad(
                     format!("follower_motion[{i}].rotation"),
                     format!("quaternion norm {l} is not 1"),

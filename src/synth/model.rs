@@ -85,13 +85,12 @@ pub fn angle_at<S: Scalar>(b: &Basis, th: &dyn Fn(usize) -> S) -> S {
     v
 }
 
+/// The tangent-only part of a contact: (p, c¹, ċ¹, T¹, T²).
+pub type Tangents<S> = (V3<S>, V3<S>, V3<S>, V3<S>, V3<S>);
+
 /// Tangent-only part of the model (no normal): p, c¹, ċ¹, T¹, T² — used for the
 /// smoothness term at the next sample.
-pub fn tangents<S: Scalar>(
-    pose: &Pose,
-    dx: f64,
-    c2: [V3<S>; 3],
-) -> (V3<S>, V3<S>, V3<S>, V3<S>, V3<S>) {
+pub fn tangents<S: Scalar>(pose: &Pose, dx: f64, c2: [V3<S>; 3]) -> Tangents<S> {
     let q = c2[0].rot(&pose.rot);
     let p = q + V3::cst(pose.trans);
     let t2 = c2[1].rot(&pose.rot);
