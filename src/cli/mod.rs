@@ -8,9 +8,12 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+pub mod analyze;
+pub mod measure;
 pub mod motion;
 pub mod ports;
 pub mod synth;
+pub mod sim_device;
 
 /// Design, fabricate and bench-verify multi-point conjugation mechanisms.
 #[derive(Debug, Parser)]
@@ -29,12 +32,19 @@ pub struct Cli {
 /// The subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Compare a recording with its target law and write the report (plots, report.md,
+    /// report.html, summary.json).
+    Analyze(analyze::AnalyzeArgs),
     /// Check, plot and sample motion specifications.
     Motion(motion::MotionArgs),
     /// List serial ports with USB vendor/product/serial where known.
     Ports(ports::PortsArgs),
     /// Synthesize conjugate curve pairs with dynamic form closure, or check a mechanism file.
     Synth(synth::SynthArgs),
+    /// Serve a simulated bench device on a pseudo-terminal (prints its path first).
+    SimDevice(sim_device::SimDeviceArgs),
+    /// Measure a mechanism on a bench (real or simulated) and record it.
+    Measure(measure::MeasureArgs),
 }
 
 /// Set up `tracing` output on stderr from the -v/-q flags (`RUST_LOG` overrides).
@@ -61,9 +71,12 @@ pub fn init_logging(verbose: u8, quiet: bool) {
 /// Run a parsed command line.
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
+        Command::Analyze(args) => analyze::run(args),
         Command::Motion(args) => motion::run(args),
         Command::Ports(args) => ports::run(args),
         Command::Synth(args) => synth::run(args),
+        Command::SimDevice(args) => sim_device::run(args),
+        Command::Measure(args) => measure::run(args),
     }
 }
 

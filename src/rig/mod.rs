@@ -8,6 +8,7 @@
 //! - [`recording`]: the recording directory (CSV + JSON sidecar), writer and reader.
 //! - [`backend`]: the driver and sample-stream traits, one folder per backend.
 //! - [`link`]: serial port listing and resolution.
+//! - [`session`]: the measurement session (`mpc-rig measure`).
 //! - [`sim`]: the plant model and the simulated devices behind pseudo-terminals.
 
 pub mod backend;
@@ -15,6 +16,7 @@ pub mod config;
 pub mod error;
 pub mod link;
 pub mod recording;
+pub mod session;
 pub mod sim;
 
 pub use error::RigError;

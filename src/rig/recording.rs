@@ -53,8 +53,8 @@ pub mod flags {
     pub const RECONNECTED: u32 = 1 << 3;
     /// The device reports its emergency stop latched.
     pub const ESTOP: u32 = 1 << 4;
-    /// The driver was still accelerating or decelerating (not at constant commanded speed).
-    pub const RAMPING: u32 = 1 << 5;
+    /// The device took this sample late (it missed at least one sampling tick before it).
+    pub const LATE: u32 = 1 << 5;
     /// The Dynamixel follower read failed; the value is repeated.
     pub const FOLLOWER_STALE: u32 = 1 << 6;
 }

@@ -16,6 +16,8 @@
 
 use std::time::Duration;
 
+pub mod stepper;
+
 use crate::rig::recording::{Counts, DeviceInfo};
 use crate::rig::RigError;
 
@@ -78,3 +80,15 @@ pub trait SampleStream {
 pub trait Bench: Driver + SampleStream {}
 
 impl<T: Driver + SampleStream> Bench for T {}
+
+pub mod dynamixel;
+
+/// Open the backend a rig's driver needs, with ports resolved from the rig (after any
+/// `--port` overrides).
+pub fn open(rig: &crate::rig::config::RigConfig) -> Result<Box<dyn Bench + Send>, RigError> {
+    use crate::rig::config::DriverConfig;
+    match &rig.driver {
+        DriverConfig::StepperFirmware(_) => Ok(Box::new(stepper::StepperBench::open(rig)?)),
+        DriverConfig::Dynamixel(_) => Ok(Box::new(dynamixel::DynamixelBench::from_rig(rig)?)),
+    }
+}

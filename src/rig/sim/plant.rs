@@ -55,7 +55,7 @@ pub enum PlantError {
 
 /// The target law the plant follows: the follower pose at a fraction `t` of the period.
 ///
-/// `crate::motion::Motion` implements it; tests use small closed-form laws.
+/// [`crate::motion::Motion`] implements it; tests use small closed-form laws.
 pub trait TargetLaw: Send + Sync {
     /// Follower state at `t` (any real `t`; 1R/1R1T angles unwrapped across periods).
     fn follower_at(&self, t: f64) -> FollowerState;
@@ -408,6 +408,16 @@ impl Plant {
         let u1: f64 = self.sensor_rng.random::<f64>().max(f64::MIN_POSITIVE);
         let u2: f64 = self.sensor_rng.random();
         (-2.0 * u1.ln()).sqrt() * (TAU * u2).cos()
+    }
+}
+
+impl TargetLaw for crate::motion::Motion {
+    fn follower_at(&self, t: f64) -> FollowerState {
+        FollowerState {
+            angle_z: self.angle_z(t).map_or(0.0, |a| a[0]),
+            height: self.height(t).map_or(0.0, |h| h[0]),
+            rotation: self.sample(t).rotation,
+        }
     }
 }
 

@@ -1,0 +1,167 @@
+//! `mpc-rig measure`: run a measurement session on a bench and record it.
+
+use std::io::{IsTerminal, Write};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use anyhow::Context;
+use clap::Args;
+
+use crate::cli::ExitStatusError;
+use crate::rig::session::{self, EndReason, MeasureOptions, Progress, TargetSpec};
+
+/// Exit code when the device disconnected during the run (recording kept, incomplete).
+pub const EXIT_DISCONNECTED: u8 = 3;
+/// Exit code when the run stopped at `safety.max_run_s` or on another error mid-run.
+pub const EXIT_INCOMPLETE: u8 = 4;
+/// Exit code after Ctrl-C (the shell convention 128 + SIGINT).
+pub const EXIT_CANCELLED: u8 = 130;
+
+/// Arguments of `mpc-rig measure`.
+#[derive(Debug, Args)]
+pub struct MeasureArgs {
+    /// Rig configuration (rigs/*.toml).
+    #[arg(long, value_name = "FILE")]
+    pub rig: PathBuf,
+    /// Serial port override: PATH (single-port rigs) or NAME=PATH; repeatable.
+    #[arg(long, value_name = "PORT")]
+    pub port: Vec<String>,
+    /// Target: a mechanism.json or the directory holding it.
+    #[arg(
+        long,
+        value_name = "PATH",
+        conflicts_with = "motion",
+        required_unless_present = "motion"
+    )]
+    pub mechanism: Option<PathBuf>,
+    /// Target: a motion file (.toml or .csv).
+    #[arg(long, value_name = "FILE")]
+    pub motion: Option<PathBuf>,
+    /// Driver speed, rpm.
+    #[arg(long, default_value_t = 30.0)]
+    pub speed: f64,
+    /// Measured cycles (driver revolutions) per direction.
+    #[arg(long, default_value_t = 3)]
+    pub cycles: u32,
+    /// Settle cycles before the measured ones.
+    #[arg(long, default_value_t = session::DEFAULT_SETTLE_CYCLES)]
+    pub settle: u32,
+    /// Also run the same cycles in reverse (for backlash).
+    #[arg(long)]
+    pub reverse: bool,
+    /// Recording directory (default out/measure/<UTC timestamp>).
+    #[arg(short, long, value_name = "DIR")]
+    pub output: Option<PathBuf>,
+    /// Do not analyse the recording at the end (run `mpc-rig analyze DIR` later).
+    #[arg(long)]
+    pub no_analysis: bool,
+    /// Tolerance on the RMS rotation error in degrees for the analysis at the end.
+    #[arg(long, value_parser = crate::cli::analyze::positive)]
+    pub tol_deg: Option<f64>,
+    /// Tolerance on every timing ratio for the analysis at the end.
+    #[arg(long, value_parser = crate::cli::analyze::positive)]
+    pub tol_ratio: Option<f64>,
+}
+
+/// Run the session; print where the recording is and how it ended.
+pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
+    let target = match (&args.mechanism, &args.motion) {
+        (Some(m), _) => TargetSpec::Mechanism(m.clone()),
+        (None, Some(m)) => TargetSpec::Motion(m.clone()),
+        (None, None) => anyhow::bail!("give the target with --mechanism PATH or --motion FILE"),
+    };
+    let cancel = Arc::new(AtomicBool::new(false));
+    {
+        let cancel = cancel.clone();
+        // A second Ctrl-C while shutting down is ignored; the firmware watchdog covers a
+        // host that dies.
+        ctrlc::set_handler(move || cancel.store(true, Ordering::Relaxed))
+            .context("cannot install the Ctrl-C handler")?;
+    }
+    let tty = std::io::stderr().is_terminal();
+    let mut last_line = std::time::Instant::now();
+    let mut opts = MeasureOptions {
+        rig_path: args.rig.clone(),
+        ports: args.port.clone(),
+        target,
+        speed_rpm: args.speed,
+        cycles: args.cycles,
+        settle_cycles: args.settle,
+        reverse: args.reverse,
+        out_dir: args.output.clone(),
+        cancel,
+        progress: Some(Box::new(move |p: &Progress| {
+            if tty {
+                eprint!("\r{}   ", progress_line(p));
+                let _ = std::io::stderr().flush();
+            } else if last_line.elapsed().as_secs_f64() >= 2.0 {
+                eprintln!("{}", progress_line(p));
+                last_line = std::time::Instant::now();
+            }
+        })),
+    };
+    let outcome = session::measure(&mut opts)
+        .with_context(|| format!("measurement with rig {}", args.rig.display()))?;
+    if tty {
+        eprintln!();
+    }
+    let c = outcome.meta.counts;
+    println!("recording: {}", outcome.dir.display());
+    println!(
+        "samples {}  gaps {} ({} samples missing)  crc errors {}  reconnects {}",
+        c.samples, c.gaps, c.missing_samples, c.crc_errors, c.reconnects
+    );
+    // Analyse whatever was recorded (an incomplete recording is still valid).
+    let mut analysis_code = ExitCode::SUCCESS;
+    if !args.no_analysis && c.samples > 0 {
+        let opts = crate::analysis::ReportOptions {
+            tol_deg: args.tol_deg,
+            tol_ratio: args.tol_ratio,
+            ..Default::default()
+        };
+        match crate::analysis::analyze_and_report(&outcome.dir, &opts) {
+            Ok(summary) => {
+                crate::cli::analyze::print_summary(&summary, &outcome.dir.join("report"));
+                analysis_code = crate::cli::analyze::exit_code(&summary);
+            }
+            Err(e) => eprintln!(
+                "warning: analysis failed: {e}; the recording is kept, retry with `mpc-rig analyze {}`",
+                outcome.dir.display()
+            ),
+        }
+    }
+    let (code, what) = match &outcome.end {
+        EndReason::Finished => return Ok(analysis_code),
+        EndReason::Cancelled => (EXIT_CANCELLED, "cancelled"),
+        EndReason::Disconnected(_) => (EXIT_DISCONNECTED, "device disconnected"),
+        EndReason::MaxRunTime | EndReason::Error(_) => (EXIT_INCOMPLETE, "run stopped early"),
+    };
+    Err(ExitStatusError {
+        code,
+        message: format!(
+            "{what} ({}); the recording in {} is kept and marked incomplete",
+            outcome.end,
+            outcome.dir.display()
+        ),
+    }
+    .into())
+}
+
+fn progress_line(p: &Progress) -> String {
+    let err = p
+        .error_deg
+        .map_or(String::new(), |e| format!("  error {e:+.2}°"));
+    format!(
+        "[{:>7}] cycle {:.2}/{}  {} samples  {:.0} Hz  gaps {}{}  {:.1} s",
+        p.phase.as_str(),
+        p.cycle,
+        p.cycles,
+        p.samples,
+        p.sample_rate_hz,
+        p.gaps,
+        err,
+        p.elapsed_s
+    )
+}

@@ -1,0 +1,614 @@
+//! The measurement session: what `mpc-rig measure` (and `demo`) run at the bench.
+//!
+//! Owns the run plan (zero/home, settle cycle(s), N forward cycles, optionally the same in
+//! reverse), the sample loop (recording every sample, counting cycles from the driver
+//! angle, live progress with the current error against the target law), the safety limits
+//! (speed, run time, sample stall) and the exit paths: on the planned end, an unplug, an
+//! error or a cancel (Ctrl-C) the motor is stopped, the hardware shut down and the
+//! recording finished — complete only in the first case. The firmware's dead-man watchdog
+//! is the last line of defence if the host itself dies.
+//!
+//! It is generic over [`Bench`] and does not know which device it talks to; it does not
+//! analyse the recording (the caller runs [`crate::analysis`] afterwards).
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant, SystemTime};
+
+use sha2::{Digest, Sha256};
+
+use crate::motion::{Motion, MotionClass};
+use crate::rig::backend::{Bench, Sample};
+use crate::rig::config::{Dof, HomeMethod, RigConfig, SensorConfig};
+use crate::rig::recording::{
+    utc_dir_stamp, Phase, RecordingMeta, RecordingWriter, Row, SessionInfo, TargetRef,
+};
+use crate::rig::RigError;
+
+/// How long the session waits for samples before declaring the stream stalled: 2 s, many
+/// times the 10 ms batch interval and longer than a brief reconnect's handshake.
+pub const STALL_TIMEOUT: Duration = Duration::from_secs(2);
+
+/// Poll interval of the sample loop: 20 ms keeps Ctrl-C and the display responsive
+/// without spinning.
+pub const POLL_INTERVAL: Duration = Duration::from_millis(20);
+
+/// Interval between live progress reports.
+pub const PROGRESS_INTERVAL: Duration = Duration::from_millis(250);
+
+/// After the stop command, wait at most this long for the driver to come to rest (and the
+/// last samples to arrive) before shutting down.
+pub const STOP_WAIT: Duration = Duration::from_secs(3);
+
+/// The driver counts as at rest when its angle changes less than this (deg) over
+/// [`REST_WINDOW`].
+pub const REST_TOLERANCE_DEG: f64 = 0.05;
+
+/// Window over which rest is judged.
+pub const REST_WINDOW: Duration = Duration::from_millis(150);
+
+/// Default settle cycles before the measured ones: one revolution lets the mechanism
+/// take up its backlash and the speed settle.
+pub const DEFAULT_SETTLE_CYCLES: u32 = 1;
+
+/// Extra time granted on top of the planned run duration before `max_run_s` is checked
+/// up front (ramps, settle, stop): 20 %.
+pub const RUN_TIME_MARGIN: f64 = 1.2;
+
+/// What the session measures against.
+#[derive(Debug, Clone, PartialEq)]
+pub enum TargetSpec {
+    /// A `mechanism.json` or the directory holding it.
+    Mechanism(PathBuf),
+    /// A motion file (`.toml` keyframes or `.csv` dense).
+    Motion(PathBuf),
+}
+
+/// A loaded target: the motion law and its reference for the sidecar.
+#[derive(Debug, Clone)]
+pub struct Target {
+    /// The law.
+    pub motion: Motion,
+    /// Reference written into the recording.
+    pub reference: TargetRef,
+}
+
+impl TargetSpec {
+    /// Load the motion and hash the file.
+    pub fn load(&self) -> Result<Target, RigError> {
+        let (kind, path, motion) = match self {
+            TargetSpec::Mechanism(p) => ("mechanism", p, Motion::from_mechanism_file(p)),
+            TargetSpec::Motion(p) => ("motion", p, Motion::from_file(p)),
+        };
+        let motion = motion.map_err(|e| RigError::Target {
+            path: path.clone(),
+            message: e.to_string(),
+        })?;
+        let file = if path.is_dir() {
+            path.join("mechanism.json")
+        } else {
+            path.clone()
+        };
+        let bytes = std::fs::read(&file).map_err(|e| RigError::Target {
+            path: file.clone(),
+            message: e.to_string(),
+        })?;
+        let sha256 = Sha256::digest(&bytes)
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect();
+        Ok(Target {
+            reference: TargetRef {
+                kind: kind.into(),
+                path: path.clone(),
+                sha256,
+                class: motion.class().to_string(),
+                name: motion.name().to_string(),
+            },
+            motion,
+        })
+    }
+}
+
+/// Live progress of a run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Progress {
+    /// Current phase.
+    pub phase: Phase,
+    /// Cycles completed in the current measured direction (fractional).
+    pub cycle: f64,
+    /// Cycles planned per direction.
+    pub cycles: u32,
+    /// Samples recorded.
+    pub samples: u64,
+    /// Sample rate over the last progress interval, Hz.
+    pub sample_rate_hz: f64,
+    /// Sequence gaps so far.
+    pub gaps: u64,
+    /// Current follower error against the target (deg), when a rotary sensor measures the
+    /// follower of a 1R/1R1T motion; the constant offset at the start is removed.
+    pub error_deg: Option<f64>,
+    /// Seconds since the start.
+    pub elapsed_s: f64,
+}
+
+/// A live progress callback.
+pub type ProgressFn = Box<dyn FnMut(&Progress) + Send>;
+
+/// Everything a session needs.
+pub struct MeasureOptions {
+    /// Rig file.
+    pub rig_path: PathBuf,
+    /// `--port` overrides (`PATH` or `NAME=PATH`).
+    pub ports: Vec<String>,
+    /// The target.
+    pub target: TargetSpec,
+    /// Driver speed, rpm (positive; reverse runs use the negative).
+    pub speed_rpm: f64,
+    /// Measured cycles per direction.
+    pub cycles: u32,
+    /// Settle cycles before the measured ones (per direction).
+    pub settle_cycles: u32,
+    /// Also run in reverse.
+    pub reverse: bool,
+    /// Recording directory; default `out/measure/<UTC timestamp>`.
+    pub out_dir: Option<PathBuf>,
+    /// Set to stop early (Ctrl-C); the recording is kept, marked incomplete.
+    pub cancel: Arc<AtomicBool>,
+    /// Called with live progress about every [`PROGRESS_INTERVAL`].
+    pub progress: Option<ProgressFn>,
+}
+
+/// How a session ended.
+#[derive(Debug, Clone)]
+pub struct MeasureOutcome {
+    /// The recording directory.
+    pub dir: PathBuf,
+    /// The final sidecar.
+    pub meta: RecordingMeta,
+    /// Whether every planned cycle was recorded.
+    pub complete: bool,
+    /// Why it ended.
+    pub end: EndReason,
+}
+
+/// Why a session ended.
+#[derive(Debug, Clone, PartialEq)]
+pub enum EndReason {
+    /// All planned cycles were recorded.
+    Finished,
+    /// Cancelled by the user.
+    Cancelled,
+    /// The device disappeared and did not come back.
+    Disconnected(String),
+    /// The run exceeded `safety.max_run_s`.
+    MaxRunTime,
+    /// Another error during the run.
+    Error(String),
+}
+
+impl std::fmt::Display for EndReason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            EndReason::Finished => write!(f, "finished"),
+            EndReason::Cancelled => write!(f, "cancelled"),
+            EndReason::Disconnected(m) => write!(f, "disconnected: {m}"),
+            EndReason::MaxRunTime => write!(f, "stopped: safety.max_run_s reached"),
+            EndReason::Error(m) => write!(f, "error: {m}"),
+        }
+    }
+}
+
+/// Run a whole session: load the rig and target, open the backend, measure, record.
+pub fn measure(opts: &mut MeasureOptions) -> Result<MeasureOutcome, RigError> {
+    let mut rig = RigConfig::load(&opts.rig_path)?;
+    rig.apply_port_overrides(&opts.ports)?;
+    let target = opts.target.load()?;
+    check_plan(&rig, opts)?;
+    let mut bench = crate::rig::backend::open(&rig)?;
+    run_session(bench.as_mut(), &rig, &target, opts)
+}
+
+/// Refuse plans that break the rig's limits before touching the hardware.
+pub fn check_plan(rig: &RigConfig, opts: &MeasureOptions) -> Result<(), RigError> {
+    if !(opts.speed_rpm.is_finite() && opts.speed_rpm > 0.0) {
+        return Err(RigError::Safety(format!(
+            "speed must be a positive number of rpm, got {}",
+            opts.speed_rpm
+        )));
+    }
+    if opts.speed_rpm > rig.safety.max_speed_rpm {
+        return Err(RigError::Safety(format!(
+            "{} rpm exceeds safety.max_speed_rpm = {} of rig `{}`",
+            opts.speed_rpm, rig.safety.max_speed_rpm, rig.name
+        )));
+    }
+    if opts.cycles == 0 {
+        return Err(RigError::Safety(
+            "at least one measured cycle is needed".into(),
+        ));
+    }
+    let revs = f64::from(opts.cycles + opts.settle_cycles) * if opts.reverse { 2.0 } else { 1.0 };
+    let planned_s = revs / (opts.speed_rpm / 60.0) * RUN_TIME_MARGIN;
+    if planned_s > rig.safety.max_run_s {
+        return Err(RigError::Safety(format!(
+            "the plan takes about {planned_s:.0} s, more than safety.max_run_s = {} s; use fewer cycles or a higher speed",
+            rig.safety.max_run_s
+        )));
+    }
+    Ok(())
+}
+
+/// Default recording directory for a run starting now.
+pub fn default_out_dir() -> PathBuf {
+    Path::new("out")
+        .join("measure")
+        .join(utc_dir_stamp(SystemTime::now()))
+}
+
+/// Where the run is, from the driver angle travelled.
+struct Plan {
+    settle_deg: f64,
+    measure_deg: f64,
+    reverse: bool,
+    /// Angle at the start of the forward run.
+    start: f64,
+    /// Highest angle reached (turning point of the reverse run).
+    turn: Option<f64>,
+    max_seen: f64,
+}
+
+enum Step {
+    Continue(Phase, f64),
+    Reverse,
+    Done,
+}
+
+impl Plan {
+    fn step(&mut self, angle: f64) -> Step {
+        self.max_seen = self.max_seen.max(angle);
+        match self.turn {
+            None => {
+                let p = angle - self.start;
+                if p < self.settle_deg {
+                    Step::Continue(Phase::Settle, 0.0)
+                } else if p < self.settle_deg + self.measure_deg {
+                    Step::Continue(Phase::Forward, (p - self.settle_deg) / 360.0)
+                } else if self.reverse {
+                    Step::Reverse
+                } else {
+                    Step::Done
+                }
+            }
+            Some(turn) => {
+                let q = self.max_seen.max(turn) - angle;
+                if q < self.settle_deg {
+                    Step::Continue(Phase::Settle, 0.0)
+                } else if q < self.settle_deg + self.measure_deg {
+                    Step::Continue(Phase::Reverse, (q - self.settle_deg) / 360.0)
+                } else {
+                    Step::Done
+                }
+            }
+        }
+    }
+}
+
+/// The live error display: measured follower angle against the target law.
+struct ErrorProbe {
+    column: usize,
+    sensor: SensorConfig,
+    offset: Option<f64>,
+}
+
+impl ErrorProbe {
+    fn new(rig: &RigConfig, motion: &Motion) -> Option<ErrorProbe> {
+        if motion.class() == MotionClass::R3 {
+            return None;
+        }
+        let mut column = 0;
+        for s in &rig.sensors {
+            if s.dof() == Some(Dof::Rz) && s.counts_per_rev().is_some() {
+                return Some(ErrorProbe {
+                    column,
+                    sensor: s.clone(),
+                    offset: None,
+                });
+            }
+            column += s.columns().len();
+        }
+        None
+    }
+
+    fn error_deg(&mut self, motion: &Motion, s: &Sample) -> Option<f64> {
+        let measured = self.sensor.to_physical(*s.values.get(self.column)?)?;
+        let target = motion.angle_z(s.driver_angle_deg / 360.0)?[0].to_degrees();
+        let raw = wrap180(measured - target);
+        let offset = *self.offset.get_or_insert(raw);
+        Some(wrap180(raw - offset))
+    }
+}
+
+fn wrap180(deg: f64) -> f64 {
+    (deg + 180.0).rem_euclid(360.0) - 180.0
+}
+
+/// Run the plan on an open bench and record it. Always shuts the bench down.
+pub fn run_session(
+    bench: &mut (dyn Bench + Send),
+    rig: &RigConfig,
+    target: &Target,
+    opts: &mut MeasureOptions,
+) -> Result<MeasureOutcome, RigError> {
+    let result = run_inner(bench, rig, target, opts);
+    let shutdown = bench.shutdown();
+    match (result, shutdown) {
+        (Ok(o), Ok(())) => Ok(o),
+        (Ok(mut o), Err(e)) => {
+            // The recording is safe; report the failed shutdown in the outcome.
+            tracing::error!("shutdown after the run failed: {e}");
+            if o.complete {
+                o.end = EndReason::Error(format!("shutdown failed: {e}"));
+            }
+            Ok(o)
+        }
+        (Err(e), _) => Err(e),
+    }
+}
+
+fn run_inner(
+    bench: &mut (dyn Bench + Send),
+    rig: &RigConfig,
+    target: &Target,
+    opts: &mut MeasureOptions,
+) -> Result<MeasureOutcome, RigError> {
+    if bench.value_count() != rig.sensor_columns().len() {
+        return Err(RigError::Setup(format!(
+            "the backend delivers {} sensor values but the rig declares {} columns",
+            bench.value_count(),
+            rig.sensor_columns().len()
+        )));
+    }
+    let dir = opts.out_dir.clone().unwrap_or_else(default_out_dir);
+    let session = SessionInfo {
+        speed_rpm: opts.speed_rpm,
+        cycles: opts.cycles,
+        settle_cycles: opts.settle_cycles,
+        reverse: opts.reverse,
+        sample_rate_hz: rig.sampling.rate_hz,
+    };
+    let meta = RecordingMeta::new(
+        rig.clone(),
+        bench.device_info(),
+        target.reference.clone(),
+        session,
+    );
+    let mut writer = RecordingWriter::create(&dir, meta)?;
+    let start = Instant::now();
+    // Errors from here on end the run but keep the recording.
+    let end = match drive(bench, rig, target, opts, &mut writer, start) {
+        Ok(end) => end,
+        Err(RigError::Disconnected { path, message }) => {
+            EndReason::Disconnected(format!("{}: {message}", path.display()))
+        }
+        Err(e) => EndReason::Error(e.to_string()),
+    };
+    let complete = end == EndReason::Finished;
+    writer.meta_mut().counts = merged_counts(writer.meta().counts.samples, bench);
+    let meta = writer.finish(complete, &end.to_string())?;
+    Ok(MeasureOutcome {
+        dir,
+        meta,
+        complete,
+        end,
+    })
+}
+
+fn merged_counts(rows: u64, bench: &(dyn Bench + Send)) -> crate::rig::recording::Counts {
+    let mut c = bench.counts();
+    c.samples = rows;
+    c
+}
+
+fn drive(
+    bench: &mut (dyn Bench + Send),
+    rig: &RigConfig,
+    target: &Target,
+    opts: &mut MeasureOptions,
+    writer: &mut RecordingWriter,
+    start: Instant,
+) -> Result<EndReason, RigError> {
+    if rig.home.method == HomeMethod::ZeroHere {
+        bench.zero()?;
+    }
+    bench.enable()?;
+    bench.start_stream(rig.sampling.rate_hz)?;
+    bench.run_at(opts.speed_rpm)?;
+    let mut plan = Plan {
+        settle_deg: f64::from(opts.settle_cycles) * 360.0,
+        measure_deg: f64::from(opts.cycles) * 360.0,
+        reverse: opts.reverse,
+        start: f64::NAN,
+        turn: None,
+        max_seen: f64::NEG_INFINITY,
+    };
+    let mut probe = ErrorProbe::new(rig, &target.motion);
+    let mut batch = Vec::with_capacity(256);
+    let mut last_sample_at = Instant::now();
+    let mut last_progress = Instant::now();
+    let mut rows_at_last_progress = 0u64;
+    let mut phase = Phase::Settle;
+    let mut cycle = 0.0;
+    let mut error_deg = None;
+    let max_run = Duration::from_secs_f64(rig.safety.max_run_s);
+    let mut done = false;
+    while !done {
+        if opts.cancel.load(Ordering::Relaxed) {
+            bench.stop().ok();
+            finish_tail(bench, writer, start, phase)?;
+            return Ok(EndReason::Cancelled);
+        }
+        if start.elapsed() > max_run {
+            bench.stop().ok();
+            finish_tail(bench, writer, start, phase)?;
+            return Ok(EndReason::MaxRunTime);
+        }
+        batch.clear();
+        bench.poll_samples(POLL_INTERVAL, &mut batch)?;
+        if batch.is_empty() {
+            if last_sample_at.elapsed() > STALL_TIMEOUT {
+                return Err(RigError::Setup(format!(
+                    "no samples for {} s (is the device still streaming?)",
+                    STALL_TIMEOUT.as_secs()
+                )));
+            }
+        } else {
+            last_sample_at = Instant::now();
+        }
+        let host_time_s = start.elapsed().as_secs_f64();
+        for s in &batch {
+            if plan.start.is_nan() {
+                plan.start = s.driver_angle_deg;
+            }
+            if !done {
+                match plan.step(s.driver_angle_deg) {
+                    Step::Continue(p, c) => {
+                        phase = p;
+                        cycle = c;
+                    }
+                    Step::Reverse => {
+                        plan.turn = Some(s.driver_angle_deg);
+                        phase = Phase::Settle;
+                        bench.run_at(-opts.speed_rpm)?;
+                    }
+                    Step::Done => {
+                        done = true;
+                        bench.stop()?;
+                    }
+                }
+            }
+            if let Some(p) = probe.as_mut() {
+                error_deg = p.error_deg(&target.motion, s).or(error_deg);
+            }
+            writer.push(&Row {
+                device_time_us: s.device_time_us,
+                host_time_s,
+                phase,
+                driver_angle_deg: s.driver_angle_deg,
+                values: &s.values,
+                flags: s.flags,
+            })?;
+        }
+        if writer.flush_due() {
+            writer.meta_mut().counts = merged_counts(writer.meta().counts.samples, bench);
+            writer.flush()?;
+        }
+        if last_progress.elapsed() >= PROGRESS_INTERVAL {
+            let rows = writer.meta().counts.samples;
+            let dt = last_progress.elapsed().as_secs_f64();
+            if let Some(cb) = opts.progress.as_mut() {
+                cb(&Progress {
+                    phase,
+                    cycle,
+                    cycles: opts.cycles,
+                    samples: rows,
+                    sample_rate_hz: (rows - rows_at_last_progress) as f64 / dt,
+                    gaps: bench.counts().gaps,
+                    error_deg,
+                    elapsed_s: start.elapsed().as_secs_f64(),
+                });
+            }
+            rows_at_last_progress = rows;
+            last_progress = Instant::now();
+        }
+    }
+    finish_tail(bench, writer, start, phase)?;
+    Ok(EndReason::Finished)
+}
+
+/// After a stop command: keep recording until the driver is at rest (or [`STOP_WAIT`]),
+/// so the deceleration is in the recording, then stop the stream.
+fn finish_tail(
+    bench: &mut (dyn Bench + Send),
+    writer: &mut RecordingWriter,
+    start: Instant,
+    phase: Phase,
+) -> Result<(), RigError> {
+    let deadline = Instant::now() + STOP_WAIT;
+    let mut batch = Vec::new();
+    let mut window: Vec<(Instant, f64)> = Vec::new();
+    while Instant::now() < deadline {
+        batch.clear();
+        bench.poll_samples(POLL_INTERVAL, &mut batch)?;
+        let now = Instant::now();
+        let host_time_s = start.elapsed().as_secs_f64();
+        for s in &batch {
+            writer.push(&Row {
+                device_time_us: s.device_time_us,
+                host_time_s,
+                phase,
+                driver_angle_deg: s.driver_angle_deg,
+                values: &s.values,
+                flags: s.flags,
+            })?;
+            window.push((now, s.driver_angle_deg));
+        }
+        window.retain(|(t, _)| now.duration_since(*t) <= REST_WINDOW);
+        let spread = window
+            .iter()
+            .map(|w| w.1)
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), a| {
+                (lo.min(a), hi.max(a))
+            });
+        if window.len() > 2 && spread.1 - spread.0 < REST_TOLERANCE_DEG {
+            break;
+        }
+    }
+    bench.stop_stream()?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Guards: the plan labels settle, forward and reverse by driver angle and asks for the
+    /// turnaround and the end at the right angles.
+    #[test]
+    fn plan_phases_by_angle() {
+        let mut plan = Plan {
+            settle_deg: 360.0,
+            measure_deg: 720.0,
+            reverse: true,
+            start: 0.0,
+            turn: None,
+            max_seen: f64::NEG_INFINITY,
+        };
+        assert!(matches!(plan.step(100.0), Step::Continue(Phase::Settle, _)));
+        match plan.step(540.0) {
+            Step::Continue(Phase::Forward, c) => assert!((c - 0.5).abs() < 1e-12),
+            _ => panic!(),
+        }
+        assert!(matches!(plan.step(1080.0), Step::Reverse));
+        plan.turn = Some(1080.0);
+        // Overshoot while decelerating moves the turning point.
+        assert!(matches!(
+            plan.step(1085.0),
+            Step::Continue(Phase::Settle, _)
+        ));
+        assert!(matches!(
+            plan.step(1085.0 - 400.0),
+            Step::Continue(Phase::Reverse, _)
+        ));
+        assert!(matches!(plan.step(1085.0 - 1081.0), Step::Done));
+    }
+
+    /// Guards: wrapping of the displayed error.
+    #[test]
+    fn wrap_to_half_turn() {
+        assert_eq!(wrap180(190.0), -170.0);
+        assert_eq!(wrap180(-190.0), 170.0);
+        assert_eq!(wrap180(10.0), 10.0);
+    }
+}
