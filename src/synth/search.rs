@@ -585,12 +585,12 @@ mod tests {
             seed: 11,
             k: Some(2),
             dx: Some(6.0),
-            samples: 48,
+            samples: 60,
             threads: Some(threads),
-            candidates: 4,
+            candidates: 6,
             generations: 20,
             population: 8,
-            max_eval: 60,
+            max_eval: 250,
             ..Default::default()
         }
     }
@@ -607,7 +607,7 @@ mod tests {
     /// (candidates and GA fitness run in parallel with rayon).
     #[test]
     fn synthesis_is_deterministic_across_thread_counts() {
-        let track = half_turn_like(48);
+        let track = half_turn_like(60);
         let a = outcome(synthesize_track(
             Class::R1,
             track.clone(),
