@@ -12,8 +12,8 @@ pub mod analyze;
 pub mod measure;
 pub mod motion;
 pub mod ports;
-pub mod synth;
 pub mod sim_device;
+pub mod synth;
 
 /// Design, fabricate and bench-verify multi-point conjugation mechanisms.
 #[derive(Debug, Parser)]
