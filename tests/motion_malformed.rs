@@ -360,3 +360,143 @@ fn cli_check_reports_errors() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
 }
+
+/// Guards the acceleration warning: a fast swing loads, with one warning naming the
+/// magnitude beyond the documented threshold.
+#[test]
+fn large_angular_acceleration_is_a_warning() {
+    let m = Motion::from_file(&data("large-acceleration.toml")).unwrap();
+    let found: Vec<f64> = m
+        .warnings()
+        .iter()
+        .filter_map(|w| match w.kind {
+            WarningKind::LargeAngularAcceleration { value, .. } => Some(value),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(found.len(), 1);
+    assert!(found[0] > mpc_rig::motion::MAX_ANGULAR_ACCELERATION);
+    assert!(m.warnings()[0]
+        .to_string()
+        .contains("large-acceleration.toml:"));
+}
+
+/// Guards the 3R key step limit: nearly opposite consecutive orientations are rejected at
+/// the second key's line.
+#[test]
+fn three_r_step_too_large() {
+    let e = error_of("step-too-large-3r.toml");
+    assert!(matches!(e, MotionError::Invalid { .. }));
+    assert_message(
+        "step-too-large-3r.toml",
+        &e,
+        Some(10),
+        &["key[1]", "175.0°"],
+    );
+}
+
+/// Guards robustness: a file that is not text, and an empty file, are errors (not panics)
+/// naming the file.
+#[test]
+fn garbage_files_are_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let bin = dir.path().join("garbage.toml");
+    std::fs::write(&bin, [0xff_u8, 0xfe, 0x00, 0x80, 0x13]).unwrap();
+    let e = Motion::from_file(&bin).unwrap_err();
+    assert!(matches!(e, MotionError::Io { .. }));
+    assert!(e.to_string().contains("garbage.toml"));
+
+    let empty = dir.path().join("empty.csv");
+    std::fs::write(&empty, "").unwrap();
+    let e = Motion::from_file(&empty).unwrap_err();
+    assert!(e.to_string().contains("empty.csv"), "{e}");
+
+    let empty = dir.path().join("empty.toml");
+    std::fs::write(&empty, "").unwrap();
+    let e = Motion::from_file(&empty).unwrap_err();
+    assert!(e.to_string().contains("empty.toml"), "{e}");
+
+    let other = dir.path().join("motion.yaml");
+    std::fs::write(&other, "class: 1R").unwrap();
+    assert!(matches!(
+        Motion::from_file(&other).unwrap_err(),
+        MotionError::UnknownFormat { .. }
+    ));
+}
+
+/// Guards "bad input never panics": thousands of seeded random mutations of the shipped
+/// examples (TOML) and of a dense file (CSV) — replaced, deleted and duplicated characters
+/// and lines, digits swapped for signs and exponents — all end in `Ok` or a typed error,
+/// and every error message names the file.
+#[test]
+fn mutated_files_never_panic() {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2024);
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/motions");
+    let mut sources: Vec<(String, String)> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .map(|p| (std::fs::read_to_string(&p).unwrap(), "m.toml".to_string()))
+        .collect();
+    let m = Motion::from_file(&dir.join("figure-eight.toml")).unwrap();
+    let mut csv = Vec::new();
+    mpc_rig::motion::dense::write_csv(&mut csv, &m, &m.samples(24), false).unwrap();
+    sources.push((String::from_utf8(csv).unwrap(), "m.csv".to_string()));
+    sources.sort();
+    const ALPHABET: &[u8] = b"0123456789.-+eE[]{}=,\"#\n abcnaninf";
+    let mut outcomes = [0usize; 2];
+    for round in 0..3000 {
+        let (text, name) = &sources[round % sources.len()];
+        let mut bytes = text.clone().into_bytes();
+        for _ in 0..rng.random_range(1..6) {
+            if bytes.is_empty() {
+                break;
+            }
+            let i = rng.random_range(0..bytes.len());
+            match rng.random_range(0..4) {
+                0 => bytes[i] = ALPHABET[rng.random_range(0..ALPHABET.len())],
+                1 => {
+                    bytes.remove(i);
+                }
+                2 => bytes.insert(i, ALPHABET[rng.random_range(0..ALPHABET.len())]),
+                _ => {
+                    // Duplicate or drop a whole line.
+                    let text = String::from_utf8_lossy(&bytes).into_owned();
+                    let mut lines: Vec<&str> = text.lines().collect();
+                    let j = rng
+                        .random_range(0..lines.len().max(1))
+                        .min(lines.len().saturating_sub(1));
+                    if !lines.is_empty() {
+                        if rng.random_bool(0.5) {
+                            lines.insert(j, lines[j]);
+                        } else {
+                            lines.remove(j);
+                        }
+                    }
+                    bytes = lines.join("\n").into_bytes();
+                }
+            }
+        }
+        let text = String::from_utf8_lossy(&bytes).into_owned();
+        let path = Path::new(name);
+        let result = if name.ends_with(".csv") {
+            mpc_rig::motion::dense::parse_csv(&text, Some(path))
+        } else {
+            mpc_rig::motion::spec::parse_spec(&text, Some(path))
+        };
+        match result {
+            Ok(m) => {
+                outcomes[0] += 1;
+                let s = m.sample(0.37);
+                assert!(s.rotation.coords.iter().all(|x| x.is_finite()), "{text}");
+            }
+            Err(e) => {
+                outcomes[1] += 1;
+                assert!(e.to_string().contains(name.as_str()), "{e}");
+            }
+        }
+    }
+    // Both outcomes occur: the mutations are neither all harmless nor all fatal.
+    assert!(outcomes[0] > 100 && outcomes[1] > 100, "{outcomes:?}");
+}

@@ -267,6 +267,37 @@ mod tests {
         }
     }
 
+    /// Guards C² continuity of the SO(3) law at every keyframe and across the wrap: the
+    /// rotation, ω and dω/dt agree from both sides (after removing the smooth change over
+    /// the probe distance).
+    #[test]
+    fn rotation_law_is_c2_at_keys_and_wrap() {
+        let mut rng = ChaCha8Rng::seed_from_u64(33);
+        let (knots, keys) = random_keys(&mut rng, 6);
+        let law = RotationLaw::new(&knots, &keys);
+        let eps = 1e-7;
+        let mut joints = knots.clone();
+        joints.push(knots[0] + 1.0);
+        for &t in &joints {
+            let (l, r) = (law.eval(t - eps), law.eval(t + eps));
+            assert!(
+                l.rotation.angle_to(&r.rotation) < 3.0 * eps * (1.0 + l.angular_velocity.norm())
+            );
+            let dw = r.angular_velocity
+                - l.angular_velocity
+                - (l.angular_acceleration + r.angular_acceleration) * eps;
+            assert!(
+                dw.norm() < 1e-6 * (1.0 + l.angular_velocity.norm()),
+                "ω jumps at {t}"
+            );
+            let da = (r.angular_acceleration - l.angular_acceleration).norm();
+            assert!(
+                da < 1e-3 * (1.0 + l.angular_acceleration.norm()),
+                "dω/dt jumps at {t}: {da}"
+            );
+        }
+    }
+
     /// Guards the direction/roll convention: the end-effector axis lands at the requested
     /// azimuth and elevation, and roll does not move it.
     #[test]
