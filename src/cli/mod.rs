@@ -11,6 +11,7 @@ use clap::{Parser, Subcommand};
 pub mod measure;
 pub mod motion;
 pub mod ports;
+pub mod sim_device;
 
 /// Design, fabricate and bench-verify multi-point conjugation mechanisms.
 #[derive(Debug, Parser)]
@@ -35,6 +36,8 @@ pub enum Command {
     Ports(ports::PortsArgs),
     /// Measure a mechanism on a bench (real or simulated) and record it.
     Measure(measure::MeasureArgs),
+    /// Serve a simulated bench on a pseudo-terminal (prints its path, serves until stopped).
+    SimDevice(sim_device::SimDeviceArgs),
 }
 
 /// Set up `tracing` output on stderr from the -v/-q flags (`RUST_LOG` overrides).
@@ -64,6 +67,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Motion(args) => motion::run(args),
         Command::Ports(args) => ports::run(args),
         Command::Measure(args) => measure::run(args),
+        Command::SimDevice(args) => sim_device::run(args),
     }
 }
 

@@ -446,12 +446,12 @@ fn drive(
     while !done {
         if opts.cancel.load(Ordering::Relaxed) {
             bench.stop().ok();
-            finish_tail(bench, writer, start, phase)?;
+            finish_tail(bench, writer, start)?;
             return Ok(EndReason::Cancelled);
         }
         if start.elapsed() > max_run {
             bench.stop().ok();
-            finish_tail(bench, writer, start, phase)?;
+            finish_tail(bench, writer, start)?;
             return Ok(EndReason::MaxRunTime);
         }
         batch.clear();
@@ -484,6 +484,8 @@ fn drive(
                     }
                     Step::Done => {
                         done = true;
+                        // The rest of this batch is the start of the stop ramp.
+                        phase = Phase::Settle;
                         bench.stop()?;
                     }
                 }
@@ -523,7 +525,7 @@ fn drive(
             last_progress = Instant::now();
         }
     }
-    finish_tail(bench, writer, start, phase)?;
+    finish_tail(bench, writer, start)?;
     Ok(EndReason::Finished)
 }
 
@@ -533,35 +535,48 @@ fn finish_tail(
     bench: &mut (dyn Bench + Send),
     writer: &mut RecordingWriter,
     start: Instant,
-    phase: Phase,
 ) -> Result<(), RigError> {
     let deadline = Instant::now() + STOP_WAIT;
+    let window_us = REST_WINDOW.as_micros() as u64;
     let mut batch = Vec::new();
-    let mut window: Vec<(Instant, f64)> = Vec::new();
+    // (device time, angle) of the recent samples; rest is judged in device time.
+    let mut window: std::collections::VecDeque<(u64, f64)> = Default::default();
     while Instant::now() < deadline {
         batch.clear();
         bench.poll_samples(POLL_INTERVAL, &mut batch)?;
-        let now = Instant::now();
         let host_time_s = start.elapsed().as_secs_f64();
+        let mut at_rest = false;
         for s in &batch {
             writer.push(&Row {
                 device_time_us: s.device_time_us,
                 host_time_s,
-                phase,
+                // The stop ramp is not part of a measured cycle.
+                phase: Phase::Settle,
                 driver_angle_deg: s.driver_angle_deg,
                 values: &s.values,
                 flags: s.flags,
             })?;
-            window.push((now, s.driver_angle_deg));
+            window.push_back((s.device_time_us, s.driver_angle_deg));
+            let oldest = window.front().map_or(0, |w| w.0);
+            if s.device_time_us.saturating_sub(oldest) >= window_us {
+                let (lo, hi) = window
+                    .iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), w| {
+                        (lo.min(w.1), hi.max(w.1))
+                    });
+                if hi - lo < REST_TOLERANCE_DEG {
+                    at_rest = true;
+                    break;
+                }
+            }
+            while window
+                .front()
+                .is_some_and(|w| s.device_time_us.saturating_sub(w.0) > window_us)
+            {
+                window.pop_front();
+            }
         }
-        window.retain(|(t, _)| now.duration_since(*t) <= REST_WINDOW);
-        let spread = window
-            .iter()
-            .map(|w| w.1)
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), a| {
-                (lo.min(a), hi.max(a))
-            });
-        if window.len() > 2 && spread.1 - spread.0 < REST_TOLERANCE_DEG {
+        if at_rest {
             break;
         }
     }
