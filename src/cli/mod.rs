@@ -8,6 +8,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+pub mod analyze;
 pub mod measure;
 pub mod motion;
 pub mod ports;
@@ -30,6 +31,9 @@ pub struct Cli {
 /// The subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Compare a recording with its target law and write the report (plots, report.md,
+    /// report.html, summary.json).
+    Analyze(analyze::AnalyzeArgs),
     /// Check, plot and sample motion specifications.
     Motion(motion::MotionArgs),
     /// List serial ports with USB vendor/product/serial where known.
@@ -64,6 +68,7 @@ pub fn init_logging(verbose: u8, quiet: bool) {
 /// Run a parsed command line.
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
+        Command::Analyze(args) => analyze::run(args),
         Command::Motion(args) => motion::run(args),
         Command::Ports(args) => ports::run(args),
         Command::Measure(args) => measure::run(args),

@@ -46,6 +46,9 @@ pub enum Mark {
     Dashed,
     /// Filled circles of the given radius in pixels.
     Points(u32),
+    /// Vertical bars from y = 0, centred on each x, as wide as the closest x spacing
+    /// (histograms).
+    Bars,
 }
 
 /// One named data series.
@@ -93,6 +96,18 @@ impl Series {
             label: label.into(),
             points,
             mark: Mark::Points(radius),
+            color,
+        }
+    }
+}
+
+impl Series {
+    /// A bar series (histogram): one bar per point, from 0 to y.
+    pub fn bars(label: impl Into<String>, points: Vec<(f64, f64)>, color: usize) -> Self {
+        Self {
+            label: label.into(),
+            points,
+            mark: Mark::Bars,
             color,
         }
     }
@@ -194,6 +209,9 @@ impl Chart {
         for (y, _) in &self.h_lines {
             yr = (yr.0.min(*y), yr.1.max(*y));
         }
+        if self.series.iter().any(|s| s.mark == Mark::Bars) {
+            yr = (yr.0.min(0.0), yr.1.max(0.0));
+        }
         let mut xr = self.x_range.unwrap_or(xr);
         let mut yr = self.y_range.unwrap_or(yr);
         if !(xr.0.is_finite() && xr.1.is_finite() && yr.0.is_finite() && yr.1.is_finite()) {
@@ -293,6 +311,34 @@ impl Chart {
                         });
                     }
                     last
+                }
+                Mark::Bars => {
+                    let mut xs: Vec<f64> = s
+                        .points
+                        .iter()
+                        .map(|p| p.0)
+                        .filter(|x| x.is_finite())
+                        .collect();
+                    xs.sort_by(f64::total_cmp);
+                    let width = xs
+                        .windows(2)
+                        .map(|w| w[1] - w[0])
+                        .filter(|d| *d > 0.0)
+                        .fold(f64::INFINITY, f64::min);
+                    let half = if width.is_finite() { width / 2.0 } else { 0.5 };
+                    let fill = colour.mix(0.75).filled();
+                    Some(
+                        chart
+                            .draw_series(
+                                s.points
+                                    .iter()
+                                    .filter(|(x, y)| x.is_finite() && y.is_finite())
+                                    .map(|&(x, y)| {
+                                        Rectangle::new([(x - half, 0.0), (x + half, y)], fill)
+                                    }),
+                            )
+                            .map_err(|e| e.to_string())?,
+                    )
                 }
                 Mark::Points(r) => Some(
                     chart

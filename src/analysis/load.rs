@@ -1,0 +1,379 @@
+//! From files to the analysis' inputs: a recording directory plus its rig calibration
+//! becomes a [`MeasuredRun`]; a mechanism or motion file becomes a [`TargetLaw`].
+//!
+//! The recording is stream-parsed row by row through [`crate::rig::recording`]'s reader (no
+//! per-row allocation), raw sensor values are converted with the rig's own calibration
+//! ([`crate::rig::config::SensorConfig::to_physical`], IMU mounting), rotary encoders are
+//! unwrapped as they arrive, and samples whose sensor value the device marked as repeated
+//! (stale IMU, failed read) are left out and counted. It does not compute any figure.
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Quaternion, UnitQuaternion};
+
+use super::run::{unwrap_in_place, MeasuredRun, Phase, Resolution};
+use super::target::TargetLaw;
+use super::AnalysisError;
+use crate::rig::config::{Dof as RigDof, SensorConfig};
+use crate::rig::recording::{flags, RecordingMeta, RecordingReader, RowBuf};
+
+/// An IMU quaternion whose norm is further than this from 1 is rejected as garbage rather
+/// than normalized. Default 0.1: fused-orientation IMUs report unit quaternions to a few
+/// 10⁻⁴ (BNO055 uses 2¹⁴ LSB per unit); anything 10 % off is a corrupted value.
+pub const QUATERNION_NORM_TOLERANCE: f64 = 0.1;
+
+/// What loading found besides the samples.
+#[derive(Debug, Clone)]
+pub struct LoadedRecording {
+    /// The recording directory.
+    pub dir: PathBuf,
+    /// The sidecar.
+    pub meta: RecordingMeta,
+    /// Samples in physical units.
+    pub run: MeasuredRun,
+    /// Rows read from the CSV.
+    pub rows: usize,
+    /// Rows left out because the device flagged their follower value as repeated or failed.
+    pub stale_rows: usize,
+    /// The CSV ended in a partial line (crash, unplug or Ctrl-C) that was dropped.
+    pub truncated_last_line: bool,
+    /// Names of the sensors used: (rz, tz, imu).
+    pub sensors_used: (Option<String>, Option<String>, Option<String>),
+}
+
+fn recording_err(dir: &Path, e: impl std::fmt::Display) -> AnalysisError {
+    AnalysisError::Recording {
+        path: dir.to_path_buf(),
+        message: e.to_string(),
+    }
+}
+
+/// Load a recording directory into physical units with its own rig calibration.
+pub fn load_run(dir: &Path) -> Result<LoadedRecording, AnalysisError> {
+    let (meta, mut reader) = RecordingReader::open(dir).map_err(|e| recording_err(dir, e))?;
+    let columns: Vec<String> = reader.columns().to_vec();
+    let lead = crate::rig::recording::LEADING_COLUMNS.len();
+    let col_of = |name: &str| -> Result<usize, AnalysisError> {
+        columns
+            .iter()
+            .position(|c| c == name)
+            .and_then(|i| i.checked_sub(lead))
+            .ok_or_else(|| {
+                recording_err(
+                    dir,
+                    format!("the CSV header has no column `{name}` for the rig's sensor"),
+                )
+            })
+    };
+    // Pick one sensor per DOF (the first the rig lists).
+    let mut rz: Option<(&SensorConfig, usize)> = None;
+    let mut tz: Option<(&SensorConfig, usize)> = None;
+    let mut imu: Option<(&crate::rig::config::ImuConfig, usize)> = None;
+    for s in &meta.rig.sensors {
+        match (s, s.dof()) {
+            (SensorConfig::Imu(i), _) if imu.is_none() => {
+                imu = Some((i, col_of(&format!("{}_qw", i.name))?));
+            }
+            (_, Some(RigDof::Rz)) if rz.is_none() => rz = Some((s, col_of(s.name())?)),
+            (_, Some(RigDof::Tz)) if tz.is_none() => tz = Some((s, col_of(s.name())?)),
+            _ => {}
+        }
+    }
+    if rz.is_none() && tz.is_none() && imu.is_none() {
+        return Err(recording_err(
+            dir,
+            format!("rig `{}` has no follower sensor", meta.rig.name),
+        ));
+    }
+    let guess = std::fs::metadata(dir.join(crate::rig::recording::CSV_FILE))
+        .map(|m| (m.len() / 40) as usize)
+        .unwrap_or(0)
+        .min(50_000_000);
+    let mut run = MeasuredRun {
+        time_s: Vec::with_capacity(guess),
+        phase: Vec::with_capacity(guess),
+        driver_deg: Vec::with_capacity(guess),
+        rz_deg: rz.map(|_| Vec::with_capacity(guess)),
+        tz_mm: tz.map(|_| Vec::with_capacity(guess)),
+        rotation: imu.map(|_| Vec::with_capacity(guess)),
+        ramping: Vec::new(),
+        resolution: Resolution {
+            rz_deg: rz
+                .and_then(|(s, _)| s.counts_per_rev())
+                .map_or(0.0, |c| 360.0 / c),
+            tz_mm: tz
+                .and_then(|(s, _)| match s {
+                    SensorConfig::As5600(e) | SensorConfig::Quadrature(e) => e.mm_per_count,
+                    _ => None,
+                })
+                .unwrap_or(0.0),
+        },
+    };
+    let mut row = RowBuf::default();
+    let (mut rows, mut stale) = (0usize, 0usize);
+    // Incremental unwrap of the rotary encoder.
+    let mut rz_prev_raw: Option<f64> = None;
+    let mut rz_turns = 0.0;
+    let stale_mask = |s: Option<&SensorConfig>| match s {
+        Some(SensorConfig::Dynamixel(_)) => flags::FOLLOWER_STALE | flags::SENSOR_ERROR,
+        _ => flags::SENSOR_ERROR,
+    };
+    let rz_mask = stale_mask(rz.map(|r| r.0));
+    let imu_mask = flags::IMU_STALE | flags::SENSOR_ERROR;
+    while reader
+        .next_row(&mut row)
+        .map_err(|e| recording_err(dir, e))?
+    {
+        rows += 1;
+        let line = rows + 1;
+        let mask = if imu.is_some() { imu_mask } else { rz_mask };
+        if row.flags & mask != 0 {
+            stale += 1;
+            continue;
+        }
+        let bad = |what: String| AnalysisError::Recording {
+            path: dir.join(crate::rig::recording::CSV_FILE),
+            message: format!("line {line}: {what}"),
+        };
+        if let Some((s, c)) = rz {
+            let v = s
+                .to_physical(row.values[c])
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| {
+                    bad(format!(
+                        "sensor `{}`: value {} is not usable",
+                        s.name(),
+                        row.values[c]
+                    ))
+                })?;
+            if let Some(prev) = rz_prev_raw {
+                rz_turns -= 360.0 * ((v - prev) / 360.0).round();
+            }
+            rz_prev_raw = Some(v);
+            run.rz_deg
+                .as_mut()
+                .expect("allocated with the sensor")
+                .push(v + rz_turns);
+        }
+        if let Some((s, c)) = tz {
+            let v = s
+                .to_physical(row.values[c])
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| {
+                    bad(format!(
+                        "sensor `{}`: value {} is not usable",
+                        s.name(),
+                        row.values[c]
+                    ))
+                })?;
+            run.tz_mm
+                .as_mut()
+                .expect("allocated with the sensor")
+                .push(v);
+        }
+        if let Some((i, c)) = imu {
+            let q = Quaternion::new(
+                row.values[c],
+                row.values[c + 1],
+                row.values[c + 2],
+                row.values[c + 3],
+            );
+            let norm = q.norm();
+            if !norm.is_finite() || (norm - 1.0).abs() > QUATERNION_NORM_TOLERANCE {
+                return Err(bad(format!(
+                    "IMU `{}`: quaternion norm {norm} is not 1 (±{QUATERNION_NORM_TOLERANCE})",
+                    i.name
+                )));
+            }
+            run.rotation
+                .as_mut()
+                .expect("allocated with the sensor")
+                .push(i.follower_rotation(UnitQuaternion::from_quaternion(q)));
+        }
+        if !row.driver_angle_deg.is_finite() {
+            return Err(bad(format!(
+                "driver_angle_deg {} is not finite",
+                row.driver_angle_deg
+            )));
+        }
+        run.time_s.push(row.device_time_us as f64 * 1e-6);
+        run.phase.push(match row.phase {
+            Some(crate::rig::recording::Phase::Forward) => Phase::Forward,
+            Some(crate::rig::recording::Phase::Reverse) => Phase::Reverse,
+            _ => Phase::Settle,
+        });
+        run.driver_deg.push(row.driver_angle_deg);
+    }
+    if let Some(v) = &mut run.rz_deg {
+        // The incremental unwrap above is exact; this is a no-op guard for stale-row skips.
+        unwrap_in_place(v, 360.0);
+    }
+    let sensors_used = (
+        rz.map(|r| r.0.name().to_string()),
+        tz.map(|r| r.0.name().to_string()),
+        imu.map(|r| r.0.name.clone()),
+    );
+    Ok(LoadedRecording {
+        dir: dir.to_path_buf(),
+        truncated_last_line: reader.truncated_last_line(),
+        meta,
+        run,
+        rows,
+        stale_rows: stale,
+        sensors_used,
+    })
+}
+
+/// Millimetres per model unit when the target is a motion file (no mechanism to say):
+/// the rig plant's default, so simulated benches and analysis agree.
+pub const DEFAULT_SCALE_MM: f64 = crate::rig::sim::plant::DEFAULT_SCALE_MM;
+
+/// Where the target law comes from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum TargetSource {
+    /// A `mechanism.json` (or the directory holding it).
+    Mechanism(PathBuf),
+    /// A motion file (`.toml` keyframes or `.csv` dense).
+    Motion(PathBuf),
+}
+
+impl TargetSource {
+    /// `mechanism` or `motion`.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            TargetSource::Mechanism(_) => "mechanism",
+            TargetSource::Motion(_) => "motion",
+        }
+    }
+
+    /// The path.
+    pub fn path(&self) -> &Path {
+        match self {
+            TargetSource::Mechanism(p) | TargetSource::Motion(p) => p,
+        }
+    }
+}
+
+/// `scale_mm` of a mechanism file (directory or file), or the default when absent.
+fn mechanism_scale_mm(path: &Path) -> Result<f64, AnalysisError> {
+    let file = if path.is_dir() {
+        path.join("mechanism.json")
+    } else {
+        path.to_path_buf()
+    };
+    let text = std::fs::read_to_string(&file).map_err(|e| AnalysisError::io(&file, e))?;
+    let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| AnalysisError::Target {
+        path: file.clone(),
+        message: e.to_string(),
+    })?;
+    match v.get("scale_mm") {
+        None => Ok(DEFAULT_SCALE_MM),
+        Some(x) => x
+            .as_f64()
+            .filter(|s| s.is_finite() && *s > 0.0)
+            .ok_or_else(|| AnalysisError::Target {
+                path: file,
+                message: format!("field `scale_mm`: {x} is not a positive number"),
+            }),
+    }
+}
+
+/// Load the target law.
+pub fn load_target(src: &TargetSource) -> Result<TargetLaw, AnalysisError> {
+    let err = |e: crate::motion::MotionError| AnalysisError::Target {
+        path: src.path().to_path_buf(),
+        message: e.to_string(),
+    };
+    match src {
+        TargetSource::Mechanism(p) => {
+            let m = crate::motion::Motion::from_mechanism_file(p).map_err(err)?;
+            Ok(TargetLaw::from_motion(&m, mechanism_scale_mm(p)?))
+        }
+        TargetSource::Motion(p) => {
+            let m = crate::motion::Motion::from_file(p).map_err(err)?;
+            Ok(TargetLaw::from_motion(&m, DEFAULT_SCALE_MM))
+        }
+    }
+}
+
+/// The target a recording names in its sidecar (relative paths are tried as given, then
+/// relative to the recording directory's parents).
+pub fn recorded_target(loaded: &LoadedRecording) -> Result<TargetSource, AnalysisError> {
+    let t = &loaded.meta.target;
+    let mut candidates = vec![t.path.clone()];
+    if t.path.is_relative() {
+        let mut d = Some(loaded.dir.as_path());
+        while let Some(dir) = d {
+            candidates.push(dir.join(&t.path));
+            d = dir.parent();
+        }
+    }
+    let path =
+        candidates
+            .into_iter()
+            .find(|p| p.exists())
+            .ok_or_else(|| AnalysisError::Target {
+                path: t.path.clone(),
+                message:
+                    "the recording's target file does not exist here; pass --mechanism or --motion"
+                        .into(),
+            })?;
+    match t.kind.as_str() {
+        "mechanism" => Ok(TargetSource::Mechanism(path)),
+        "motion" => Ok(TargetSource::Motion(path)),
+        other => Err(AnalysisError::Target {
+            path,
+            message: format!("unknown target kind `{other}` in the sidecar (mechanism or motion)"),
+        }),
+    }
+}
+
+/// Analyse a recording directory and write its report into `<recording_dir>/report/` (or
+/// `opts.out_dir`). The target is the one the sidecar names unless `opts` overrides it.
+pub fn analyze_and_report(
+    recording_dir: &Path,
+    opts: &super::ReportOptions,
+) -> Result<super::Summary, AnalysisError> {
+    let loaded = load_run(recording_dir)?;
+    let src = match (&opts.mechanism, &opts.motion) {
+        (Some(_), Some(_)) => {
+            return Err(AnalysisError::BadOption {
+                option: "--mechanism/--motion".into(),
+                message: "give one target, not both".into(),
+            })
+        }
+        (Some(m), None) => TargetSource::Mechanism(m.clone()),
+        (None, Some(m)) => TargetSource::Motion(m.clone()),
+        (None, None) => recorded_target(&loaded)?,
+    };
+    let law = load_target(&src)?;
+    if loaded.truncated_last_line {
+        tracing::warn!(
+            "{}: the last CSV line was cut off (crash or unplug) and was dropped",
+            recording_dir.display()
+        );
+    }
+    let analysis = super::analyze(
+        &loaded.run,
+        &law,
+        &super::AnalysisOptions {
+            timing_levels: opts.timing_levels.clone(),
+        },
+    )?;
+    let out_dir = opts
+        .out_dir
+        .clone()
+        .unwrap_or_else(|| recording_dir.join("report"));
+    let source = super::report::SourceInfo {
+        recording_dir: recording_dir.to_path_buf(),
+        complete: Some(loaded.meta.complete),
+        end_reason: loaded.meta.end_reason.clone(),
+        rows: loaded.rows,
+        stale_rows: loaded.stale_rows,
+        truncated_last_line: loaded.truncated_last_line,
+        device_counts: serde_json::to_value(loaded.meta.counts).unwrap_or_default(),
+        target_kind: src.kind().into(),
+        target_path: src.path().to_path_buf(),
+    };
+    super::report::write_report(&out_dir, &analysis, &loaded.run, &law, source, opts)
+}

@@ -1,0 +1,805 @@
+//! The report: pictures for people, numbers for scripts, and a verdict.
+//!
+//! [`write_report`] writes into one directory: PNG + SVG charts ([`plots`]), `report.md`,
+//! a self-contained `report.html` (charts embedded; one document model, [`doc`], renders
+//! both) and `summary.json` ([`Summary`]: every metric, units in the field names, and the
+//! pass/fail [`Check`]s against the tolerances of [`ReportOptions`]). It computes nothing
+//! itself: the figures come from [`crate::analysis::analyze`].
+
+pub mod doc;
+pub mod plots;
+
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+
+use super::align::Dof;
+use super::metrics::{ChannelMetrics, Hysteresis};
+use super::run::MeasuredRun;
+use super::sampling::SamplingStats;
+use super::target::TargetLaw;
+use super::timing::TimingReport;
+use super::{Analysis, AnalysisError, KeyPoseError};
+use doc::Block;
+
+/// Format tag of `summary.json`.
+pub const SUMMARY_FORMAT: &str = "mpcrig-summary/1";
+
+/// How to analyse and what to judge.
+#[derive(Debug, Clone, Default)]
+pub struct ReportOptions {
+    /// Where to write the report; `<recording>/report` when `None`.
+    pub out_dir: Option<PathBuf>,
+    /// Analyse against this mechanism (file or directory) instead of the recording's target.
+    pub mechanism: Option<PathBuf>,
+    /// Analyse against this motion file instead of the recording's target.
+    pub motion: Option<PathBuf>,
+    /// Follower crossing angles for timing ratios (`--timing 0,180,360`).
+    pub timing_levels: Option<Vec<f64>>,
+    /// Tolerance on the RMS rotation error, degrees.
+    pub tol_deg: Option<f64>,
+    /// Tolerance on the RMS height error, millimetres.
+    pub tol_mm: Option<f64>,
+    /// Tolerance on |measured − target| of every timing ratio.
+    pub tol_ratio: Option<f64>,
+}
+
+/// One pass/fail check against a tolerance.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Check {
+    /// What is checked, e.g. `rms_error_rz_deg`.
+    pub name: String,
+    /// The measured figure (`None` when it could not be measured: the check fails).
+    pub measured: Option<f64>,
+    /// The target value it is compared with (0 for errors).
+    pub target: f64,
+    /// The allowed |measured − target|.
+    pub tolerance: f64,
+    /// Whether it passed.
+    pub pass: bool,
+}
+
+/// Where the data came from.
+#[derive(Debug, Clone, Serialize)]
+pub struct SourceInfo {
+    /// Recording directory.
+    pub recording_dir: PathBuf,
+    /// Whether the session ended normally (sidecar `complete`).
+    pub complete: Option<bool>,
+    /// Why it ended.
+    pub end_reason: Option<String>,
+    /// CSV rows read.
+    pub rows: usize,
+    /// Rows left out as stale (device-flagged repeated values).
+    pub stale_rows: usize,
+    /// The CSV ended in a cut-off line that was dropped.
+    pub truncated_last_line: bool,
+    /// The recording's own counters (gaps, CRC errors, reconnects …), as written by the rig.
+    pub device_counts: serde_json::Value,
+    /// Target kind (`mechanism` or `motion`).
+    pub target_kind: String,
+    /// Target file.
+    pub target_path: PathBuf,
+}
+
+/// The headline figures.
+#[derive(Debug, Clone, Serialize)]
+pub struct Headline {
+    /// Motion class.
+    pub class: String,
+    /// Motion name.
+    pub motion: String,
+    /// RMS rotation error (rz for 1R/1R1T, geodesic for 3R), after alignment.
+    pub rms_error_deg: Option<f64>,
+    /// Largest rotation error.
+    pub max_error_deg: Option<f64>,
+    /// RMS height error (1R1T).
+    pub rms_error_mm: Option<f64>,
+    /// First timing ratio (e.g. first half-turn over second half-turn).
+    pub timing_ratio_measured: Option<f64>,
+    /// Its expanded uncertainty (k = 2).
+    pub timing_ratio_u95: Option<f64>,
+    /// The target's ratio (2.0 for half-turn-2to1).
+    pub timing_ratio_target: Option<f64>,
+    /// Phase lag in driver degrees.
+    pub phase_lag_deg: f64,
+    /// Driver-side backlash, when both directions were run.
+    pub backlash_driver_deg: Option<f64>,
+    /// Complete forward/reverse cycles analysed.
+    pub cycles: usize,
+    /// Mean sample rate.
+    pub sample_rate_hz: f64,
+}
+
+/// The offsets, with units in the field names.
+#[derive(Debug, Clone, Serialize)]
+pub struct AlignmentSummary {
+    /// Constant driver-angle offset δ₀ (positive: follower behind).
+    pub driver_offset_deg: f64,
+    /// Its standard error.
+    pub driver_offset_std_err_deg: f64,
+    /// False when the law cannot separate it from the sensor offset (uniform laws).
+    pub driver_offset_determined: bool,
+    /// Sensor offset of rz, degrees.
+    pub sensor_offset_rz_deg: Option<f64>,
+    /// Its standard error.
+    pub sensor_offset_rz_std_err_deg: Option<f64>,
+    /// Sensor offset of tz, millimetres.
+    pub sensor_offset_tz_mm: Option<f64>,
+    /// Its standard error.
+    pub sensor_offset_tz_std_err_mm: Option<f64>,
+    /// 3R: angle of the world-frame (IMU heading) offset.
+    pub world_offset_deg: Option<f64>,
+    /// 3R: its axis.
+    pub world_offset_axis: Option<[f64; 3]>,
+    /// 3R: angle of the mounting offset.
+    pub mount_offset_deg: Option<f64>,
+    /// 3R: its axis.
+    pub mount_offset_axis: Option<[f64; 3]>,
+    /// Non-settle samples used.
+    pub samples: usize,
+}
+
+/// Lag and backlash, with units in the field names.
+#[derive(Debug, Clone, Serialize)]
+pub struct LagSummary {
+    /// Phase lag (= the driver offset; a homing error looks the same).
+    pub phase_lag_driver_deg: f64,
+    /// As a time at the forward speed.
+    pub phase_lag_ms: Option<f64>,
+    /// Driver-side backlash 2λ (forward and reverse runs only).
+    pub backlash_driver_deg: Option<f64>,
+    /// Its standard error.
+    pub backlash_driver_std_err_deg: Option<f64>,
+    /// Follower-side dead band in rz.
+    pub backlash_follower_rz_deg: Option<f64>,
+    /// Follower-side dead band in tz.
+    pub backlash_follower_tz_mm: Option<f64>,
+    /// 3R forward/reverse difference of the error rotation.
+    pub rotation_hysteresis: Option<Hysteresis>,
+}
+
+/// `summary.json`: every figure of the analysis for scripts.
+#[derive(Debug, Clone, Serialize)]
+pub struct Summary {
+    /// [`SUMMARY_FORMAT`].
+    pub format: String,
+    /// `None` without tolerances; otherwise whether every check passed.
+    pub pass: Option<bool>,
+    /// The checks.
+    pub checks: Vec<Check>,
+    /// Headline figures.
+    pub headline: Headline,
+    /// Offsets.
+    pub alignment: AlignmentSummary,
+    /// Lag and backlash.
+    pub lag: LagSummary,
+    /// Error statistics per channel.
+    pub errors: Vec<ChannelMetrics>,
+    /// Timing ratios.
+    pub timing: Option<TimingReport>,
+    /// 3R key poses.
+    pub key_poses: Vec<KeyPoseError>,
+    /// Sampling figures.
+    pub sampling: SamplingStats,
+    /// Data sources.
+    pub source: SourceInfo,
+    /// Files written (relative to the report directory).
+    pub files: Vec<String>,
+}
+
+fn checks(a: &Analysis, opts: &ReportOptions) -> Vec<Check> {
+    let mut out = Vec::new();
+    let rot = a
+        .channels
+        .iter()
+        .find(|c| c.name == "rz" || c.name == "rotation");
+    if let Some(tol) = opts.tol_deg {
+        let m = rot.map(|c| c.overall.rms);
+        out.push(Check {
+            name: format!(
+                "rms_error_{}_deg",
+                rot.map_or("rotation", |c| c.name.as_str())
+            ),
+            measured: m,
+            target: 0.0,
+            tolerance: tol,
+            pass: m.is_some_and(|m| m <= tol),
+        });
+    }
+    if let Some(tol) = opts.tol_mm {
+        let m = a
+            .channels
+            .iter()
+            .find(|c| c.name == "tz")
+            .map(|c| c.overall.rms);
+        out.push(Check {
+            name: "rms_error_tz_mm".into(),
+            measured: m,
+            target: 0.0,
+            tolerance: tol,
+            pass: m.is_some_and(|m| m <= tol),
+        });
+    }
+    if let Some(tol) = opts.tol_ratio {
+        match &a.timing {
+            Some(t) if !t.ratios.is_empty() => {
+                for r in &t.ratios {
+                    out.push(Check {
+                        name: format!(
+                            "timing_ratio_{}_{}_{}",
+                            r.levels_deg[0], r.levels_deg[1], r.levels_deg[2]
+                        ),
+                        measured: Some(r.measured),
+                        target: r.target,
+                        tolerance: tol,
+                        pass: (r.measured - r.target).abs() <= tol,
+                    });
+                }
+            }
+            _ => out.push(Check {
+                name: "timing_ratio".into(),
+                measured: None,
+                target: f64::NAN,
+                tolerance: tol,
+                pass: false,
+            }),
+        }
+    }
+    out
+}
+
+/// Build the summary (no files written).
+pub fn summarize(
+    a: &Analysis,
+    law: &TargetLaw,
+    source: SourceInfo,
+    opts: &ReportOptions,
+) -> Summary {
+    let checks = checks(a, opts);
+    let pass = (!checks.is_empty()).then(|| checks.iter().all(|c| c.pass));
+    let rot = a
+        .channels
+        .iter()
+        .find(|c| c.name == "rz" || c.name == "rotation");
+    let tz = a.channels.iter().find(|c| c.name == "tz");
+    let ratio = a.timing.as_ref().and_then(|t| t.ratios.first());
+    let cycles = rot.map_or(0, |c| {
+        c.per_cycle
+            .iter()
+            .filter(|k| k.coverage >= super::metrics::FULL_CYCLE_COVERAGE)
+            .count()
+    });
+    let off = |d: Dof| a.alignment.dofs.iter().find(|o| o.dof == d);
+    let rot_off = a.alignment.rotation;
+    let axis = |q: nalgebra::UnitQuaternion<f64>| {
+        q.axis().map_or([0.0, 0.0, 1.0], |ax| [ax.x, ax.y, ax.z])
+    };
+    let bl = a.backlash.as_ref();
+    let follower_bl = |d: Dof| {
+        bl.and_then(|b| {
+            b.follower
+                .iter()
+                .find(|(x, _)| *x == d)
+                .map(|(_, e)| e.value)
+        })
+    };
+    Summary {
+        format: SUMMARY_FORMAT.into(),
+        pass,
+        checks,
+        headline: Headline {
+            class: a.class.into(),
+            motion: law.name.clone(),
+            rms_error_deg: rot.map(|c| c.overall.rms),
+            max_error_deg: rot.map(|c| c.overall.max_abs),
+            rms_error_mm: tz.map(|c| c.overall.rms),
+            timing_ratio_measured: ratio.map(|r| r.measured),
+            timing_ratio_u95: ratio.map(|r| r.u95),
+            timing_ratio_target: ratio.map(|r| r.target),
+            phase_lag_deg: a.phase_lag.driver_deg.value,
+            backlash_driver_deg: bl.map(|b| b.driver_deg.value),
+            cycles,
+            sample_rate_hz: a.sampling.mean_rate_hz,
+        },
+        alignment: AlignmentSummary {
+            driver_offset_deg: a.alignment.driver_offset_deg.value,
+            driver_offset_std_err_deg: a.alignment.driver_offset_deg.std_err,
+            driver_offset_determined: a.alignment.driver_offset_deg.determined,
+            sensor_offset_rz_deg: off(Dof::Rz).map(|o| o.sensor_offset.value),
+            sensor_offset_rz_std_err_deg: off(Dof::Rz).map(|o| o.sensor_offset.std_err),
+            sensor_offset_tz_mm: off(Dof::Tz).map(|o| o.sensor_offset.value),
+            sensor_offset_tz_std_err_mm: off(Dof::Tz).map(|o| o.sensor_offset.std_err),
+            world_offset_deg: rot_off.map(|r| r.world.angle().to_degrees()),
+            world_offset_axis: rot_off.map(|r| axis(r.world)),
+            mount_offset_deg: rot_off.map(|r| r.mount.angle().to_degrees()),
+            mount_offset_axis: rot_off.map(|r| axis(r.mount)),
+            samples: a.alignment.samples,
+        },
+        lag: LagSummary {
+            phase_lag_driver_deg: a.phase_lag.driver_deg.value,
+            phase_lag_ms: a.phase_lag.ms,
+            backlash_driver_deg: bl.map(|b| b.driver_deg.value),
+            backlash_driver_std_err_deg: bl.map(|b| b.driver_deg.std_err),
+            backlash_follower_rz_deg: follower_bl(Dof::Rz),
+            backlash_follower_tz_mm: follower_bl(Dof::Tz),
+            rotation_hysteresis: a.rotation_hysteresis,
+        },
+        errors: a.channels.clone(),
+        timing: a.timing.clone(),
+        key_poses: a.key_poses.clone(),
+        sampling: a.sampling.clone(),
+        source,
+        files: Vec::new(),
+    }
+}
+
+fn f3(v: f64) -> String {
+    format!("{v:.3}")
+}
+
+fn opt3(v: Option<f64>) -> String {
+    v.map_or_else(|| "–".into(), f3)
+}
+
+/// The verdict sentence.
+fn verdict(s: &Summary) -> (Option<bool>, String) {
+    let failed: Vec<&str> = s
+        .checks
+        .iter()
+        .filter(|c| !c.pass)
+        .map(|c| c.name.as_str())
+        .collect();
+    match s.pass {
+        Some(true) => (
+            Some(true),
+            format!("PASS — all {} tolerance checks met", s.checks.len()),
+        ),
+        Some(false) => (Some(false), format!("FAIL — missed: {}", failed.join(", "))),
+        None => (
+            None,
+            "No tolerances given (use --tol-deg, --tol-mm, --tol-ratio for a verdict)".into(),
+        ),
+    }
+}
+
+fn blocks(s: &Summary, a: &Analysis, pictures: &[plots::Picture]) -> Vec<Block> {
+    let h = &s.headline;
+    let mut b = vec![Block::Heading(
+        1,
+        format!("Bench report: {} ({})", h.motion, h.class),
+    )];
+    let (v, text) = verdict(s);
+    b.push(Block::Verdict(v, text));
+    let mut lines = Vec::new();
+    if let (Some(m), Some(u), Some(t)) = (
+        h.timing_ratio_measured,
+        h.timing_ratio_u95,
+        h.timing_ratio_target,
+    ) {
+        let lv = s
+            .timing
+            .as_ref()
+            .map(|t| t.ratios[0].levels_deg)
+            .unwrap_or_default();
+        lines.push(format!(
+            "Timing: the follower's {}°→{}° took **{m:.3} ± {u:.3}** times as long as {}°→{}° (target **{t:.3}**).",
+            lv[0], lv[1], lv[1], lv[2]
+        ));
+    }
+    if let Some(r) = h.rms_error_deg {
+        lines.push(format!(
+            "Rotation error after alignment: RMS **{r:.3}°**, max {:.3}°.",
+            h.max_error_deg.unwrap_or(f64::NAN)
+        ));
+    }
+    if let Some(r) = h.rms_error_mm {
+        lines.push(format!("Height error after alignment: RMS **{r:.3} mm**."));
+    }
+    lines.push(format!(
+        "Phase lag {:.3}° of driver angle{}; {}.",
+        h.phase_lag_deg,
+        s.lag
+            .phase_lag_ms
+            .map_or(String::new(), |ms| format!(" ({ms:.1} ms)")),
+        h.backlash_driver_deg
+            .map_or("backlash not measured (no reverse run)".to_string(), |v| {
+                format!("backlash {v:.3}° of driver angle")
+            })
+    ));
+    lines.push(format!(
+        "{} complete cycles, {} samples at {:.1} Hz, {} gaps.",
+        h.cycles, s.sampling.samples, s.sampling.mean_rate_hz, s.sampling.gaps
+    ));
+    for l in lines {
+        b.push(Block::Para(l));
+    }
+    for c in &s.checks {
+        let _ = c;
+    }
+    if !s.checks.is_empty() {
+        b.push(Block::Table(
+            vec![
+                "check".into(),
+                "measured".into(),
+                "target".into(),
+                "tolerance".into(),
+                "result".into(),
+            ],
+            s.checks
+                .iter()
+                .map(|c| {
+                    vec![
+                        c.name.clone(),
+                        opt3(c.measured),
+                        f3(c.target),
+                        format!("±{}", c.tolerance),
+                        if c.pass {
+                            "pass".into()
+                        } else {
+                            "**FAIL**".into()
+                        },
+                    ]
+                })
+                .collect(),
+        ));
+    }
+    // Pictures early: a person should understand the result at a glance.
+    for (cap, path) in pictures {
+        b.push(Block::Image(cap.clone(), path.clone()));
+    }
+    b.push(Block::Heading(2, "Alignment (reported, not hidden)".into()));
+    let al = &s.alignment;
+    let mut rows = vec![vec![
+        "driver-angle offset δ₀ (phase lag)".into(),
+        format!(
+            "{} ± {} °",
+            f3(al.driver_offset_deg),
+            f3(al.driver_offset_std_err_deg)
+        ),
+        if al.driver_offset_determined {
+            "".into()
+        } else {
+            "not separable from the sensor offset".into()
+        },
+    ]];
+    if let Some(v) = al.sensor_offset_rz_deg {
+        rows.push(vec![
+            "sensor offset rz".into(),
+            format!("{} ± {} °", f3(v), opt3(al.sensor_offset_rz_std_err_deg)),
+            String::new(),
+        ]);
+    }
+    if let Some(v) = al.sensor_offset_tz_mm {
+        rows.push(vec![
+            "sensor offset tz".into(),
+            format!("{} ± {} mm", f3(v), opt3(al.sensor_offset_tz_std_err_mm)),
+            String::new(),
+        ]);
+    }
+    if let (Some(w), Some(ax)) = (al.world_offset_deg, al.world_offset_axis) {
+        rows.push(vec![
+            "IMU world-frame offset".into(),
+            format!("{w:.3}° about [{:.2}, {:.2}, {:.2}]", ax[0], ax[1], ax[2]),
+            String::new(),
+        ]);
+    }
+    if let (Some(w), Some(ax)) = (al.mount_offset_deg, al.mount_offset_axis) {
+        rows.push(vec![
+            "mounting offset".into(),
+            format!("{w:.3}° about [{:.2}, {:.2}, {:.2}]", ax[0], ax[1], ax[2]),
+            String::new(),
+        ]);
+    }
+    if let Some(v) = s.lag.backlash_driver_deg {
+        rows.push(vec![
+            "driver-side backlash (2λ)".into(),
+            format!("{} ± {} °", f3(v), opt3(s.lag.backlash_driver_std_err_deg)),
+            "includes 2 × time lag × speed".into(),
+        ]);
+    }
+    if let Some(v) = s.lag.backlash_follower_rz_deg {
+        rows.push(vec![
+            "follower-side dead band rz".into(),
+            format!("{} °", f3(v)),
+            String::new(),
+        ]);
+    }
+    if let Some(v) = s.lag.backlash_follower_tz_mm {
+        rows.push(vec![
+            "follower-side dead band tz".into(),
+            format!("{} mm", f3(v)),
+            String::new(),
+        ]);
+    }
+    b.push(Block::Table(
+        vec!["offset".into(), "value".into(), "note".into()],
+        rows,
+    ));
+    b.push(Block::Heading(2, "Errors".into()));
+    let mut rows = Vec::new();
+    for c in &a.channels {
+        let u = c.unit;
+        for (label, st) in [
+            ("all", Some(c.overall)),
+            ("forward", c.forward),
+            ("reverse", c.reverse),
+            ("unaligned", c.unaligned),
+        ] {
+            if let Some(st) = st {
+                rows.push(vec![
+                    format!("{} ({label})", c.name),
+                    st.samples.to_string(),
+                    format!("{} {u}", f3(st.rms)),
+                    format!("{} {u}", f3(st.mean)),
+                    format!("{} {u}", f3(st.max_abs)),
+                    format!("{} {u}", f3(st.p95_abs)),
+                ]);
+            }
+        }
+    }
+    b.push(Block::Table(
+        ["channel", "samples", "RMS", "mean", "max |e|", "95 % |e|"]
+            .map(String::from)
+            .to_vec(),
+        rows,
+    ));
+    let mut rows = Vec::new();
+    for c in &a.channels {
+        if let Some(r) = c.repeatability {
+            rows.push(vec![
+                format!("{} repeatability ({} cycles)", c.name, r.cycles),
+                format!("RMS σ {} {}", f3(r.rms_std), c.unit),
+                format!("max σ {} {}", f3(r.max_std), c.unit),
+            ]);
+        }
+        if let Some(hy) = c.hysteresis {
+            rows.push(vec![
+                format!("{} hysteresis (reverse − forward)", c.name),
+                format!("mean {} {}", f3(hy.mean), c.unit),
+                format!("max {} {}", f3(hy.max_abs), c.unit),
+            ]);
+        }
+    }
+    if let Some(hy) = s.lag.rotation_hysteresis {
+        rows.push(vec![
+            "rotation hysteresis |ē_fwd − ē_rev|".into(),
+            format!("mean {} deg", f3(hy.mean)),
+            format!("max {} deg", f3(hy.max_abs)),
+        ]);
+    }
+    if !rows.is_empty() {
+        b.push(Block::Table(
+            vec!["figure".into(), "".into(), "".into()],
+            rows,
+        ));
+    }
+    if let Some(c) = a.channels.first() {
+        b.push(Block::Heading(3, format!("Per cycle ({})", c.name)));
+        let rows = c
+            .per_cycle
+            .iter()
+            .map(|k| {
+                vec![
+                    format!("{} {}", k.direction.as_str(), k.cycle),
+                    format!("{:.0} %", 100.0 * k.coverage),
+                    format!("{} {}", f3(k.stats.rms), c.unit),
+                    format!("{} {}", f3(k.stats.mean), c.unit),
+                    format!("{} {}", f3(k.stats.max_abs), c.unit),
+                ]
+            })
+            .collect();
+        b.push(Block::Table(
+            ["cycle", "coverage", "RMS", "mean", "max |e|"]
+                .map(String::from)
+                .to_vec(),
+            rows,
+        ));
+    }
+    if let Some(t) = &s.timing {
+        b.push(Block::Heading(2, "Timing".into()));
+        b.push(Block::Para(format!(
+            "Crossings of the follower angles {:?}° (relative to each cycle's start), found by interpolation; uncertainties from sample period, encoder resolution and noise, expanded k = 2.",
+            t.levels_deg
+        )));
+        let rows = t
+            .ratios
+            .iter()
+            .map(|r| {
+                vec![
+                    format!(
+                        "({}→{}) / ({}→{})",
+                        r.levels_deg[0], r.levels_deg[1], r.levels_deg[1], r.levels_deg[2]
+                    ),
+                    format!("**{:.4}** ± {:.4}", r.measured, r.u95),
+                    format!("{:.4}", r.measured_span_ratio),
+                    format!("{:.4}", r.target),
+                    format!("{:.4}", r.cycle_std),
+                ]
+            })
+            .collect();
+        b.push(Block::Table(
+            [
+                "ratio",
+                "measured (time)",
+                "measured (driver angle)",
+                "target",
+                "σ across cycles",
+            ]
+            .map(String::from)
+            .to_vec(),
+            rows,
+        ));
+        let rows = t
+            .cycles
+            .iter()
+            .map(|c| {
+                let mut r = vec![c.cycle.to_string()];
+                r.extend(c.durations_s.iter().map(|d| format!("{d:.4} s")));
+                r.extend(
+                    c.ratios
+                        .iter()
+                        .zip(&c.ratios_u95)
+                        .map(|(x, u)| format!("{x:.4} ± {u:.4}")),
+                );
+                r
+            })
+            .collect();
+        let mut head = vec!["cycle".to_string()];
+        head.extend(
+            (0..t.levels_deg.len() - 1)
+                .map(|j| format!("{}→{}°", t.levels_deg[j], t.levels_deg[j + 1])),
+        );
+        head.extend((0..t.ratios.len()).map(|j| format!("ratio {j}")));
+        b.push(Block::Table(head, rows));
+    }
+    if !s.key_poses.is_empty() {
+        b.push(Block::Heading(2, "Key poses".into()));
+        let rows = s
+            .key_poses
+            .iter()
+            .map(|k| {
+                vec![
+                    k.index.to_string(),
+                    format!("{:.3}", k.t),
+                    k.passes.to_string(),
+                    format!("{} °", f3(k.mean_deg)),
+                    format!("{} °", f3(k.max_deg)),
+                ]
+            })
+            .collect();
+        b.push(Block::Table(
+            ["key pose", "t", "passes", "mean error", "max error"]
+                .map(String::from)
+                .to_vec(),
+            rows,
+        ));
+    }
+    b.push(Block::Heading(2, "Sampling and recording".into()));
+    let sm = &s.sampling;
+    let src = &s.source;
+    b.push(Block::Table(
+        vec!["figure".into(), "value".into()],
+        vec![
+            vec!["samples".into(), sm.samples.to_string()],
+            vec!["duration".into(), format!("{:.3} s", sm.duration_s)],
+            vec!["mean rate".into(), format!("{:.2} Hz", sm.mean_rate_hz)],
+            vec![
+                "period median / min / max".into(),
+                format!(
+                    "{:.3} / {:.3} / {:.3} ms",
+                    sm.median_period_ms, sm.min_period_ms, sm.max_period_ms
+                ),
+            ],
+            vec![
+                "period jitter (σ)".into(),
+                format!("{:.4} ms", sm.period_jitter_ms),
+            ],
+            vec![
+                "gaps / missing samples (est.)".into(),
+                format!("{} / {}", sm.gaps, sm.missing_samples_estimate),
+            ],
+            vec![
+                "driver speed forward / reverse".into(),
+                format!(
+                    "{} / {} °/s",
+                    opt3(sm.driver_speed_forward_deg_per_s),
+                    opt3(sm.driver_speed_reverse_deg_per_s)
+                ),
+            ],
+            vec!["recording".into(), src.recording_dir.display().to_string()],
+            vec![
+                "complete".into(),
+                src.complete.map_or("unknown".into(), |c| {
+                    if c {
+                        "yes".into()
+                    } else {
+                        format!("no ({})", src.end_reason.clone().unwrap_or_default())
+                    }
+                }),
+            ],
+            vec![
+                "rows / stale rows left out".into(),
+                format!("{} / {}", src.rows, src.stale_rows),
+            ],
+            vec![
+                "truncated last line".into(),
+                if src.truncated_last_line {
+                    "yes (dropped)".into()
+                } else {
+                    "no".into()
+                },
+            ],
+            vec!["device counters".into(), src.device_counts.to_string()],
+            vec![
+                "target".into(),
+                format!("{} {}", src.target_kind, src.target_path.display()),
+            ],
+        ],
+    ));
+    b
+}
+
+/// Write every chart, `report.md`, `report.html` and `summary.json` into `out_dir`.
+pub fn write_report(
+    out_dir: &Path,
+    a: &Analysis,
+    run: &MeasuredRun,
+    law: &TargetLaw,
+    source: SourceInfo,
+    opts: &ReportOptions,
+) -> Result<Summary, AnalysisError> {
+    std::fs::create_dir_all(out_dir).map_err(|e| AnalysisError::io(out_dir, e))?;
+    let mut s = summarize(a, law, source, opts);
+    let mut pics: Vec<plots::Picture> = Vec::new();
+    if let Some(t) = &a.timing {
+        if !t.ratios.is_empty() {
+            pics.push(plots::timing_chart(out_dir, t, opts.tol_ratio)?);
+        }
+    }
+    if law.rotation.is_some() {
+        pics.push(plots::axis_chart(out_dir, run, law, a)?);
+    }
+    for dof in [Dof::Rz, Dof::Tz] {
+        if a.alignment.dofs.iter().any(|d| d.dof == dof) {
+            pics.push(plots::follower_chart(out_dir, run, law, a, dof)?);
+        }
+    }
+    for (ch, m) in a.errors.iter().zip(&a.channels) {
+        if matches!(ch.name.as_str(), "rx" | "ry") || (law.rotation.is_some() && ch.name == "rz") {
+            continue;
+        }
+        let tol = if ch.unit == "deg" {
+            opts.tol_deg
+        } else {
+            opts.tol_mm
+        };
+        pics.push(plots::error_chart(out_dir, run, ch, m, tol)?);
+        pics.push(plots::cycles_chart(out_dir, m)?);
+        pics.push(plots::histogram_chart(out_dir, run, ch, m)?);
+    }
+    let mut files: Vec<String> = Vec::new();
+    for (_, p) in &pics {
+        for ext in ["png", "svg"] {
+            files.push(
+                p.with_extension(ext)
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default(),
+            );
+        }
+    }
+    files.extend(["report.md", "report.html", "summary.json"].map(String::from));
+    s.files = files;
+    let blocks = blocks(&s, a, &pics);
+    doc::write(&out_dir.join("report.md"), &doc::markdown(&blocks))?;
+    let title = format!("Bench report: {}", law.name);
+    doc::write(&out_dir.join("report.html"), &doc::html(&title, &blocks)?)?;
+    let json_path = out_dir.join("summary.json");
+    let json = serde_json::to_string_pretty(&s).map_err(|source| AnalysisError::Json {
+        path: json_path.clone(),
+        source,
+    })?;
+    doc::write(&json_path, &json)?;
+    Ok(s)
+}

@@ -1,0 +1,395 @@
+//! The report's charts, drawn through [`crate::plot`]: follower over driver angle (measured
+//! against target), error over driver angle, per-cycle overlay, error histogram, timing
+//! ratios per cycle and, for 3R, the end-effector axis path.
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::Vector3;
+
+use crate::analysis::align::Dof;
+use crate::analysis::metrics::{ChannelErrors, ChannelMetrics, PROFILE_BINS};
+use crate::analysis::run::{MeasuredRun, Phase};
+use crate::analysis::target::TargetLaw;
+use crate::analysis::timing::TimingReport;
+use crate::analysis::{Analysis, AnalysisError};
+use crate::plot::{Chart, Series};
+
+/// Most points drawn per scatter series. Default 4000: a 1000-pixel-wide chart cannot show
+/// more, and SVG files stay below a megabyte.
+pub const MAX_PLOT_POINTS: usize = 4000;
+
+/// Bars in the error histogram. Default 41 (odd, so zero error sits in the middle of a bar).
+pub const HISTOGRAM_BINS: usize = 41;
+
+/// A written chart: caption and PNG path (the SVG sits beside it).
+pub type Picture = (String, PathBuf);
+
+fn stride(n: usize) -> usize {
+    n.div_ceil(MAX_PLOT_POINTS).max(1)
+}
+
+fn by_phase(run: &MeasuredRun, ph: Phase) -> Vec<usize> {
+    let idx: Vec<usize> = (0..run.len()).filter(|&i| run.phase[i] == ph).collect();
+    let s = stride(idx.len());
+    idx.into_iter().step_by(s).collect()
+}
+
+fn unit_label(unit: &str) -> &str {
+    if unit == "deg" {
+        "°"
+    } else {
+        " mm"
+    }
+}
+
+/// Follower DOF over one driver revolution: measured (sensor offset removed, folded into one
+/// cycle) against the target law.
+pub fn follower_chart(
+    dir: &Path,
+    run: &MeasuredRun,
+    law: &TargetLaw,
+    a: &Analysis,
+    dof: Dof,
+) -> Result<Picture, AnalysisError> {
+    let (y, table) = match dof {
+        Dof::Rz => (run.rz_deg.as_ref(), law.rz_deg.as_ref()),
+        Dof::Tz => (run.tz_mm.as_ref(), law.tz_mm.as_ref()),
+    };
+    let (Some(y), Some(table)) = (y, table) else {
+        return Err(AnalysisError::Mismatch(format!(
+            "no {} data to plot",
+            dof.name()
+        )));
+    };
+    let off = a
+        .alignment
+        .dofs
+        .iter()
+        .find(|d| d.dof == dof)
+        .map_or(0.0, |d| d.total_offset());
+    let adv = table.advance();
+    let fold = |i: usize| {
+        let phi = run.driver_deg[i];
+        let k = (phi / 360.0).floor();
+        (phi - 360.0 * k, y[i] - off - k * adv)
+    };
+    let target: Vec<(f64, f64)> = (0..=720)
+        .map(|k| {
+            let phi = k as f64 * 0.5;
+            (phi, table.value(phi))
+        })
+        .collect();
+    let mut chart = Chart::new(
+        format!(
+            "{}: follower {} over one driver revolution — measured vs target",
+            law.name,
+            if dof == Dof::Rz { "angle" } else { "height" }
+        ),
+        "driver angle within the cycle [°]",
+        format!(
+            "follower {} [{}]",
+            if dof == Dof::Rz {
+                "angle θ"
+            } else {
+                "height h"
+            },
+            if dof == Dof::Rz { "°" } else { "mm" }
+        ),
+    );
+    chart.x_range = Some((0.0, 360.0));
+    for (ph, label, color) in [
+        (Phase::Forward, "measured, forward", 0),
+        (Phase::Reverse, "measured, reverse", 1),
+    ] {
+        let pts: Vec<(f64, f64)> = by_phase(run, ph).into_iter().map(fold).collect();
+        if !pts.is_empty() {
+            chart = chart.with(Series::points(label, pts, 2, color));
+        }
+    }
+    chart = chart.with(Series::dashed("target law", target, 6));
+    let stem = dir.join(format!("follower_{}", dof.name()));
+    chart.write(&stem)?;
+    Ok((
+        format!(
+            "Follower {} against the target over one driver revolution (all cycles folded).",
+            dof.name()
+        ),
+        stem.with_extension("png"),
+    ))
+}
+
+/// Error over the (unwrapped) driver angle for the whole run.
+pub fn error_chart(
+    dir: &Path,
+    run: &MeasuredRun,
+    ch: &ChannelErrors,
+    m: &ChannelMetrics,
+    tol: Option<f64>,
+) -> Result<Picture, AnalysisError> {
+    let u = unit_label(ch.unit);
+    let mut chart = Chart::new(
+        format!(
+            "{} error over driver angle — RMS {:.3}{u}, max |e| {:.3}{u}",
+            ch.name, m.overall.rms, m.overall.max_abs
+        ),
+        "driver angle [°]",
+        format!("error [{}]", ch.unit),
+    );
+    for (ph, label, color) in [
+        (Phase::Forward, "forward", 0),
+        (Phase::Reverse, "reverse", 1),
+    ] {
+        let pts: Vec<(f64, f64)> = by_phase(run, ph)
+            .into_iter()
+            .map(|i| (run.driver_deg[i], ch.values[i]))
+            .collect();
+        if !pts.is_empty() {
+            chart = chart.with(Series::points(label, pts, 2, color));
+        }
+    }
+    if let Some(t) = tol {
+        chart.h_lines.push((t, format!("±{t}{u} (RMS tolerance)")));
+        chart.h_lines.push((-t, String::new()));
+    }
+    chart.h_lines.push((0.0, String::new()));
+    let stem = dir.join(format!("error_{}", ch.name));
+    chart.write(&stem)?;
+    Ok((
+        format!("{} error over the driver angle for the whole run.", ch.name),
+        stem.with_extension("png"),
+    ))
+}
+
+/// Per-cycle overlay of the binned error over one revolution, with the mean per direction.
+pub fn cycles_chart(dir: &Path, ch: &ChannelMetrics) -> Result<Picture, AnalysisError> {
+    let mut chart = Chart::new(
+        format!("{} error per cycle (1° bins), overlaid", ch.name),
+        "driver angle within the cycle [°]",
+        format!("error [{}]", ch.unit),
+    );
+    chart.x_range = Some((0.0, 360.0));
+    let x = |b: usize| (b as f64 + 0.5) * 360.0 / PROFILE_BINS as f64;
+    let (mut fwd_labelled, mut rev_labelled) = (false, false);
+    for (ph, _, means) in &ch.profile.cycles {
+        let forward = *ph == Phase::Forward;
+        let label = match (forward, fwd_labelled, rev_labelled) {
+            (true, false, _) => {
+                fwd_labelled = true;
+                "forward cycles"
+            }
+            (false, _, false) => {
+                rev_labelled = true;
+                "reverse cycles"
+            }
+            _ => "",
+        };
+        let pts = means.iter().enumerate().map(|(b, &v)| (x(b), v)).collect();
+        chart = chart.with(Series::line(label, pts, if forward { 0 } else { 1 }));
+    }
+    let mut mean_labelled = false;
+    for prof in [&ch.profile.forward, &ch.profile.reverse] {
+        if prof.iter().any(|v| v.is_finite()) {
+            let pts = prof.iter().enumerate().map(|(b, &v)| (x(b), v)).collect();
+            let label = if mean_labelled {
+                ""
+            } else {
+                "mean per direction"
+            };
+            mean_labelled = true;
+            chart = chart.with(Series::dashed(label, pts, 6));
+        }
+    }
+    let stem = dir.join(format!("cycles_{}", ch.name));
+    chart.write(&stem)?;
+    Ok((
+        format!(
+            "{} error of every cycle over one driver revolution; dashed: mean per direction.",
+            ch.name
+        ),
+        stem.with_extension("png"),
+    ))
+}
+
+/// Histogram of the error (percent of samples per bin).
+pub fn histogram_chart(
+    dir: &Path,
+    run: &MeasuredRun,
+    ch: &ChannelErrors,
+    m: &ChannelMetrics,
+) -> Result<Picture, AnalysisError> {
+    let vals: Vec<f64> = run
+        .measured_indices()
+        .map(|i| ch.values[i])
+        .filter(|v| v.is_finite())
+        .collect();
+    let non_negative = vals.iter().all(|v| *v >= 0.0);
+    let hi = m.overall.max_abs.max(1e-9);
+    let lo = if non_negative { 0.0 } else { -hi };
+    let w = (hi - lo) / HISTOGRAM_BINS as f64;
+    let mut counts = vec![0usize; HISTOGRAM_BINS];
+    for v in &vals {
+        let b = (((v - lo) / w) as usize).min(HISTOGRAM_BINS - 1);
+        counts[b] += 1;
+    }
+    let total = vals.len().max(1) as f64;
+    let pts = counts
+        .iter()
+        .enumerate()
+        .map(|(b, &c)| (lo + (b as f64 + 0.5) * w, 100.0 * c as f64 / total))
+        .collect();
+    let u = unit_label(ch.unit);
+    let chart = Chart::new(
+        format!(
+            "{} error distribution — mean {:.3}{u}, RMS {:.3}{u}, 95 % within {:.3}{u}",
+            ch.name, m.overall.mean, m.overall.rms, m.overall.p95_abs
+        ),
+        format!("error [{}]", ch.unit),
+        "samples [%]",
+    )
+    .with(Series::bars("", pts, 0));
+    let stem = dir.join(format!("histogram_{}", ch.name));
+    chart.write(&stem)?;
+    Ok((
+        format!(
+            "Distribution of the {} error over all measured samples.",
+            ch.name
+        ),
+        stem.with_extension("png"),
+    ))
+}
+
+/// Timing ratio of every cycle with its U95, against the target and the tolerance.
+pub fn timing_chart(
+    dir: &Path,
+    t: &TimingReport,
+    tol: Option<f64>,
+) -> Result<Picture, AnalysisError> {
+    let r = &t.ratios[0];
+    let mut chart = Chart::new(
+        format!(
+            "duration ratio ({}°→{}°) / ({}°→{}°): measured {:.3} ± {:.3} vs target {:.3}",
+            r.levels_deg[0],
+            r.levels_deg[1],
+            r.levels_deg[1],
+            r.levels_deg[2],
+            r.measured,
+            r.u95,
+            r.target
+        ),
+        "cycle",
+        "ratio of durations [-]",
+    );
+    let pts: Vec<(f64, f64)> = t
+        .cycles
+        .iter()
+        .map(|c| (c.cycle as f64, c.ratios[0]))
+        .collect();
+    // Error bars as short vertical lines (NaN-separated segments of one line series).
+    let mut bars = Vec::new();
+    for c in &t.cycles {
+        let (x, y, u) = (c.cycle as f64, c.ratios[0], c.ratios_u95[0]);
+        bars.extend([(x, y - u), (x, y + u), (f64::NAN, f64::NAN)]);
+    }
+    chart
+        .h_lines
+        .push((r.target, format!("target {:.3}", r.target)));
+    if let Some(tol) = tol {
+        chart
+            .h_lines
+            .push((r.target + tol, format!("tolerance ±{tol}")));
+        chart.h_lines.push((r.target - tol, String::new()));
+    }
+    chart = chart
+        .with(Series::line("U95 per cycle", bars, 0))
+        .with(Series::points("measured per cycle", pts, 5, 0));
+    let (lo, hi) = t
+        .cycles
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), c| {
+            (a.min(c.cycle as f64), b.max(c.cycle as f64))
+        });
+    chart.x_range = Some((lo - 0.5, hi + 0.5));
+    let stem = dir.join("timing");
+    chart.write(&stem)?;
+    Ok((
+        "Timing ratio per forward cycle with its expanded uncertainty; red: target (and tolerance).".into(),
+        stem.with_extension("png"),
+    ))
+}
+
+/// The projection `motion show` uses for the end-effector axis: azimuthal equidistant
+/// around the rest direction +z (tilt towards +x, tilt towards +y, degrees).
+fn project(v: Vector3<f64>) -> (f64, f64) {
+    let tilt = v.z.clamp(-1.0, 1.0).acos().to_degrees();
+    let az = v.y.atan2(v.x);
+    (tilt * az.cos(), tilt * az.sin())
+}
+
+/// 3R: the end-effector axis (follower +z) path, measured (frame offsets removed) on the
+/// same plot as `motion show` draws the target (its projection, tilt circle and keyframes).
+pub fn axis_chart(
+    dir: &Path,
+    run: &MeasuredRun,
+    law: &TargetLaw,
+    a: &Analysis,
+) -> Result<Picture, AnalysisError> {
+    let (Some(meas), Some(rot), Some(off)) = (&run.rotation, &law.rotation, a.alignment.rotation)
+    else {
+        return Err(AnalysisError::Mismatch(
+            "no orientation data to plot".into(),
+        ));
+    };
+    let measured: Vec<(f64, f64)> = run
+        .measured_indices()
+        .step_by(stride(run.len()))
+        .map(|i| project(off.world.inverse() * meas[i] * off.mount.inverse() * Vector3::z()))
+        .collect();
+    let base = law.motion.as_ref().and_then(|m| {
+        crate::motion::figures::charts(m, 360)
+            .into_iter()
+            .find(|(name, _)| name == "axis-path")
+            .map(|(_, c)| c)
+    });
+    let mut chart = match base {
+        Some(mut c) => {
+            c.title = format!(
+                "{}: end-effector axis, measured vs target (seen from above)",
+                law.name
+            );
+            c
+        }
+        None => {
+            let target: Vec<(f64, f64)> = (0..=720)
+                .map(|k| project(rot.eval(k as f64 * 0.5) * Vector3::z()))
+                .collect();
+            let keys: Vec<(f64, f64)> = law
+                .key_poses
+                .iter()
+                .map(|k| project(k.rotation * Vector3::z()))
+                .collect();
+            let mut c = Chart::new(
+                format!(
+                    "{}: end-effector axis, measured vs target (seen from above)",
+                    law.name
+                ),
+                "tilt towards +x [deg]",
+                "tilt towards +y [deg]",
+            )
+            .with(Series::line("target axis path", target, 0))
+            .with(Series::points("keyframes", keys, 5, 1));
+            c.equal_aspect = true;
+            c.size = (900, 900);
+            c
+        }
+    };
+    // Measured first in the legend order does not matter; draw it under the target line.
+    chart
+        .series
+        .insert(0, Series::points("measured axis", measured, 2, 4));
+    let stem = dir.join("axis_path");
+    chart.write(&stem)?;
+    Ok((
+        "End-effector axis (follower +z) seen from above (tilt from +z towards x and y): measured against the target path, key poses marked.".into(),
+        stem.with_extension("png"),
+    ))
+}

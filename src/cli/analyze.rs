@@ -1,0 +1,161 @@
+//! `mpc-rig analyze RECORDING`: measured versus target, written as a report.
+//!
+//! Parses the options, calls [`crate::analysis::analyze_and_report`] and prints where the
+//! report is with the headline figures. Exit code 3 when a tolerance was given and missed.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::Context as _;
+use clap::Args;
+
+use crate::analysis::{analyze_and_report, timing::parse_levels, ReportOptions, Summary};
+
+/// Exit code when the analysis ran but a tolerance (`--tol-*`) was missed.
+pub const EXIT_TOLERANCE_MISSED: u8 = 3;
+
+/// Analyse a recording against its target law and write the report.
+#[derive(Debug, Args)]
+pub struct AnalyzeArgs {
+    /// Recording directory (holding recording.csv and recording.json).
+    pub recording: PathBuf,
+    /// Compare against this mechanism (mechanism.json or its directory) instead of the
+    /// target named in the recording.
+    #[arg(long, conflicts_with = "motion")]
+    pub mechanism: Option<PathBuf>,
+    /// Compare against this motion file instead of the target named in the recording.
+    #[arg(long)]
+    pub motion: Option<PathBuf>,
+    /// Report directory (default: RECORDING/report).
+    #[arg(short, long)]
+    pub out: Option<PathBuf>,
+    /// Follower crossing angles for timing ratios, degrees relative to each cycle's start
+    /// (default 0,180,360 for a turning follower).
+    #[arg(long, value_name = "DEG,DEG,...")]
+    pub timing: Option<String>,
+    /// Tolerance on the RMS rotation error in degrees (exit code 3 when missed).
+    #[arg(long, value_parser = positive)]
+    pub tol_deg: Option<f64>,
+    /// Tolerance on the RMS height error in millimetres (1R1T).
+    #[arg(long, value_parser = positive)]
+    pub tol_mm: Option<f64>,
+    /// Tolerance on |measured − target| of every timing ratio.
+    #[arg(long, value_parser = positive)]
+    pub tol_ratio: Option<f64>,
+}
+
+/// clap value parser: a positive finite number.
+pub fn positive(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("`{s}` is not a positive number")),
+    }
+}
+
+impl AnalyzeArgs {
+    /// The report options these arguments ask for.
+    pub fn report_options(&self) -> anyhow::Result<ReportOptions> {
+        Ok(ReportOptions {
+            out_dir: self.out.clone(),
+            mechanism: self.mechanism.clone(),
+            motion: self.motion.clone(),
+            timing_levels: self.timing.as_deref().map(parse_levels).transpose()?,
+            tol_deg: self.tol_deg,
+            tol_mm: self.tol_mm,
+            tol_ratio: self.tol_ratio,
+        })
+    }
+}
+
+/// Run `analyze`.
+pub fn run(args: AnalyzeArgs) -> anyhow::Result<ExitCode> {
+    let opts = args.report_options()?;
+    let summary = analyze_and_report(&args.recording, &opts)
+        .with_context(|| format!("analysing {}", args.recording.display()))?;
+    let report_dir = opts
+        .out_dir
+        .clone()
+        .unwrap_or_else(|| args.recording.join("report"));
+    print_summary(&summary, &report_dir);
+    Ok(exit_code(&summary))
+}
+
+/// 0 unless tolerances were given and missed.
+pub fn exit_code(summary: &Summary) -> ExitCode {
+    if summary.pass == Some(false) {
+        ExitCode::from(EXIT_TOLERANCE_MISSED)
+    } else {
+        ExitCode::SUCCESS
+    }
+}
+
+/// Print where the report is and its headline figures (stdout).
+pub fn print_summary(s: &Summary, report_dir: &Path) {
+    let h = &s.headline;
+    println!("report:   {}", report_dir.join("report.html").display());
+    println!("          {}", report_dir.join("report.md").display());
+    println!("summary:  {}", report_dir.join("summary.json").display());
+    println!("motion:   {} ({})", h.motion, h.class);
+    if let (Some(m), Some(u), Some(t)) = (
+        h.timing_ratio_measured,
+        h.timing_ratio_u95,
+        h.timing_ratio_target,
+    ) {
+        let lv = s
+            .timing
+            .as_ref()
+            .and_then(|t| t.ratios.first())
+            .map(|r| r.levels_deg)
+            .unwrap_or_default();
+        println!(
+            "timing:   ({}°→{}°)/({}°→{}°) measured {m:.3} ± {u:.3} vs target {t:.3}",
+            lv[0], lv[1], lv[1], lv[2]
+        );
+    }
+    if let Some(r) = h.rms_error_deg {
+        println!(
+            "error:    RMS {r:.3}°, max {:.3}° (after removing the offsets below)",
+            h.max_error_deg.unwrap_or(f64::NAN)
+        );
+    }
+    if let Some(r) = h.rms_error_mm {
+        println!("height:   RMS {r:.3} mm");
+    }
+    print!("offsets:  driver {:.3}°", s.alignment.driver_offset_deg);
+    if let Some(c) = s.alignment.sensor_offset_rz_deg {
+        print!(", sensor rz {c:.3}°");
+    }
+    if let Some(c) = s.alignment.sensor_offset_tz_mm {
+        print!(", sensor tz {c:.3} mm");
+    }
+    if let Some(w) = s.alignment.world_offset_deg {
+        print!(", IMU frame {w:.2}°");
+    }
+    println!();
+    if let Some(b) = h.backlash_driver_deg {
+        println!("backlash: {b:.3}° of driver angle (forward vs reverse)");
+    }
+    println!(
+        "samples:  {} at {:.1} Hz, {} gaps, {} cycles",
+        s.sampling.samples, s.sampling.mean_rate_hz, s.sampling.gaps, h.cycles
+    );
+    match s.pass {
+        Some(true) => println!("verdict:  PASS ({} checks)", s.checks.len()),
+        Some(false) => {
+            let missed: Vec<String> = s
+                .checks
+                .iter()
+                .filter(|c| !c.pass)
+                .map(|c| match c.measured {
+                    Some(m) => format!(
+                        "{} = {m:.4} (target {} ± {})",
+                        c.name, c.target, c.tolerance
+                    ),
+                    None => format!("{} not measured", c.name),
+                })
+                .collect();
+            println!("verdict:  FAIL: {}", missed.join("; "));
+        }
+        None => {}
+    }
+}

@@ -1,0 +1,96 @@
+//! The report writer: every file is written, `summary.json` carries units in its field
+//! names and a verdict against the tolerances, and the HTML report is self-contained.
+
+use mpc_rig::analysis::report::{write_report, SourceInfo};
+use mpc_rig::analysis::synthetic::{piecewise_half_turn, SyntheticBench};
+use mpc_rig::analysis::{analyze, AnalysisOptions, ReportOptions};
+
+fn source() -> SourceInfo {
+    SourceInfo {
+        recording_dir: "synthetic".into(),
+        complete: Some(true),
+        end_reason: None,
+        rows: 0,
+        stale_rows: 0,
+        truncated_last_line: false,
+        device_counts: serde_json::json!({}),
+        target_kind: "motion".into(),
+        target_path: "synthetic".into(),
+    }
+}
+
+/// Guards the report files and verdicts: a 1R run with backlash writes all charts, the
+/// Markdown and self-contained HTML reports and a summary whose fields name their units; a
+/// loose tolerance passes, a tight one fails and names the missed check.
+#[test]
+fn writes_all_files_and_judges_tolerances() {
+    let law = piecewise_half_turn(2.0 / 3.0);
+    let bench = SyntheticBench {
+        driver_backlash_deg: 2.0,
+        noise: 0.05,
+        quantum: 360.0 / 4096.0,
+        forward_cycles: 3.0,
+        reverse_cycles: 2.0,
+        rate_hz: 200.0,
+        ..Default::default()
+    };
+    let run = bench.generate(&law);
+    let a = analyze(&run, &law, &AnalysisOptions::default()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let loose = ReportOptions {
+        tol_deg: Some(5.0),
+        tol_ratio: Some(0.1),
+        ..Default::default()
+    };
+    let s = write_report(dir.path(), &a, &run, &law, source(), &loose).unwrap();
+    assert_eq!(s.pass, Some(true), "{:?}", s.checks);
+    for f in &s.files {
+        let p = dir.path().join(f);
+        assert!(
+            std::fs::metadata(&p)
+                .map(|m| m.len() > 100)
+                .unwrap_or(false),
+            "{f}"
+        );
+    }
+    for f in [
+        "follower_rz.png",
+        "error_rz.svg",
+        "cycles_rz.png",
+        "histogram_rz.png",
+        "timing.png",
+    ] {
+        assert!(
+            s.files.iter().any(|x| x == f),
+            "{f} missing from {:?}",
+            s.files
+        );
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("summary.json")).unwrap())
+            .unwrap();
+    assert!(json["headline"]["rms_error_deg"].as_f64().unwrap() > 0.0);
+    assert!((json["headline"]["timing_ratio_target"].as_f64().unwrap() - 2.0).abs() < 1e-9);
+    assert!(json["errors"][0]["overall"]["rms_deg"].is_number());
+    assert!(json["lag"]["backlash_driver_deg"].as_f64().unwrap() > 1.5);
+    let html = std::fs::read_to_string(dir.path().join("report.html")).unwrap();
+    assert!(html.contains("data:image/png;base64,"));
+    assert!(
+        !html.contains("src=\"follower"),
+        "HTML must not link external images"
+    );
+    let md = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
+    assert!(md.contains("PASS") && md.contains("![") && md.contains("follower_rz.png"));
+
+    let tight = ReportOptions {
+        tol_deg: Some(0.001),
+        ..Default::default()
+    };
+    let s = write_report(dir.path(), &a, &run, &law, source(), &tight).unwrap();
+    assert_eq!(s.pass, Some(false));
+    let md = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
+    assert!(
+        md.contains("FAIL") && md.contains("rms_error_rz_deg"),
+        "{md}"
+    );
+}
