@@ -9,7 +9,8 @@ use std::sync::Arc;
 use anyhow::Context;
 use clap::Args;
 
-use crate::cli::ExitStatusError;
+use crate::analysis::{analyze_and_report, ReportOptions};
+use crate::cli::{analyze, ExitStatusError};
 use crate::rig::session::{self, EndReason, MeasureOptions, Progress, TargetSpec};
 
 /// Exit code when the device disconnected during the run (recording kept, incomplete).
@@ -54,6 +55,9 @@ pub struct MeasureArgs {
     /// Recording directory (default out/measure/<UTC timestamp>).
     #[arg(short, long, value_name = "DIR")]
     pub output: Option<PathBuf>,
+    /// Do not analyse the recording at the end (run `mpc-rig analyze DIR` later).
+    #[arg(long)]
+    pub no_analysis: bool,
 }
 
 /// Run the session; print where the recording is and how it ended.
@@ -105,7 +109,14 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
         c.samples, c.gaps, c.missing_samples, c.crc_errors, c.reconnects
     );
     let (code, what) = match &outcome.end {
-        EndReason::Finished => return Ok(ExitCode::SUCCESS),
+        EndReason::Finished if args.no_analysis => return Ok(ExitCode::SUCCESS),
+        EndReason::Finished => {
+            let opts = ReportOptions::default();
+            let summary = analyze_and_report(&outcome.dir, &opts)
+                .with_context(|| format!("analysing {}", outcome.dir.display()))?;
+            analyze::print_summary(&summary, &outcome.dir.join("report"));
+            return Ok(analyze::exit_code(&summary));
+        }
         EndReason::Cancelled => (EXIT_CANCELLED, "cancelled"),
         EndReason::Disconnected(_) => (EXIT_DISCONNECTED, "device disconnected"),
         EndReason::MaxRunTime | EndReason::Error(_) => (EXIT_INCOMPLETE, "run stopped early"),
@@ -113,8 +124,9 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
     Err(ExitStatusError {
         code,
         message: format!(
-            "{what} ({}); the recording in {} is kept and marked incomplete",
+            "{what} ({}); the recording in {} is kept and marked incomplete (`mpc-rig analyze {}` analyses what was recorded)",
             outcome.end,
+            outcome.dir.display(),
             outcome.dir.display()
         ),
     }

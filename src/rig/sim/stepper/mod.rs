@@ -33,7 +33,7 @@ use crate::rig::sim::pty::{Pty, StableLink};
 use crate::rig::RigError;
 
 use i2c::SensorBus;
-use pins::{DriverChip, NoDelay, SimClock, SimQuadrature};
+use pins::{DriverChip, SimClock, SimQuadrature};
 
 /// Simulated time between firmware polls, µs. 100 µs keeps the sensor values the firmware
 /// reads within 100 µs of its step count (0.04° of driver at 60 rpm) at 10 000 polls per
