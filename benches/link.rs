@@ -74,7 +74,12 @@ fn process_cpu_s() -> f64 {
     let after = stat.rsplit_once(')').map_or("", |x| x.1);
     let fields: Vec<&str> = after.split_whitespace().collect();
     let tick = 100.0; // USER_HZ on Linux
-    let get = |i: usize| fields.get(i).and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0);
+    let get = |i: usize| {
+        fields
+            .get(i)
+            .and_then(|v| v.parse::<f64>().ok())
+            .unwrap_or(0.0)
+    };
     // After the comm field: state is index 0, utime index 11, stime index 12.
     (get(11) + get(12)) / tick
 }

@@ -43,7 +43,9 @@ fn foreign_device_is_reported_as_wrong_device() {
         let mut buf = [0u8; 256];
         while !stop2.load(Ordering::Relaxed) {
             let _ = pty.read_available(&mut buf);
-            let _ = pty.write_lossy(b"$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47\r\n");
+            let _ = pty.write_lossy(
+                b"$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47\r\n",
+            );
             std::thread::sleep(Duration::from_millis(20));
         }
     });
@@ -52,7 +54,10 @@ fn foreign_device_is_reported_as_wrong_device() {
     talker.join().unwrap();
     assert!(matches!(err, RigError::WrongDevice { .. }), "{err}");
     let msg = err.to_string();
-    assert!(msg.contains("does not speak the mpc-rig firmware protocol"), "{msg}");
+    assert!(
+        msg.contains("does not speak the mpc-rig firmware protocol"),
+        "{msg}"
+    );
     assert!(msg.contains("bytes arrived"), "{msg}");
 }
 
@@ -64,5 +69,8 @@ fn missing_port_is_an_open_error() {
         .err()
         .unwrap();
     let msg = err.to_string();
-    assert!(msg.contains("/dev/mpc-rig-no-such-port") && msg.contains("mpc-rig ports"), "{msg}");
+    assert!(
+        msg.contains("/dev/mpc-rig-no-such-port") && msg.contains("mpc-rig ports"),
+        "{msg}"
+    );
 }

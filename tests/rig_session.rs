@@ -10,9 +10,7 @@ use std::time::Duration;
 use mpc_rig::rig::backend::{Driver, Sample, SampleStream};
 use mpc_rig::rig::config::RigConfig;
 use mpc_rig::rig::recording::{Counts, DeviceInfo, Phase, Recording};
-use mpc_rig::rig::session::{
-    check_plan, run_session, EndReason, MeasureOptions, TargetSpec,
-};
+use mpc_rig::rig::session::{check_plan, run_session, EndReason, MeasureOptions, TargetSpec};
 use mpc_rig::rig::RigError;
 
 fn root() -> &'static Path {
@@ -161,7 +159,9 @@ impl SampleStream for FakeBench {
             self.angle += self.speed_dps * dt;
             self.t_us += 1000;
             let theta = self.motion.angle_z(self.angle / 360.0).unwrap()[0];
-            let counts = (theta / std::f64::consts::TAU * 4096.0).round().rem_euclid(4096.0);
+            let counts = (theta / std::f64::consts::TAU * 4096.0)
+                .round()
+                .rem_euclid(4096.0);
             out.push(Sample {
                 device_time_us: self.t_us,
                 driver_angle_deg: self.angle,
@@ -237,12 +237,22 @@ fn full_session_records_all_phases_and_ends_stopped() {
     };
     // The measured cycles plus the phase margin on each side.
     let want = 720.0 + 2.0 * mpc_rig::rig::session::PHASE_MARGIN_DEG;
-    assert!((span(Phase::Forward) - want).abs() < 2.0, "{}", span(Phase::Forward));
-    assert!((span(Phase::Reverse) - want).abs() < 2.0, "{}", span(Phase::Reverse));
+    assert!(
+        (span(Phase::Forward) - want).abs() < 2.0,
+        "{}",
+        span(Phase::Forward)
+    );
+    assert!(
+        (span(Phase::Reverse) - want).abs() < 2.0,
+        "{}",
+        span(Phase::Reverse)
+    );
     let l = log.lock().unwrap();
     assert_eq!(l.shutdowns, 1);
     assert_eq!(l.speed_rpm, 0.0);
-    assert!(l.commands.starts_with(&["zero".into(), "enable".into(), "run 60".into()]));
+    assert!(l
+        .commands
+        .starts_with(&["zero".into(), "enable".into(), "run 60".into()]));
     assert!(l.commands.contains(&"run -60".to_string()));
     // The driver came to rest before the stream was stopped: the last rows are still.
     let n = rec.len();
@@ -264,7 +274,12 @@ fn unplug_mid_run_keeps_incomplete_recording() {
     assert!(matches!(&out.end, EndReason::Disconnected(m) if m.contains("unplugged")));
     let rec = Recording::load(dir.path()).unwrap();
     assert!(!rec.meta.complete);
-    assert!(rec.meta.end_reason.as_deref().unwrap().starts_with("disconnected"));
+    assert!(rec
+        .meta
+        .end_reason
+        .as_deref()
+        .unwrap()
+        .starts_with("disconnected"));
     assert_eq!(rec.len(), 1500);
     assert_eq!(rec.meta.counts.samples, 1500);
     assert_eq!(log.lock().unwrap().shutdowns, 1);
@@ -314,7 +329,12 @@ fn two_runs_record_the_same_samples() {
         let target = opts.target.load().unwrap();
         run_session(&mut bench, &rig(), &target, &mut opts).unwrap();
         let rec = Recording::load(dir.path()).unwrap();
-        (rec.device_time_us, rec.driver_angle_deg, rec.sensors, rec.phase)
+        (
+            rec.device_time_us,
+            rec.driver_angle_deg,
+            rec.sensors,
+            rec.phase,
+        )
     };
     assert!(run() == run(), "two runs recorded different samples");
 }

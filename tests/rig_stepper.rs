@@ -13,7 +13,7 @@ use mpc_rig::rig::config::RigConfig;
 use mpc_rig::rig::recording::{flags, Phase, Recording};
 use mpc_rig::rig::session::{measure, EndReason, MeasureOptions, MeasureOutcome, TargetSpec};
 use mpc_rig::rig::sim::plant::PlantConfig;
-use mpc_rig::rig::sim::stepper::{self, Mechanics, SimHandle, SimStepperOptions, SimStatus};
+use mpc_rig::rig::sim::stepper::{self, Mechanics, SimHandle, SimStatus, SimStepperOptions};
 use mpc_rig::rig::RigError;
 
 fn root() -> &'static Path {
@@ -68,11 +68,19 @@ fn full_session_against_simulated_stepper_bench() {
     assert!(out.complete, "{:?}", out.end);
     let rec = Recording::load(dir.path()).unwrap();
     let c = rec.meta.counts;
-    assert_eq!((c.gaps, c.missing_samples, c.crc_errors), (0, 0, 0), "{c:?}");
+    assert_eq!(
+        (c.gaps, c.missing_samples, c.crc_errors),
+        (0, 0, 0),
+        "{c:?}"
+    );
     assert_eq!(c.samples as usize, rec.len());
     // 1 kHz of device time, every sample present.
     let span_s = (rec.device_time_us[rec.len() - 1] - rec.device_time_us[0]) as f64 / 1e6;
-    assert!(((rec.len() - 1) as f64 - span_s * 1000.0).abs() < 1.5, "{} in {span_s}", rec.len());
+    assert!(
+        ((rec.len() - 1) as f64 - span_s * 1000.0).abs() < 1.5,
+        "{} in {span_s}",
+        rec.len()
+    );
     assert!(rec.phase.contains(&Phase::Forward) && rec.phase.contains(&Phase::Reverse));
     assert_eq!(rec.meta.device.board.as_deref(), Some("sim-stepper"));
     // The follower reading tracks the target law (up to a constant offset).
@@ -88,7 +96,10 @@ fn full_session_against_simulated_stepper_bench() {
         .collect();
     let mean = errs.iter().sum::<f64>() / errs.len() as f64;
     let worst = errs.iter().map(|e| (e - mean).abs()).fold(0.0, f64::max);
-    assert!(worst < 0.5, "follower deviates {worst}° from the target law");
+    assert!(
+        worst < 0.5,
+        "follower deviates {worst}° from the target law"
+    );
     assert_motor_stopped(&status);
 }
 
@@ -148,10 +159,19 @@ fn unplug_mid_run_keeps_incomplete_recording() {
     let status = sim.stop().unwrap();
     assert!(status.disconnected);
     assert!(!out.complete);
-    assert!(matches!(out.end, EndReason::Disconnected(_)), "{:?}", out.end);
+    assert!(
+        matches!(out.end, EndReason::Disconnected(_)),
+        "{:?}",
+        out.end
+    );
     let rec = Recording::load(dir.path()).unwrap();
     assert!(!rec.meta.complete);
-    assert!(rec.meta.end_reason.as_deref().unwrap().contains("disconnected"));
+    assert!(rec
+        .meta
+        .end_reason
+        .as_deref()
+        .unwrap()
+        .contains("disconnected"));
     assert!(rec.len() > 500, "{}", rec.len());
 }
 
@@ -164,8 +184,14 @@ fn version_mismatch_is_reported_clearly() {
     rig.apply_port_overrides(&[sim.path().display().to_string()])
         .unwrap();
     let err = StepperBench::open(&rig).err().unwrap();
-    assert!(matches!(err, RigError::VersionMismatch { device: 9, .. }), "{err}");
+    assert!(
+        matches!(err, RigError::VersionMismatch { device: 9, .. }),
+        "{err}"
+    );
     let msg = err.to_string();
-    assert!(msg.contains("version 9") && msg.contains("flash a matching firmware"), "{msg}");
+    assert!(
+        msg.contains("version 9") && msg.contains("flash a matching firmware"),
+        "{msg}"
+    );
     drop(sim);
 }

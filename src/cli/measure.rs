@@ -9,8 +9,7 @@ use std::sync::Arc;
 use anyhow::Context;
 use clap::Args;
 
-use crate::analysis::{analyze_and_report, ReportOptions};
-use crate::cli::{analyze, ExitStatusError};
+use crate::cli::ExitStatusError;
 use crate::rig::session::{self, EndReason, MeasureOptions, Progress, TargetSpec};
 
 /// Exit code when the device disconnected during the run (recording kept, incomplete).
@@ -58,6 +57,12 @@ pub struct MeasureArgs {
     /// Do not analyse the recording at the end (run `mpc-rig analyze DIR` later).
     #[arg(long)]
     pub no_analysis: bool,
+    /// Tolerance on the RMS rotation error in degrees for the analysis at the end.
+    #[arg(long, value_parser = crate::cli::analyze::positive)]
+    pub tol_deg: Option<f64>,
+    /// Tolerance on every timing ratio for the analysis at the end.
+    #[arg(long, value_parser = crate::cli::analyze::positive)]
+    pub tol_ratio: Option<f64>,
 }
 
 /// Run the session; print where the recording is and how it ended.
@@ -108,15 +113,27 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
         "samples {}  gaps {} ({} samples missing)  crc errors {}  reconnects {}",
         c.samples, c.gaps, c.missing_samples, c.crc_errors, c.reconnects
     );
-    let (code, what) = match &outcome.end {
-        EndReason::Finished if args.no_analysis => return Ok(ExitCode::SUCCESS),
-        EndReason::Finished => {
-            let opts = ReportOptions::default();
-            let summary = analyze_and_report(&outcome.dir, &opts)
-                .with_context(|| format!("analysing {}", outcome.dir.display()))?;
-            analyze::print_summary(&summary, &outcome.dir.join("report"));
-            return Ok(analyze::exit_code(&summary));
+    // Analyse whatever was recorded (an incomplete recording is still valid).
+    let mut analysis_code = ExitCode::SUCCESS;
+    if !args.no_analysis && c.samples > 0 {
+        let opts = crate::analysis::ReportOptions {
+            tol_deg: args.tol_deg,
+            tol_ratio: args.tol_ratio,
+            ..Default::default()
+        };
+        match crate::analysis::analyze_and_report(&outcome.dir, &opts) {
+            Ok(summary) => {
+                crate::cli::analyze::print_summary(&summary, &outcome.dir.join("report"));
+                analysis_code = crate::cli::analyze::exit_code(&summary);
+            }
+            Err(e) => eprintln!(
+                "warning: analysis failed: {e}; the recording is kept, retry with `mpc-rig analyze {}`",
+                outcome.dir.display()
+            ),
         }
+    }
+    let (code, what) = match &outcome.end {
+        EndReason::Finished => return Ok(analysis_code),
         EndReason::Cancelled => (EXIT_CANCELLED, "cancelled"),
         EndReason::Disconnected(_) => (EXIT_DISCONNECTED, "device disconnected"),
         EndReason::MaxRunTime | EndReason::Error(_) => (EXIT_INCOMPLETE, "run stopped early"),
@@ -124,9 +141,8 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
     Err(ExitStatusError {
         code,
         message: format!(
-            "{what} ({}); the recording in {} is kept and marked incomplete (`mpc-rig analyze {}` analyses what was recorded)",
+            "{what} ({}); the recording in {} is kept and marked incomplete",
             outcome.end,
-            outcome.dir.display(),
             outcome.dir.display()
         ),
     }

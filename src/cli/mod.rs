@@ -38,10 +38,10 @@ pub enum Command {
     Motion(motion::MotionArgs),
     /// List serial ports with USB vendor/product/serial where known.
     Ports(ports::PortsArgs),
+    /// Serve a simulated bench device on a pseudo-terminal (prints its path first).
+    SimDevice(sim_device::SimDeviceArgs),
     /// Measure a mechanism on a bench (real or simulated) and record it.
     Measure(measure::MeasureArgs),
-    /// Serve a simulated bench on a pseudo-terminal (prints its path, serves until stopped).
-    SimDevice(sim_device::SimDeviceArgs),
 }
 
 /// Set up `tracing` output on stderr from the -v/-q flags (`RUST_LOG` overrides).
@@ -71,8 +71,8 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Analyze(args) => analyze::run(args),
         Command::Motion(args) => motion::run(args),
         Command::Ports(args) => ports::run(args),
-        Command::Measure(args) => measure::run(args),
         Command::SimDevice(args) => sim_device::run(args),
+        Command::Measure(args) => measure::run(args),
     }
 }
 

@@ -1,7 +1,9 @@
-//! `mpc-rig sim-device`: serve a simulated bench on a pseudo-terminal until stopped.
+//! `mpc-rig sim-device …`: serve a simulated bench on a pseudo-terminal until stopped.
 //!
-//! Prints the pseudo-terminal path on the first line of stdout (flushed), so scripts and
-//! tests can start it and read where to connect.
+//! Prints the pseudo-terminal path on the first line of standard output (scripts and tests
+//! read it), then serves until Ctrl-C or a configured disconnect (`--fault
+//! disconnect_at_s=…`). Only argument handling lives here; the simulators are
+//! [`crate::rig::sim`].
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -15,13 +17,15 @@ use clap::{Args, Subcommand};
 
 use crate::motion::Motion;
 use crate::rig::config::RigConfig;
+use crate::rig::sim::dynamixel::{
+    self, BusConfig, HardwareFault, MotionTarget, ServerEnd, SimDynamixelOptions,
+};
 use crate::rig::sim::plant::{PlantConfig, FAULT_KEYS};
 use crate::rig::sim::stepper::{self, Mechanics, SimStepperOptions};
 
-/// Arguments of `mpc-rig sim-device`.
+/// Serve a simulated device on a pseudo-terminal.
 #[derive(Debug, Args)]
 pub struct SimDeviceArgs {
-    /// Which device to simulate.
     #[command(subcommand)]
     pub device: SimDevice,
 }
@@ -29,76 +33,97 @@ pub struct SimDeviceArgs {
 /// The simulated devices.
 #[derive(Debug, Subcommand)]
 pub enum SimDevice {
-    /// Our stepper firmware (the real firmware core) with a plant-driven follower.
-    Stepper(StepperArgs),
+    /// Our stepper firmware: the real firmware core on emulated pins and I²C sensors
+    /// (AS5600, BNO055) whose follower obeys the plant model.
+    Stepper(SimStepperArgs),
+    /// A Dynamixel Protocol 2.0 bus: an XL430-W250 driver servo and a torque-off XL430
+    /// follower servo whose present position obeys the plant model.
+    Dynamixel(SimDynamixelArgs),
 }
 
-/// The plant's target law: a mechanism or a motion file.
+/// The target law: a mechanism or a motion file.
 #[derive(Debug, Args)]
-pub struct SimTargetArgs {
-    /// A mechanism.json or the directory holding it.
-    #[arg(long, value_name = "PATH", conflicts_with = "motion", required_unless_present = "motion")]
+#[group(required = true, multiple = false)]
+pub struct TargetArgs {
+    /// mechanism.json (or its directory): the follower obeys its target law.
+    #[arg(long, value_name = "PATH")]
     pub mechanism: Option<PathBuf>,
-    /// A motion file (.toml or .csv).
+    /// Motion file (.toml keyframes or .csv dense): the follower obeys it.
     #[arg(long, value_name = "FILE")]
     pub motion: Option<PathBuf>,
-    /// Imperfection or link fault, key=value; repeatable. Keys: backlash_deg,
+}
+
+/// Options of `sim-device dynamixel`.
+#[derive(Debug, Args)]
+pub struct SimDynamixelArgs {
+    #[command(flatten)]
+    pub target: TargetArgs,
+    /// Plant imperfection or link fault, `key=value`, repeatable (e.g. backlash_deg=0.5,
+    /// gain_error=0.01, encoder_noise_counts=1, drop_prob=0.001, corrupt_prob=0.001,
+    /// disconnect_at_s=5, dropout_at_s=2, seed=7).
+    #[arg(long = "fault", value_name = "KEY=VALUE")]
+    pub faults: Vec<String>,
+    /// ID of the driver servo.
+    #[arg(long, default_value_t = 1)]
+    pub driver_id: u8,
+    /// ID of the follower servo (torque off, the follower encoder).
+    #[arg(long, default_value_t = 2)]
+    pub follower_id: u8,
+    /// Servo revolutions per mechanism driver revolution.
+    #[arg(long, default_value_t = 1.0)]
+    pub gear_ratio: f64,
+    /// Follower servo's present position at the follower's zero (its mounting).
+    #[arg(long, default_value_t = 1024.0)]
+    pub follower_zero: f64,
+    /// Answer immediately instead of pacing replies at the control table's baud rate.
+    #[arg(long)]
+    pub no_pacing: bool,
+    /// Latch an overload hardware error on the driver this many seconds after start (it
+    /// turns torque off, as the default Shutdown mask does on a real servo).
+    #[arg(long, value_name = "S")]
+    pub overload_at_s: Option<f64>,
+}
+
+/// Options of `sim-device stepper`.
+#[derive(Debug, Args)]
+pub struct SimStepperArgs {
+    #[command(flatten)]
+    pub target: TargetArgs,
+    /// Plant imperfection or link fault, `key=value`, repeatable: backlash_deg,
     /// phase_lag_deg, gain_error, encoder_noise_counts, encoder_resolution, imu_noise_deg,
     /// imu_bias_deg, missed_step_prob, scale_mm, drop_prob, corrupt_prob, disconnect_at_s,
     /// dropout_at_s, dropout_s, protocol_version, seed.
-    #[arg(long, value_name = "KEY=VALUE")]
-    pub fault: Vec<String>,
-}
-
-impl SimTargetArgs {
-    /// Load the target law.
-    pub fn load_motion(&self) -> anyhow::Result<Motion> {
-        match (&self.mechanism, &self.motion) {
-            (Some(m), _) => Motion::from_mechanism_file(m)
-                .with_context(|| format!("loading mechanism {}", m.display())),
-            (None, Some(m)) => {
-                Motion::from_file(m).with_context(|| format!("loading motion {}", m.display()))
-            }
-            (None, None) => anyhow::bail!("give --mechanism PATH or --motion FILE"),
-        }
-    }
-
-    /// Parse the `--fault` options.
-    pub fn plant(&self) -> anyhow::Result<PlantConfig> {
-        PlantConfig::from_faults(&self.fault).with_context(|| {
-            let keys: Vec<&str> = FAULT_KEYS.iter().map(|(k, _)| *k).collect();
-            format!("known fault keys: {}", keys.join(", "))
-        })
-    }
-}
-
-/// Arguments of `mpc-rig sim-device stepper`.
-#[derive(Debug, Args)]
-pub struct StepperArgs {
-    /// Target law and faults.
-    #[command(flatten)]
-    pub target: SimTargetArgs,
-    /// Take the bench's mechanics (steps/rev, microsteps, gear, sensors) from this rig
-    /// file; default: those of rigs/sim-stepper.toml.
+    #[arg(long = "fault", value_name = "KEY=VALUE")]
+    pub faults: Vec<String>,
+    /// Take the bench's mechanics (steps/rev, microsteps, gear, direction, fitted sensors)
+    /// from this rig file; default: those of rigs/sim-stepper.toml.
     #[arg(long, value_name = "FILE")]
     pub rig: Option<PathBuf>,
     /// Also expose the device at this stable path (a symlink kept across simulated
-    /// re-plugs).
+    /// re-plugs; one is made in the temp directory when `dropout_at_s` is given).
     #[arg(long, value_name = "PATH")]
     pub link: Option<PathBuf>,
 }
 
-/// Run the chosen simulator until Ctrl-C (or until a simulated unplug ends it).
+/// Run `sim-device`.
 pub fn run(args: SimDeviceArgs) -> anyhow::Result<ExitCode> {
     match args.device {
         SimDevice::Stepper(a) => run_stepper(a),
+        SimDevice::Dynamixel(a) => run_dynamixel(a),
     }
 }
 
-fn run_stepper(args: StepperArgs) -> anyhow::Result<ExitCode> {
-    let motion = args.target.load_motion()?;
-    let plant = args.target.plant()?;
-    let mechanics = match &args.rig {
+fn plant_from(faults: &[String]) -> anyhow::Result<PlantConfig> {
+    PlantConfig::from_faults(faults).with_context(|| {
+        let keys: Vec<&str> = FAULT_KEYS.iter().map(|k| k.0).collect();
+        format!("known --fault keys: {}", keys.join(", "))
+    })
+}
+
+fn run_stepper(a: SimStepperArgs) -> anyhow::Result<ExitCode> {
+    let motion = load_target(&a.target)?;
+    let plant = plant_from(&a.faults)?;
+    let mechanics = match &a.rig {
         Some(r) => Mechanics::from_rig(&RigConfig::load(r)?)?,
         None => Mechanics::default(),
     };
@@ -106,18 +131,23 @@ fn run_stepper(args: StepperArgs) -> anyhow::Result<ExitCode> {
         target: motion,
         plant,
         mechanics,
-        link: args.link,
+        link: a.link,
     })
     .context("starting the simulated stepper bench")?;
-    let mut stdout = std::io::stdout();
-    writeln!(stdout, "{}", sim.path().display())?;
-    stdout.flush()?;
-    let stop = Arc::new(AtomicBool::new(false));
     {
-        let stop = stop.clone();
-        ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed))
-            .context("cannot install the Ctrl-C handler")?;
+        let mut out = std::io::stdout().lock();
+        writeln!(out, "{}", sim.path().display())?;
+        out.flush()?;
     }
+    eprintln!(
+        "simulated stepper bench on {} (firmware core, board `{}`); Ctrl-C stops",
+        sim.path().display(),
+        stepper::SIM_BOARD_NAME
+    );
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
+        .context("installing the Ctrl-C handler")?;
     while !stop.load(Ordering::Relaxed) && sim.is_running() {
         std::thread::sleep(Duration::from_millis(50));
     }
@@ -134,7 +164,67 @@ fn run_stepper(args: StepperArgs) -> anyhow::Result<ExitCode> {
         status.bytes_out,
         status.bytes_dropped,
         status.bytes_corrupted,
-        if status.disconnected { ", unplugged" } else { "" }
+        if status.disconnected { "; simulated unplug: pseudo-terminal closed" } else { "" }
     );
+    Ok(ExitCode::SUCCESS)
+}
+
+fn load_target(t: &TargetArgs) -> anyhow::Result<Motion> {
+    match (&t.mechanism, &t.motion) {
+        (Some(m), _) => Motion::from_mechanism_file(m)
+            .with_context(|| format!("loading mechanism {}", m.display())),
+        (None, Some(f)) => {
+            Motion::from_file(f).with_context(|| format!("loading motion {}", f.display()))
+        }
+        (None, None) => anyhow::bail!("give --mechanism PATH or --motion FILE"),
+    }
+}
+
+fn run_dynamixel(a: SimDynamixelArgs) -> anyhow::Result<ExitCode> {
+    let motion = load_target(&a.target)?;
+    let target = MotionTarget::new(motion)?;
+    let plant = plant_from(&a.faults)?;
+    let mut opts = SimDynamixelOptions::new(Arc::new(target));
+    opts.plant = plant;
+    opts.bus = BusConfig {
+        driver_id: a.driver_id,
+        follower_id: Some(a.follower_id),
+        gear_ratio: a.gear_ratio,
+        follower_zero_pulses: a.follower_zero,
+        ..BusConfig::default()
+    };
+    opts.server.pace_wire = !a.no_pacing;
+    if let Some(at_s) = a.overload_at_s {
+        opts.server.hardware_faults.push(HardwareFault {
+            at_s,
+            driver: true,
+            bits: dynamixel::control_table::hw_error::OVERLOAD,
+        });
+    }
+    let sim = dynamixel::spawn(opts)?;
+    {
+        let mut out = std::io::stdout().lock();
+        writeln!(out, "{}", sim.path().display())?;
+        out.flush()?;
+    }
+    eprintln!(
+        "simulated Dynamixel bus on {} (driver ID {}, follower ID {}, factory 57600 baud; answers at any baud); Ctrl-C stops",
+        sim.path().display(),
+        a.driver_id,
+        a.follower_id
+    );
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
+        .context("installing the Ctrl-C handler")?;
+    while !stop.load(Ordering::Relaxed) && sim.is_running() {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    match sim.stop() {
+        ServerEnd::Disconnected => {
+            eprintln!("simulated unplug (disconnect_at_s): pseudo-terminal closed")
+        }
+        ServerEnd::Stopped => eprintln!("stopped"),
+    }
     Ok(ExitCode::SUCCESS)
 }

@@ -619,14 +619,23 @@ mod tests {
         }
         // The forward phase runs PHASE_MARGIN_DEG past the last cycle.
         let m = PHASE_MARGIN_DEG;
-        assert!(matches!(plan.step(1080.0 + m / 2.0), Step::Continue(Phase::Forward, _)));
+        assert!(matches!(
+            plan.step(1080.0 + m / 2.0),
+            Step::Continue(Phase::Forward, _)
+        ));
         assert!(matches!(plan.step(1080.0 + m), Step::Reverse));
         plan.turn = Some(1080.0 + m);
         // Overshoot while decelerating moves the turning point.
         let top = 1080.0 + m + 5.0;
         assert!(matches!(plan.step(top), Step::Continue(Phase::Settle, _)));
-        assert!(matches!(plan.step(top - 360.0 + m / 2.0), Step::Continue(Phase::Reverse, _)));
-        assert!(matches!(plan.step(top - 400.0), Step::Continue(Phase::Reverse, _)));
+        assert!(matches!(
+            plan.step(top - 360.0 + m / 2.0),
+            Step::Continue(Phase::Reverse, _)
+        ));
+        assert!(matches!(
+            plan.step(top - 400.0),
+            Step::Continue(Phase::Reverse, _)
+        ));
         assert!(matches!(plan.step(top - 1080.0 - m), Step::Done));
     }
 

@@ -81,14 +81,14 @@ pub trait Bench: Driver + SampleStream {}
 
 impl<T: Driver + SampleStream> Bench for T {}
 
+pub mod dynamixel;
+
 /// Open the backend a rig's driver needs, with ports resolved from the rig (after any
 /// `--port` overrides).
 pub fn open(rig: &crate::rig::config::RigConfig) -> Result<Box<dyn Bench + Send>, RigError> {
     use crate::rig::config::DriverConfig;
     match &rig.driver {
         DriverConfig::StepperFirmware(_) => Ok(Box::new(stepper::StepperBench::open(rig)?)),
-        DriverConfig::Dynamixel(_) => Err(RigError::Setup(
-            "the Dynamixel backend (src/rig/backend/dynamixel) is not in this build".into(),
-        )),
+        DriverConfig::Dynamixel(_) => Ok(Box::new(dynamixel::DynamixelBench::from_rig(rig)?)),
     }
 }

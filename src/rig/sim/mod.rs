@@ -3,11 +3,14 @@
 //!
 //! - [`plant`]: the follower's response to the driver (target law plus imperfections) and
 //!   the link faults, shared by every simulator.
+//! - [`dynamixel`]: a Protocol 2.0 bus with an XL430-class driver servo and a torque-off
+//!   follower servo.
 //! - [`pty`]: pseudo-terminal pairs (and a stable symlink for re-plugging).
 //!
 //! It owns no host-side protocol logic: the backends in [`crate::rig::backend`] are the
 //! same for real and simulated devices.
 
+pub mod dynamixel;
 pub mod plant;
 pub mod pty;
 pub mod stepper;

@@ -209,7 +209,10 @@ impl SimHandle {
 
     /// A snapshot of the simulator's state.
     pub fn status(&self) -> SimStatus {
-        self.status.lock().unwrap_or_else(|p| p.into_inner()).clone()
+        self.status
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone()
     }
 
     /// Whether the simulator thread is still serving.
@@ -363,7 +366,9 @@ fn run(
     bench.update(0);
     let mut fw = firmware::Firmware::new(&mech, clock.clone(), chip, bus_a, bus_b, quadrature)?;
     let mut pty = Some(pty);
-    let mut rewrite = faults.protocol_version.map(|v| (v, Decoder::<Report>::new()));
+    let mut rewrite = faults
+        .protocol_version
+        .map(|v| (v, Decoder::<Report>::new()));
     let start = Instant::now();
     let mut sim_us: u64 = 0;
     let mut slip = Duration::ZERO;

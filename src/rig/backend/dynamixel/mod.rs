@@ -1,0 +1,768 @@
+//! The Dynamixel backend: a Protocol 2.0 servo turns the driver and torque-off servos on the
+//! same bus serve as absolute encoders on the follower joint, all through the `dynamixel2`
+//! crate on a bus thread of its own ([`worker`]).
+//!
+//! Owns: finding the servos (ping, with a bus scan in the error message when an ID does not
+//! answer), checking their model against the rig file, setting up the driver (operating
+//! mode velocity or extended position, profile velocity/acceleration, the bus watchdog at
+//! address 98 from `safety.watchdog_ms`) and the followers (torque off), an indirect-address
+//! block on every servo so one sync read per sample returns realtime tick, present velocity
+//! and present position, unit conversions between the driver shaft (deg, rpm, after gear
+//! ratio and direction) and servo units (pulses, 0.229 rpm), and torque off on every way
+//! out: [`Driver::shutdown`], drop (which also runs while unwinding) and the servo's own bus
+//! watchdog if the host dies. The session's Ctrl-C handling calls `shutdown`.
+//!
+//! Does not own the session, the recording, or the rig file's schema.
+
+pub mod models;
+pub mod worker;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::{self, Receiver, Sender};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use crate::rig::backend::{Driver, Sample, SampleStream};
+use crate::rig::config::{
+    DriverConfig, DynamixelDriverConfig, DynamixelMode, RigConfig, SensorConfig,
+};
+use crate::rig::recording::{flags, Counts, DeviceInfo};
+use crate::rig::RigError;
+use worker::{call, DxlBus, Event, Message, WorkerSetup};
+
+/// Pulses per servo revolution (X-series).
+pub const PULSES_PER_REV: f64 = 4096.0;
+
+/// Servo velocity unit, rpm per count (X-series Goal/Present Velocity, Profile Velocity).
+pub const VELOCITY_UNIT_RPM: f64 = 0.229;
+
+/// Extended Position Control range, pulses either side of zero (±256 turns).
+pub const EXTENDED_POSITION_LIMIT: i64 = 1_048_575;
+
+/// Bus watchdog unit (address 98), ms per count.
+pub const BUS_WATCHDOG_UNIT_MS: u32 = 20;
+
+/// Longest idle time between instructions from the bus thread, as a fraction of the bus
+/// watchdog period. Default 1/4: three heartbeats can be lost before the servo stops.
+pub const HEARTBEAT_FRACTION: u32 = 4;
+
+// Control table addresses used by the backend (X-series, e-manual).
+const OPERATING_MODE: u16 = 11;
+const VELOCITY_LIMIT: u16 = 44;
+const TORQUE_ENABLE: u16 = 64;
+const HARDWARE_ERROR_STATUS: u16 = 70;
+const BUS_WATCHDOG: u16 = 98;
+const GOAL_VELOCITY: u16 = 104;
+const PROFILE_ACCELERATION: u16 = 108;
+const PROFILE_VELOCITY: u16 = 112;
+const GOAL_POSITION: u16 = 116;
+const PRESENT_POSITION: u16 = 132;
+const MODE_VELOCITY: u8 = 1;
+const MODE_EXTENDED_POSITION: u8 = 4;
+
+/// A follower encoder servo.
+#[derive(Debug, Clone)]
+struct Follower {
+    id: u8,
+}
+
+/// State shared with the sample conversion.
+#[derive(Debug, Clone, Copy)]
+struct Shared {
+    /// Driver present position taken as 0° (pulses).
+    home_pulses: f64,
+    /// Emergency stop latched.
+    estop: bool,
+    /// Operating mode currently set on the driver.
+    mode: u8,
+    /// Torque on.
+    enabled: bool,
+}
+
+/// A Dynamixel bench: driver servo plus torque-off follower servos on one bus.
+pub struct DynamixelBench {
+    path: PathBuf,
+    driver: DynamixelDriverConfig,
+    followers: Vec<Follower>,
+    max_speed_rpm: f64,
+    velocity_limit_units: i32,
+    tx: Sender<Message>,
+    events: Receiver<Event>,
+    thread: Option<JoinHandle<()>>,
+    counts: Arc<Mutex<Counts>>,
+    shared: Shared,
+    device: DeviceInfo,
+    lost: Option<String>,
+    shut_down: bool,
+}
+
+impl std::fmt::Debug for DynamixelBench {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DynamixelBench")
+            .field("path", &self.path)
+            .field("driver", &self.driver)
+            .finish()
+    }
+}
+
+fn io_err(path: &Path, what: &str, e: impl std::fmt::Display) -> RigError {
+    RigError::Io {
+        path: path.to_path_buf(),
+        message: format!("{what}: {e}"),
+    }
+}
+
+impl DynamixelBench {
+    /// Open the bench of a rig whose driver is `kind = "dynamixel"`, finding the bus's port
+    /// path from the rig's `[[ports]]` (path, `--port` override already applied, or USB
+    /// serial number).
+    pub fn from_rig(rig: &RigConfig) -> Result<Self, RigError> {
+        let name = rig.driver.port();
+        let port = rig.port(name).ok_or_else(|| {
+            RigError::Setup(format!("rig `{}` has no port named `{name}`", rig.name))
+        })?;
+        let path = crate::rig::link::resolve_port(port)?;
+        Self::open(rig, &path)
+    }
+
+    /// Open the bench of a rig whose driver is `kind = "dynamixel"`, with the bus at
+    /// `path` (already resolved from the rig's ports and `--port` overrides). Every
+    /// `kind = "dynamixel"` sensor on the same port becomes a follower column.
+    pub fn open(rig: &RigConfig, path: &Path) -> Result<Self, RigError> {
+        let DriverConfig::Dynamixel(driver) = &rig.driver else {
+            return Err(RigError::Setup(format!(
+                "rig `{}`: the Dynamixel backend needs `driver.kind = \"dynamixel\"` (it is `{}`)",
+                rig.name,
+                rig.driver.kind()
+            )));
+        };
+        let mut followers = Vec::new();
+        for s in &rig.sensors {
+            match s {
+                SensorConfig::Dynamixel(d) if d.port == driver.port => followers.push(Follower { id: d.id }),
+                SensorConfig::Dynamixel(d) => {
+                    return Err(RigError::Setup(format!(
+                        "sensor `{}` is on port `{}` but the driver bus is `{}`: one Dynamixel bus per bench",
+                        d.name, d.port, driver.port
+                    )))
+                }
+                other => {
+                    return Err(RigError::Setup(format!(
+                        "sensor `{}` is read by the stepper firmware, which a Dynamixel bench does not have",
+                        other.name()
+                    )))
+                }
+            }
+        }
+        let expected_model = models::model_number(&driver.model).ok_or_else(|| {
+            RigError::Setup(format!(
+                "driver.model `{}` is not a known Dynamixel X-series model (known: {})",
+                driver.model,
+                models::MODELS
+                    .iter()
+                    .map(|m| m.0)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))
+        })?;
+        let bus = DxlBus::open(path, driver.baud).map_err(|e| RigError::Open {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        let watchdog_counts = rig
+            .safety
+            .watchdog_ms
+            .div_ceil(BUS_WATCHDOG_UNIT_MS)
+            .clamp(1, 127);
+        let heartbeat = Duration::from_millis(u64::from(
+            watchdog_counts * BUS_WATCHDOG_UNIT_MS / HEARTBEAT_FRACTION,
+        ));
+        let setup = WorkerSetup {
+            path: path.to_path_buf(),
+            driver_id: driver.id,
+            follower_ids: followers.iter().map(|f| f.id).collect(),
+            heartbeat,
+        };
+        let (tx, rx) = mpsc::channel();
+        let (etx, erx) = mpsc::channel();
+        let counts = Arc::new(Mutex::new(Counts::default()));
+        let wcounts = counts.clone();
+        let thread = std::thread::Builder::new()
+            .name("dynamixel-bus".into())
+            .spawn(move || worker::run(bus, setup, rx, etx, wcounts))
+            .map_err(|e| RigError::Setup(format!("cannot start the Dynamixel bus thread: {e}")))?;
+        let mut bench = DynamixelBench {
+            path: path.to_path_buf(),
+            driver: driver.clone(),
+            followers,
+            max_speed_rpm: rig.safety.max_speed_rpm,
+            velocity_limit_units: 0,
+            tx,
+            events: erx,
+            thread: Some(thread),
+            counts,
+            shared: Shared {
+                home_pulses: 0.0,
+                estop: false,
+                mode: MODE_VELOCITY,
+                enabled: false,
+            },
+            device: DeviceInfo {
+                backend: "dynamixel".into(),
+                ports: vec![path.display().to_string()],
+                ..Default::default()
+            },
+            lost: None,
+            shut_down: false,
+        };
+        bench.identify(expected_model)?;
+        bench.configure(watchdog_counts as u8)?;
+        Ok(bench)
+    }
+
+    /// Run a transaction on the bus thread.
+    fn bus<T: Send + 'static>(
+        &self,
+        what: &str,
+        f: impl FnOnce(&mut DxlBus) -> Result<T, dynamixel2::TransferError> + Send + 'static,
+    ) -> Result<T, RigError> {
+        match call(&self.tx, f) {
+            Some(Ok(v)) => Ok(v),
+            Some(Err(e)) => Err(self.transfer_error(what, &e)),
+            None => Err(RigError::Disconnected {
+                path: self.path.clone(),
+                message: "the bus thread has ended".into(),
+            }),
+        }
+    }
+
+    fn transfer_error(&self, what: &str, e: &dynamixel2::TransferError) -> RigError {
+        use dynamixel2::{ReadError, TransferError};
+        match e {
+            TransferError::ReadError(ReadError::MotorError(m)) => RigError::Device {
+                path: self.path.clone(),
+                command: what.to_string(),
+                message: format!(
+                    "servo error {} ({})",
+                    m.raw & 0x7F,
+                    motor_error_text(m.raw & 0x7F)
+                ),
+            },
+            TransferError::ReadError(ReadError::Io(io))
+                if io.kind() == std::io::ErrorKind::TimedOut =>
+            {
+                RigError::CommandTimeout {
+                    path: self.path.clone(),
+                    command: what.to_string(),
+                    attempts: 1,
+                }
+            }
+            other => io_err(&self.path, what, other),
+        }
+    }
+
+    fn write(&self, id: u8, address: u16, data: Vec<u8>, what: &str) -> Result<(), RigError> {
+        self.bus(what, move |b| b.write(id, address, &data).map(|_| ()))
+    }
+
+    fn write_u8(&self, id: u8, address: u16, v: u8, what: &str) -> Result<(), RigError> {
+        self.write(id, address, vec![v], what)
+    }
+
+    fn write_i32(&self, id: u8, address: u16, v: i32, what: &str) -> Result<(), RigError> {
+        self.write(id, address, v.to_le_bytes().to_vec(), what)
+    }
+
+    fn read_i32(&self, id: u8, address: u16, what: &str) -> Result<i32, RigError> {
+        self.bus(what, move |b| {
+            b.read_u32(id, address).map(|r| r.data as i32)
+        })
+    }
+
+    /// Ping the driver and followers; check models. Scan the bus for the error message when
+    /// an ID does not answer.
+    fn identify(&mut self, expected_model: u16) -> Result<(), RigError> {
+        let ids: Vec<(u8, &str)> = std::iter::once((self.driver.id, "driver"))
+            .chain(self.followers.iter().map(|f| (f.id, "follower encoder")))
+            .collect();
+        let mut firmware = Vec::new();
+        for (id, role) in ids {
+            let ping = call(&self.tx, move |b| b.ping(id));
+            let ping = match ping {
+                Some(Ok(p)) => p,
+                Some(Err(e)) => {
+                    let found = call(&self.tx, |b| {
+                        b.scan().map(|v| {
+                            v.into_iter()
+                                .filter_map(|r| r.ok())
+                                .map(|r| (r.motor_id, r.data.model))
+                                .collect::<Vec<_>>()
+                        })
+                    });
+                    let found = match found {
+                        Some(Ok(v)) if v.is_empty() => {
+                            "nothing answered a broadcast ping".to_string()
+                        }
+                        Some(Ok(v)) => format!(
+                            "servos on the bus: {}",
+                            v.iter()
+                                .map(|(i, m)| format!(
+                                    "ID {i} ({})",
+                                    models::model_name(*m).unwrap_or("unknown model")
+                                ))
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                        _ => "the bus scan failed too".to_string(),
+                    };
+                    return Err(RigError::WrongDevice {
+                        path: self.path.clone(),
+                        detail: format!(
+                            "no Dynamixel answered as the {role}, ID {id}, at {} baud ({e}); {found}. Check the servo power supply, the baud rate and the IDs in the rig file",
+                            self.driver.baud
+                        ),
+                    });
+                }
+                None => {
+                    return Err(RigError::Disconnected {
+                        path: self.path.clone(),
+                        message: "bus thread ended".into(),
+                    })
+                }
+            };
+            let model = ping.data.model;
+            if role == "driver" && model != expected_model {
+                return Err(RigError::WrongDevice {
+                    path: self.path.clone(),
+                    detail: format!(
+                        "ID {id} is a {} (model number {model}), but driver.model in the rig file is `{}` ({expected_model})",
+                        models::model_name(model).unwrap_or("unknown model"),
+                        self.driver.model
+                    ),
+                });
+            }
+            if models::model_name(model).is_none() {
+                return Err(RigError::WrongDevice {
+                    path: self.path.clone(),
+                    detail: format!(
+                        "ID {id} ({role}) reports model number {model}, not an X-series servo with the control table this backend uses"
+                    ),
+                });
+            }
+            firmware.push(format!(
+                "ID {id}: {} fw {}",
+                models::model_name(model).unwrap_or("?"),
+                ping.data.firmware
+            ));
+            if role == "driver" {
+                self.device.firmware_version = Some(ping.data.firmware.to_string());
+                self.device.board = Some(models::model_name(model).unwrap_or("?").to_string());
+            }
+        }
+        self.device
+            .extra
+            .insert("servos".into(), serde_json::json!(firmware));
+        self.device
+            .extra
+            .insert("baud".into(), serde_json::json!(self.driver.baud));
+        self.device.clock_hz = Some(1000);
+        Ok(())
+    }
+
+    /// Driver: torque off, clear a latched watchdog, operating mode, profile, watchdog,
+    /// indirect block. Followers: torque off, indirect block.
+    fn configure(&mut self, watchdog_counts: u8) -> Result<(), RigError> {
+        let id = self.driver.id;
+        self.write_u8(id, TORQUE_ENABLE, 0, "torque off (driver)")?;
+        self.write_u8(id, BUS_WATCHDOG, 0, "clear bus watchdog")?;
+        let hw = self.bus("read hardware error status", move |b| {
+            b.read_u8(id, HARDWARE_ERROR_STATUS).map(|r| r.data)
+        })?;
+        if hw != 0 {
+            return Err(RigError::Device {
+                path: self.path.clone(),
+                command: "check hardware error status".into(),
+                message: format!(
+                    "driver ID {id} has a latched hardware error (status 0x{hw:02X}: {}); power-cycle or reboot it after fixing the cause",
+                    hardware_error_text(hw)
+                ),
+            });
+        }
+        let mode = match self.driver.mode {
+            DynamixelMode::Velocity => MODE_VELOCITY,
+            DynamixelMode::ExtendedPosition => MODE_EXTENDED_POSITION,
+        };
+        self.set_mode(mode)?;
+        self.velocity_limit_units = self.read_i32(id, VELOCITY_LIMIT, "read velocity limit")?;
+        self.write_u8(id, BUS_WATCHDOG, watchdog_counts, "set bus watchdog")?;
+        for f in self.followers.clone() {
+            self.write_u8(f.id, TORQUE_ENABLE, 0, "torque off (follower encoder)")?;
+        }
+        let all: Vec<u8> = std::iter::once(id)
+            .chain(self.followers.iter().map(|f| f.id))
+            .collect();
+        for sid in all {
+            let mut data = Vec::with_capacity(2 * worker::STREAM_SOURCES.len());
+            for src in worker::STREAM_SOURCES {
+                data.extend_from_slice(&src.to_le_bytes());
+            }
+            self.write(
+                sid,
+                worker::INDIRECT_ADDRESS_1,
+                data,
+                "map the streamed block (indirect addresses)",
+            )?;
+        }
+        self.zero()?;
+        Ok(())
+    }
+
+    /// Switch the driver's operating mode (torque off meanwhile) and restore the profile,
+    /// which a mode change resets.
+    fn set_mode(&mut self, mode: u8) -> Result<(), RigError> {
+        let id = self.driver.id;
+        let was_enabled = self.shared.enabled;
+        if was_enabled {
+            self.write_u8(id, TORQUE_ENABLE, 0, "torque off for a mode change")?;
+        }
+        self.write_u8(id, OPERATING_MODE, mode, "set operating mode")?;
+        self.write_i32(
+            id,
+            PROFILE_ACCELERATION,
+            self.driver.profile_acceleration as i32,
+            "set profile acceleration",
+        )?;
+        self.write_i32(
+            id,
+            PROFILE_VELOCITY,
+            self.driver.profile_velocity as i32,
+            "set profile velocity",
+        )?;
+        self.shared.mode = mode;
+        if was_enabled {
+            self.write_u8(id, TORQUE_ENABLE, 1, "torque on after a mode change")?;
+        }
+        Ok(())
+    }
+
+    /// Servo pulses per driver degree, signed by the direction.
+    fn pulses_per_deg(&self) -> f64 {
+        f64::from(self.driver.direction) * self.driver.gear_ratio * PULSES_PER_REV / 360.0
+    }
+
+    /// Driver angle (deg) for a servo present position.
+    pub fn driver_deg(&self, pulses: i32) -> f64 {
+        (f64::from(pulses) - self.shared.home_pulses) / self.pulses_per_deg()
+    }
+
+    /// Goal Velocity units for a driver speed (rpm), checked against the rig's safety limit
+    /// and the servo's Velocity Limit.
+    pub fn velocity_units(&self, rpm: f64) -> Result<i32, RigError> {
+        if !rpm.is_finite() || rpm.abs() > self.max_speed_rpm {
+            return Err(RigError::Safety(format!(
+                "{rpm} rpm exceeds safety.max_speed_rpm = {} rpm of the rig",
+                self.max_speed_rpm
+            )));
+        }
+        let servo_rpm = rpm * self.driver.gear_ratio * f64::from(self.driver.direction);
+        let units = (servo_rpm / VELOCITY_UNIT_RPM).round();
+        if units.abs() > f64::from(self.velocity_limit_units) {
+            return Err(RigError::Safety(format!(
+                "{rpm} rpm at the driver is {:.1} rpm at the servo, above its Velocity Limit of {:.1} rpm ({} × 0.229 rpm)",
+                servo_rpm.abs(),
+                f64::from(self.velocity_limit_units) * VELOCITY_UNIT_RPM,
+                self.velocity_limit_units
+            )));
+        }
+        Ok(units as i32)
+    }
+
+    fn check_lost(&self) -> Result<(), RigError> {
+        match &self.lost {
+            Some(m) => Err(RigError::Disconnected {
+                path: self.path.clone(),
+                message: m.clone(),
+            }),
+            None => Ok(()),
+        }
+    }
+
+    fn goal_position(&mut self, pulses: f64) -> Result<(), RigError> {
+        let goal = pulses.round() as i64;
+        if goal.abs() > EXTENDED_POSITION_LIMIT {
+            return Err(RigError::Safety(format!(
+                "goal {goal} pulses is outside the servo's extended position range ±{EXTENDED_POSITION_LIMIT} (±256 turns)"
+            )));
+        }
+        if self.shared.mode != MODE_EXTENDED_POSITION {
+            self.set_mode(MODE_EXTENDED_POSITION)?;
+        }
+        self.write_i32(
+            self.driver.id,
+            GOAL_POSITION,
+            goal as i32,
+            "set goal position",
+        )
+    }
+
+    /// The port path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl Driver for DynamixelBench {
+    fn enable(&mut self) -> Result<(), RigError> {
+        self.check_lost()?;
+        self.shared.estop = false;
+        self.write_u8(self.driver.id, TORQUE_ENABLE, 1, "torque on")?;
+        self.shared.enabled = true;
+        Ok(())
+    }
+
+    fn disable(&mut self) -> Result<(), RigError> {
+        self.write_u8(self.driver.id, TORQUE_ENABLE, 0, "torque off")?;
+        self.shared.enabled = false;
+        Ok(())
+    }
+
+    fn zero(&mut self) -> Result<(), RigError> {
+        let p = self.read_i32(self.driver.id, PRESENT_POSITION, "read present position")?;
+        self.shared.home_pulses = f64::from(p);
+        Ok(())
+    }
+
+    fn run_at(&mut self, rpm: f64) -> Result<(), RigError> {
+        self.check_lost()?;
+        let units = self.velocity_units(rpm)?;
+        match self.driver.mode {
+            DynamixelMode::Velocity => {
+                if self.shared.mode != MODE_VELOCITY {
+                    self.set_mode(MODE_VELOCITY)?;
+                }
+                self.write_i32(self.driver.id, GOAL_VELOCITY, units, "set goal velocity")?;
+            }
+            DynamixelMode::ExtendedPosition => {
+                // Constant speed in position mode: the far end of the range at the profile
+                // velocity of the requested speed.
+                if self.shared.mode != MODE_EXTENDED_POSITION {
+                    self.set_mode(MODE_EXTENDED_POSITION)?;
+                }
+                self.write_i32(
+                    self.driver.id,
+                    PROFILE_VELOCITY,
+                    units.abs(),
+                    "set profile velocity",
+                )?;
+                let far = if units >= 0 {
+                    EXTENDED_POSITION_LIMIT
+                } else {
+                    -EXTENDED_POSITION_LIMIT
+                };
+                self.write_i32(
+                    self.driver.id,
+                    GOAL_POSITION,
+                    far as i32,
+                    "set goal position",
+                )?;
+            }
+        }
+        Ok(())
+    }
+
+    fn move_to(&mut self, deg: f64) -> Result<(), RigError> {
+        self.check_lost()?;
+        let target = self.shared.home_pulses + deg * self.pulses_per_deg();
+        if self.shared.mode == MODE_EXTENDED_POSITION
+            && self.driver.mode == DynamixelMode::ExtendedPosition
+        {
+            self.write_i32(
+                self.driver.id,
+                PROFILE_VELOCITY,
+                self.driver.profile_velocity as i32,
+                "set profile velocity",
+            )?;
+        }
+        self.goal_position(target)
+    }
+
+    fn move_by(&mut self, deg: f64) -> Result<(), RigError> {
+        let now = self.position_deg()?;
+        self.move_to(now + deg)
+    }
+
+    fn stop(&mut self) -> Result<(), RigError> {
+        if self.shared.mode == MODE_VELOCITY {
+            self.write_i32(self.driver.id, GOAL_VELOCITY, 0, "stop (goal velocity 0)")
+        } else {
+            let p = self.read_i32(self.driver.id, PRESENT_POSITION, "read present position")?;
+            self.write_i32(
+                self.driver.id,
+                GOAL_POSITION,
+                p,
+                "stop (goal = present position)",
+            )
+        }
+    }
+
+    fn estop(&mut self) -> Result<(), RigError> {
+        self.shared.estop = true;
+        self.disable()
+    }
+
+    fn position_deg(&mut self) -> Result<f64, RigError> {
+        let p = self.read_i32(self.driver.id, PRESENT_POSITION, "read present position")?;
+        Ok(self.driver_deg(p))
+    }
+
+    fn shutdown(&mut self) -> Result<(), RigError> {
+        if self.shut_down {
+            return Ok(());
+        }
+        let _ = self.tx.send(Message::Stop);
+        let stopped = self.stop();
+        let off = self.disable();
+        // Leave the bus watchdog off so a torque-on by another tool is not stopped by it.
+        let _ = self.write_u8(self.driver.id, BUS_WATCHDOG, 0, "clear bus watchdog");
+        self.shut_down = off.is_ok();
+        off.and(stopped.or(Ok(())))
+    }
+}
+
+impl SampleStream for DynamixelBench {
+    fn value_count(&self) -> usize {
+        self.followers.len()
+    }
+
+    fn start_stream(&mut self, rate_hz: f64) -> Result<(), RigError> {
+        self.check_lost()?;
+        if !(rate_hz.is_finite() && rate_hz > 0.0) {
+            return Err(RigError::Setup(format!(
+                "sample rate {rate_hz} Hz must be positive"
+            )));
+        }
+        self.tx
+            .send(Message::Start(Duration::from_secs_f64(1.0 / rate_hz)))
+            .map_err(|_| RigError::Disconnected {
+                path: self.path.clone(),
+                message: "bus thread ended".into(),
+            })
+    }
+
+    fn stop_stream(&mut self) -> Result<(), RigError> {
+        let _ = self.tx.send(Message::Stop);
+        Ok(())
+    }
+
+    fn poll_samples(&mut self, timeout: Duration, out: &mut Vec<Sample>) -> Result<(), RigError> {
+        self.check_lost()?;
+        let deadline = Instant::now() + timeout;
+        let mut got = false;
+        loop {
+            let ev = if got {
+                match self.events.try_recv() {
+                    Ok(ev) => ev,
+                    Err(_) => return Ok(()),
+                }
+            } else {
+                match self
+                    .events
+                    .recv_timeout(deadline.saturating_duration_since(Instant::now()))
+                {
+                    Ok(ev) => ev,
+                    Err(mpsc::RecvTimeoutError::Timeout) => return Ok(()),
+                    Err(mpsc::RecvTimeoutError::Disconnected) => {
+                        return Err(RigError::Disconnected {
+                            path: self.path.clone(),
+                            message: "bus thread ended".into(),
+                        })
+                    }
+                }
+            };
+            match ev {
+                Event::Sample(raw) => {
+                    let mut f = raw.flags;
+                    if self.shared.estop {
+                        f |= flags::ESTOP;
+                    }
+
+                    out.push(Sample {
+                        device_time_us: raw.device_time_us,
+                        driver_angle_deg: self.driver_deg(raw.driver_position),
+                        values: raw.followers.iter().map(|&p| f64::from(p)).collect(),
+                        flags: f,
+                    });
+                    got = true;
+                }
+                Event::Lost(message) => {
+                    self.lost = Some(message.clone());
+                    return Err(RigError::Disconnected {
+                        path: self.path.clone(),
+                        message,
+                    });
+                }
+            }
+        }
+    }
+
+    fn counts(&self) -> Counts {
+        *self.counts.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    fn device_info(&self) -> DeviceInfo {
+        let mut d = self.device.clone();
+        d.extra
+            .entry("mode".into())
+            .or_insert_with(|| serde_json::json!(format!("{:?}", self.driver.mode)));
+        d
+    }
+}
+
+impl Drop for DynamixelBench {
+    fn drop(&mut self) {
+        // The worker turns the driver's torque off on Quit.
+        let _ = self.tx.send(Message::Quit);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+/// Text for a status packet error number (e-manual, Protocol 2.0).
+pub fn motor_error_text(n: u8) -> &'static str {
+    match n {
+        1 => "result fail",
+        2 => "instruction error",
+        3 => "CRC error",
+        4 => "data range error",
+        5 => "data length error",
+        6 => "data limit error",
+        7 => "access error (read-only item, or EEPROM while torque is on)",
+        _ => "unknown error",
+    }
+}
+
+/// Text for Hardware Error Status bits (address 70).
+pub fn hardware_error_text(bits: u8) -> String {
+    let names: BTreeMap<u8, &str> = [
+        (0x01, "input voltage"),
+        (0x04, "overheating"),
+        (0x08, "motor encoder"),
+        (0x10, "electrical shock"),
+        (0x20, "overload"),
+    ]
+    .into_iter()
+    .collect();
+    let v: Vec<&str> = names
+        .iter()
+        .filter(|(b, _)| bits & **b != 0)
+        .map(|(_, n)| *n)
+        .collect();
+    if v.is_empty() {
+        "unknown".into()
+    } else {
+        v.join(", ")
+    }
+}

@@ -1,0 +1,241 @@
+//! The simulated bus behind a pseudo-terminal: a thread that reads instruction packets from
+//! the pty master, lets the [`Bus`] answer them in real time, and writes status packets
+//! back, optionally paced at the control table's baud rate and with injected link faults.
+//!
+//! The simulator keeps its own handle on the pty slave open, so a client closing and
+//! reopening the port (as hosts do between runs) never ends the simulation; a pty has no
+//! baud rate, so the device answers whatever baud the client configured.
+//!
+//! Does not own what a reply contains (that is [`Bus`]) nor the byte framing (that is
+//! [`super::packet`]).
+
+use std::fs::File;
+use std::io::{Read, Write};
+use std::os::fd::{AsFd, AsRawFd, OwnedFd};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use super::bus::Bus;
+use super::packet::Decoder;
+use crate::rig::sim::plant::{LinkByte, LinkFaults, Plant};
+use crate::rig::RigError;
+use nix::fcntl::{fcntl, FcntlArg, OFlag};
+use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
+use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, SetArg};
+
+/// Inter-byte timeout after which a partial packet is discarded. Default 100 ms: far longer
+/// than any gap inside a packet from a host, short enough to recover quickly from a
+/// truncated packet.
+pub const PARTIAL_PACKET_TIMEOUT: Duration = Duration::from_millis(100);
+
+/// How long the server thread waits for input before advancing the mechanics anyway.
+/// Default 2 ms: the follower keeps moving smoothly between host requests.
+pub const IDLE_POLL: Duration = Duration::from_millis(2);
+
+/// A hardware error to raise on a servo at a given time (e.g. an overload mid-run).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HardwareFault {
+    /// Seconds after start.
+    pub at_s: f64,
+    /// Which servo: `true` for the driver, `false` for the follower.
+    pub driver: bool,
+    /// Hardware Error Status bits to latch.
+    pub bits: u8,
+}
+
+/// Server behaviour.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ServerOptions {
+    /// Delay each status packet by its transmission time at the control table's baud rate
+    /// (as a real half-duplex bus would). Default true.
+    pub pace_wire: bool,
+    /// Hardware faults to inject.
+    pub hardware_faults: Vec<HardwareFault>,
+}
+
+impl Default for ServerOptions {
+    fn default() -> Self {
+        Self {
+            pace_wire: true,
+            hardware_faults: Vec::new(),
+        }
+    }
+}
+
+/// Seconds to transmit `bytes` at `baud` (10 bits per byte: start, 8 data, stop).
+pub fn wire_time_s(bytes: usize, baud: u32) -> f64 {
+    bytes as f64 * 10.0 / f64::from(baud.max(1))
+}
+
+/// Open a pseudo-terminal pair in raw mode; returns (master, slave, slave path).
+pub fn open_raw_pty() -> Result<(OwnedFd, OwnedFd, PathBuf), RigError> {
+    let pty = nix::pty::openpty(None, None).map_err(|e| RigError::Pty(format!("openpty: {e}")))?;
+    let mut t =
+        tcgetattr(pty.slave.as_fd()).map_err(|e| RigError::Pty(format!("tcgetattr: {e}")))?;
+    cfmakeraw(&mut t);
+    tcsetattr(pty.slave.as_fd(), SetArg::TCSANOW, &t)
+        .map_err(|e| RigError::Pty(format!("tcsetattr: {e}")))?;
+    let path = nix::unistd::ttyname(pty.slave.as_fd())
+        .map_err(|e| RigError::Pty(format!("ttyname: {e}")))?;
+    let flags = fcntl(pty.master.as_raw_fd(), FcntlArg::F_GETFL)
+        .map_err(|e| RigError::Pty(format!("fcntl: {e}")))?;
+    fcntl(
+        pty.master.as_raw_fd(),
+        FcntlArg::F_SETFL(OFlag::from_bits_truncate(flags) | OFlag::O_NONBLOCK),
+    )
+    .map_err(|e| RigError::Pty(format!("fcntl: {e}")))?;
+    Ok((pty.master, pty.slave, path))
+}
+
+/// Why the server thread ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ServerEnd {
+    /// `stop()` was called or the handle dropped.
+    Stopped,
+    /// The configured disconnect time was reached; the pty was closed.
+    Disconnected,
+}
+
+pub(super) struct Server {
+    pub master: File,
+    pub slave: OwnedFd,
+    pub bus: Arc<Mutex<Bus>>,
+    /// The plant, shared with the follower law: its link faults apply to every status byte.
+    pub plant: Arc<Mutex<Plant>>,
+    pub options: ServerOptions,
+    pub stop: Arc<AtomicBool>,
+}
+
+impl Server {
+    pub fn spawn(self) -> Result<JoinHandle<ServerEnd>, RigError> {
+        std::thread::Builder::new()
+            .name("sim-dynamixel".into())
+            .spawn(move || self.run())
+            .map_err(|e| RigError::Pty(format!("spawning the simulator thread: {e}")))
+    }
+
+    fn run(mut self) -> ServerEnd {
+        let start = Instant::now();
+        let link: LinkFaults = lock(&self.plant).config().link.clone();
+        let mut decoder = Decoder::new();
+        let mut last_byte = Instant::now();
+        let mut buf = [0u8; 4096];
+        let mut pending_faults = self.options.hardware_faults.clone();
+        pending_faults.sort_by(|a, b| a.at_s.total_cmp(&b.at_s));
+        let end = loop {
+            if self.stop.load(Ordering::Relaxed) {
+                break ServerEnd::Stopped;
+            }
+            let t = start.elapsed().as_secs_f64();
+            if link.disconnect_at_s.is_some_and(|d| t >= d) {
+                break ServerEnd::Disconnected;
+            }
+            // A brief drop-out: the device neither hears nor answers for a while.
+            let silent = link
+                .dropout_at_s
+                .is_some_and(|d| t >= d && t < d + link.dropout_s);
+            while pending_faults.first().is_some_and(|f| f.at_s <= t) {
+                let f = pending_faults.remove(0);
+                let mut bus = lock(&self.bus);
+                bus.advance(t);
+                let id = if f.driver {
+                    bus.driver().id()
+                } else {
+                    bus.follower().map_or(0, |s| s.id())
+                };
+                if let Some(s) = bus.servo_mut(id) {
+                    s.inject_hardware_error(f.bits);
+                }
+            }
+            let readable = {
+                let mut fds = [PollFd::new(self.master.as_fd(), PollFlags::POLLIN)];
+                let timeout = PollTimeout::try_from(IDLE_POLL).unwrap_or(PollTimeout::ZERO);
+                matches!(poll(&mut fds, timeout), Ok(n) if n > 0)
+                    && fds[0]
+                        .revents()
+                        .is_some_and(|r| r.contains(PollFlags::POLLIN))
+            };
+            if readable {
+                match self.master.read(&mut buf) {
+                    Ok(n) if n > 0 && silent => {}
+                    Ok(n) if n > 0 => {
+                        decoder.push(&buf[..n]);
+                        last_byte = Instant::now();
+                    }
+                    _ => {
+                        // EIO without a client or EAGAIN: nothing to read now.
+                        std::thread::sleep(IDLE_POLL);
+                    }
+                }
+            }
+            while let Some(decoded) = decoder.next_packet() {
+                let now = start.elapsed().as_secs_f64();
+                let (replies, baud) = {
+                    let mut bus = lock(&self.bus);
+                    let replies = bus.handle(now, &decoded);
+                    (replies, bus.driver().baud_rate())
+                };
+                for r in replies {
+                    let mut wait = r.delay_s;
+                    if self.options.pace_wire {
+                        wait += wire_time_s(r.bytes.len(), baud);
+                    }
+                    sleep_precise(Duration::from_secs_f64(wait));
+                    let bytes = self.apply_link_faults(r.bytes);
+                    // A full pty buffer (nobody reading) loses the bytes, as on a real bus.
+                    let _ = self.master.write(&bytes);
+                }
+            }
+            if decoder.pending() > 0 && last_byte.elapsed() > PARTIAL_PACKET_TIMEOUT {
+                decoder.discard_partial();
+            }
+            let t = start.elapsed().as_secs_f64();
+            self.bus
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .advance(t);
+        };
+        // Closing both ends makes the client's reads fail, like an unplugged adapter.
+        drop(self.slave);
+        drop(self.master);
+        end
+    }
+
+    fn apply_link_faults(&self, bytes: Vec<u8>) -> Vec<u8> {
+        let mut plant = lock(&self.plant);
+        let l = &plant.config().link;
+        if l.drop_prob <= 0.0 && l.corrupt_prob <= 0.0 {
+            return bytes;
+        }
+        bytes
+            .into_iter()
+            .filter_map(|b| match plant.link_byte(b) {
+                LinkByte::Pass(b) | LinkByte::Corrupted(b) => Some(b),
+                LinkByte::Dropped => None,
+            })
+            .collect()
+    }
+}
+
+/// Lock a mutex, recovering the data if another thread panicked while holding it.
+pub(super) fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// Sleep for `d`, finishing with a short spin so sub-millisecond return delays are honoured
+/// (a plain sleep overshoots by tens of microseconds).
+fn sleep_precise(d: Duration) {
+    if d.is_zero() {
+        return;
+    }
+    let until = Instant::now() + d;
+    if d > Duration::from_micros(200) {
+        std::thread::sleep(d - Duration::from_micros(100));
+    }
+    while Instant::now() < until {
+        std::hint::spin_loop();
+    }
+}

@@ -1,0 +1,126 @@
+//! `mpc-rig sim-device dynamixel` as a user runs it: the pseudo-terminal path on the first
+//! line of stdout, a bus a host can talk to, clear errors for bad arguments, and the
+//! configured unplug.
+
+use std::io::{BufRead, BufReader};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_mpc-rig"))
+}
+
+fn motion() -> String {
+    format!(
+        "{}/data/motions/half-turn-2to1.toml",
+        env!("CARGO_MANIFEST_DIR")
+    )
+}
+
+struct Served {
+    child: Child,
+    path: String,
+}
+
+impl Drop for Served {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn serve(extra: &[&str]) -> Served {
+    let mut child = bin()
+        .args(["sim-device", "dynamixel", "--motion", &motion()])
+        .args(extra)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("mpc-rig runs");
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .expect("first line");
+    Served {
+        child,
+        path: line.trim().to_string(),
+    }
+}
+
+/// Guards the user-facing contract: the first stdout line is a pseudo-terminal path and a
+/// Protocol 2.0 host finds the XL430 driver and follower on it.
+#[test]
+fn prints_pty_path_and_serves_the_bus() {
+    let served = serve(&[]);
+    assert!(
+        served.path.starts_with("/dev/"),
+        "first line: {}",
+        served.path
+    );
+    let mut bus = dynamixel2::Bus::open(&served.path, 57_600).expect("opens");
+    assert_eq!(bus.ping(1).unwrap().data.model, 1060);
+    assert_eq!(bus.ping(2).unwrap().data.model, 1060);
+}
+
+/// Guards custom IDs and the configured unplug: the process ends by itself after
+/// `disconnect_at_s` and the port stops answering.
+#[test]
+fn custom_ids_and_configured_disconnect() {
+    let mut served = serve(&[
+        "--driver-id",
+        "5",
+        "--follower-id",
+        "6",
+        "--fault",
+        "disconnect_at_s=0.8",
+    ]);
+    let mut bus = dynamixel2::Bus::open(&served.path, 1_000_000).expect("opens at any baud");
+    assert_eq!(bus.ping(5).unwrap().data.model, 1060);
+    assert!(bus.ping(1).is_err());
+    let t0 = Instant::now();
+    let status = loop {
+        if let Some(s) = served.child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(5),
+            "simulator did not end after its disconnect"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert!(status.success());
+    assert!(bus.ping(5).is_err(), "nothing answers after the unplug");
+}
+
+/// Guards the argument errors: no target, both targets, a bad fault key, a 3R target.
+#[test]
+fn bad_arguments_are_refused_clearly() {
+    let out = bin().args(["sim-device", "dynamixel"]).output().unwrap();
+    assert!(!out.status.success());
+    let out = bin()
+        .args([
+            "sim-device",
+            "dynamixel",
+            "--motion",
+            &motion(),
+            "--fault",
+            "wobble=3",
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("wobble") && err.contains("backlash_deg"),
+        "{err}"
+    );
+    let fig8 = format!(
+        "{}/data/motions/figure-eight.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let out = bin()
+        .args(["sim-device", "dynamixel", "--motion", &fig8])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("1R or 1R1T"), "{err}");
+}
