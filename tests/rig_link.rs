@@ -74,3 +74,26 @@ fn missing_port_is_an_open_error() {
         "{msg}"
     );
 }
+
+/// Guards: pointing the stepper rig at a Dynamixel bus (the simulated one, which ignores
+/// frames that are not Protocol 2.0 packets) fails the handshake with a message that asks
+/// whether this is the right port, instead of hanging.
+#[test]
+fn dynamixel_bus_on_the_port_is_reported() {
+    use mpc_rig::rig::sim::dynamixel::{self, MotionTarget, SimDynamixelOptions};
+    let motion = mpc_rig::motion::Motion::from_file(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("data/motions/half-turn-2to1.toml"),
+    )
+    .unwrap();
+    let sim = dynamixel::spawn(SimDynamixelOptions::new(Arc::new(
+        MotionTarget::new(motion).unwrap(),
+    )))
+    .unwrap();
+    let err = StepperBench::open(&rig_on(sim.path())).err().unwrap();
+    let msg = err.to_string();
+    assert!(
+        matches!(err, RigError::NoAnswer { .. } | RigError::WrongDevice { .. }),
+        "{msg}"
+    );
+    assert!(msg.contains("right port"), "{msg}");
+}
