@@ -74,7 +74,7 @@ fn sim_device_prints_pty_path_first() {
 }
 
 /// Guards: an unplug mid-run (the simulator closes its end for good) ends `measure` with
-/// exit code 3, a message saying the device disconnected and that the recording is kept,
+/// exit code 5, a message saying the device disconnected and that the recording is kept,
 /// and an incomplete but readable recording.
 #[test]
 fn measure_reports_unplug_with_exit_code_and_kept_recording() {
@@ -83,7 +83,7 @@ fn measure_reports_unplug_with_exit_code_and_kept_recording() {
     let sim = Sim::start(&["disconnect_at_s=1.5"]);
     let out = measure(&sim, &rec);
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(3), "{stderr}");
+    assert_eq!(out.status.code(), Some(5), "{stderr}");
     assert!(stderr.contains("device disconnected"), "{stderr}");
     assert!(stderr.contains("kept and marked incomplete"), "{stderr}");
     let r = mpc_rig::rig::recording::Recording::load(&rec).unwrap();

@@ -195,3 +195,64 @@ fn version_mismatch_is_reported_clearly() {
     );
     drop(sim);
 }
+
+/// Guards: the 3R path — a BNO055 bench (rigs/pico-bno055.toml) on the simulated stepper
+/// bench records unit quaternions that follow the target orientation (up to the constant
+/// IMU world frame, measured at home), with repeated IMU values flagged stale.
+#[test]
+fn imu_bench_records_follower_orientation() {
+    let dir = tempfile::tempdir().unwrap();
+    let rig_path = root().join("rigs/pico-bno055.toml");
+    let motion_file = root().join("data/motions/figure-eight.toml");
+    let rig = RigConfig::load(&rig_path).unwrap();
+    let sim = stepper::spawn(SimStepperOptions {
+        target: Motion::from_file(&motion_file).unwrap(),
+        plant: PlantConfig::default(),
+        mechanics: Mechanics::from_rig(&rig).unwrap(),
+        link: None,
+    })
+    .unwrap();
+    let mut opts = MeasureOptions {
+        rig_path,
+        ports: vec![format!("firmware={}", sim.path().display())],
+        target: TargetSpec::Motion(motion_file.clone()),
+        speed_rpm: 30.0,
+        cycles: 1,
+        settle_cycles: 0,
+        reverse: false,
+        out_dir: Some(dir.path().to_path_buf()),
+        cancel: Arc::new(AtomicBool::new(false)),
+        progress: None,
+    };
+    let out = measure(&mut opts).unwrap();
+    let status = sim.stop().unwrap();
+    assert!(out.complete, "{:?}", out.end);
+    let rec = Recording::load(dir.path()).unwrap();
+    let imu = match &rec.meta.rig.sensors[0] {
+        mpc_rig::rig::config::SensorConfig::Imu(i) => i.clone(),
+        other => panic!("{other:?}"),
+    };
+    let col = |n: &str| rec.sensor(n).unwrap();
+    let (w, x, y, z) = (col("imu_qw"), col("imu_qx"), col("imu_qy"), col("imu_qz"));
+    let motion = Motion::from_file(&motion_file).unwrap();
+    let q_at = |i: usize| {
+        imu.follower_rotation(nalgebra::UnitQuaternion::from_quaternion(
+            nalgebra::Quaternion::new(w[i], x[i], y[i], z[i]),
+        ))
+    };
+    // The IMU's world frame at home, then the error along the run.
+    let world = motion.sample(0.0).rotation * q_at(0).inverse();
+    let mut worst: f64 = 0.0;
+    for i in (0..rec.len()).step_by(25) {
+        let n = (w[i] * w[i] + x[i] * x[i] + y[i] * y[i] + z[i] * z[i]).sqrt();
+        assert!((n - 1.0).abs() < 2e-3, "quaternion norm {n}");
+        let target = motion.sample(rec.driver_angle_deg[i] / 360.0).rotation;
+        worst = worst.max((world * q_at(i)).angle_to(&target).to_degrees());
+    }
+    // 100 Hz IMU at 30 rpm: the held value lags up to 10 ms = 1.8° of driver angle.
+    assert!(worst < 3.0, "orientation error up to {worst}°");
+    let stale = rec.flags.iter().filter(|f| *f & flags::IMU_STALE != 0).count();
+    let frac = stale as f64 / rec.len() as f64;
+    assert!((0.6..0.95).contains(&frac), "stale fraction {frac}");
+    assert_motor_stopped(&status);
+}

@@ -70,6 +70,8 @@ pub struct Mechanics {
     pub as5600_b: bool,
     /// A BNO055 on the follower (bus A).
     pub imu: bool,
+    /// How the BNO055 is mounted: IMU axes → follower axes (it reports `R₂ · mounting`).
+    pub imu_mounting: nalgebra::UnitQuaternion<f64>,
     /// Linear encoder (quadrature) resolution, mm per count, for a 1R1T follower.
     pub quadrature_mm_per_count: Option<f64>,
 }
@@ -86,6 +88,7 @@ impl Default for Mechanics {
             as5600: true,
             as5600_b: false,
             imu: false,
+            imu_mounting: nalgebra::UnitQuaternion::identity(),
             quadrature_mm_per_count: None,
         }
     }
@@ -109,6 +112,7 @@ impl Mechanics {
             as5600: false,
             as5600_b: false,
             imu: false,
+            imu_mounting: nalgebra::UnitQuaternion::identity(),
             quadrature_mm_per_count: None,
         };
         for s in &rig.sensors {
@@ -116,7 +120,10 @@ impl Mechanics {
             match s {
                 S::As5600(e) if e.channel == 0 => m.as5600 = true,
                 S::As5600(_) => m.as5600_b = true,
-                S::Imu(_) => m.imu = true,
+                S::Imu(i) => {
+                    m.imu = true;
+                    m.imu_mounting = i.mounting_rotation();
+                }
                 S::Quadrature(e) => m.quadrature_mm_per_count = e.mm_per_count.or(Some(0.01)),
                 S::Dynamixel(_) => {}
             }
@@ -327,7 +334,9 @@ impl Bench {
             self.bus_b.set_as5600_angle(counts);
         }
         if self.mech.imu {
-            let q = self.plant.imu_reading(f.rotation);
+            let q = self
+                .plant
+                .imu_reading(f.rotation * self.mech.imu_mounting);
             self.bus_a.set_quaternion([q.w, q.i, q.j, q.k]);
         }
         if let Some(mm) = self.mech.quadrature_mm_per_count {
