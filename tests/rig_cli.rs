@@ -104,3 +104,51 @@ fn measure_reports_version_mismatch() {
         "{stderr}"
     );
 }
+
+/// Guards: when the host process dies mid-run (SIGKILL, no cleanup at all), the firmware's
+/// dead-man watchdog stops the motor, and the recording on disk is still valid and
+/// analyzable, marked incomplete.
+#[test]
+fn host_crash_leaves_valid_recording_and_watchdog_stops_motor() {
+    use mpc_rig::motion::Motion;
+    use mpc_rig::rig::sim::plant::PlantConfig;
+    use mpc_rig::rig::sim::stepper::{self, Mechanics, SimStepperOptions};
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("rec");
+    let sim = stepper::spawn(SimStepperOptions {
+        target: Motion::from_file(&root().join("data/motions/half-turn-2to1.toml")).unwrap(),
+        plant: PlantConfig::default(),
+        mechanics: Mechanics::default(),
+        link: None,
+    })
+    .unwrap();
+    let mut child = Command::new(bin())
+        .arg("measure")
+        .arg("--rig")
+        .arg(root().join("rigs/sim-stepper.toml"))
+        .args(["--port", &sim.path().display().to_string()])
+        .arg("--motion")
+        .arg(root().join("data/motions/half-turn-2to1.toml"))
+        .args(["--speed", "60", "--cycles", "5", "--no-analysis", "-o"])
+        .arg(&rec)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    // Kill it while the motor runs.
+    let t0 = std::time::Instant::now();
+    while !sim.status().moving && t0.elapsed().as_secs() < 10 {
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    assert!(sim.status().moving, "the motor should run before the crash");
+    child.kill().unwrap(); // SIGKILL: no handler, no shutdown
+    child.wait().unwrap();
+    // Watchdog 250 ms + deceleration from 1 rev/s at 1440 °/s² (0.25 s).
+    std::thread::sleep(std::time::Duration::from_millis(1200));
+    let status = sim.stop().unwrap();
+    assert!(!status.moving, "watchdog did not stop the motor: {status:?}");
+    let r = mpc_rig::rig::recording::Recording::load(&rec).unwrap();
+    assert!(!r.meta.complete);
+    assert!(r.len() > 500, "{} rows survived", r.len());
+}
