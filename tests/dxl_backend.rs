@@ -53,14 +53,19 @@ fn streams_a_constant_speed_run_with_the_follower_on_the_target_law() {
     bench.zero().unwrap();
     bench.start_stream(rig.sampling.rate_hz).unwrap();
     bench.run_at(30.0).unwrap();
-    let samples = collect(&mut bench, 1.5);
+    let mut samples = collect(&mut bench, 1.5);
+    let running = samples.len();
     bench.shutdown().unwrap();
+    // Samples read between the last poll and the stop are still in the channel.
+    bench
+        .poll_samples(Duration::from_millis(20), &mut samples)
+        .unwrap();
     assert!(
         samples.len() > 80,
         "only {} samples in 1.5 s",
         samples.len()
     );
-    let last = samples.last().unwrap();
+    let last = &samples[running - 1];
     let first = &samples[0];
     let dt = (last.device_time_us - first.device_time_us) as f64 / 1e6;
     let dphi = last.driver_angle_deg - first.driver_angle_deg;
@@ -140,7 +145,10 @@ fn extended_position_move_to_lands_on_target() {
     }
     assert!((at - 540.0).abs() < 0.1, "ended at {at}°");
     bench.move_by(-90.0).unwrap();
-    std::thread::sleep(Duration::from_millis(900));
+    let end = Instant::now() + Duration::from_secs(5);
+    while Instant::now() < end && (bench.position_deg().unwrap() - 450.0).abs() >= 0.1 {
+        std::thread::sleep(Duration::from_millis(50));
+    }
     assert!((bench.position_deg().unwrap() - 450.0).abs() < 0.1);
 }
 

@@ -223,3 +223,38 @@ fn loading_is_deterministic() {
         }
     }
 }
+
+/// Guards `motion sample` and `motion show` end to end: the CSV on stdout has a header and
+/// N rows and reads back as a motion; show writes PNG and SVG files.
+#[test]
+fn cli_sample_and_show() {
+    let file = motions_dir().join("screw-bob.toml");
+    let out = assert_cmd::Command::cargo_bin("mpc-rig")
+        .unwrap()
+        .args(["motion", "sample", "-n", "36"])
+        .arg(&file)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(text.starts_with("# class = 1R1T\n# name = screw-bob\nt,qw,qx,qy,qz,tx,ty,tz\n"));
+    assert_eq!(text.lines().count(), 3 + 36);
+    let back = mpc_rig::motion::dense::parse_csv(&text, None).unwrap();
+    assert_eq!(back.keyframes().len(), 36);
+
+    let dir = tempfile::tempdir().unwrap();
+    let out = assert_cmd::Command::cargo_bin("mpc-rig")
+        .unwrap()
+        .args(["motion", "show", "-o"])
+        .arg(dir.path())
+        .arg(&file)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(dir.path().join("screw-bob-height.png").exists());
+    assert!(dir.path().join("screw-bob-angle.svg").exists());
+}

@@ -66,7 +66,8 @@ pub fn load(path: &std::path::Path) -> anyhow::Result<Motion> {
     } else {
         Motion::from_file(path)
     };
-    motion.with_context(|| format!("invalid motion {}", path.display()))
+    // Library errors already name the file, line and field.
+    Ok(motion?)
 }
 
 /// Run a `motion` subcommand.

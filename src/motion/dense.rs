@@ -92,7 +92,11 @@ pub fn parse_csv(text: &str, path: Option<&Path>) -> Result<Motion, MotionError>
         }
     };
     let headers = reader.headers().map_err(syntax)?.clone();
-    let header_line = reader.position().line() as usize;
+    // The first line that is neither blank nor a comment.
+    let header_line = text
+        .lines()
+        .position(|l| !l.trim().is_empty() && !l.trim_start().starts_with('#'))
+        .map_or(1, |i| i + 1);
     let found: Vec<String> = headers.iter().map(str::to_ascii_lowercase).collect();
     if found.len() < COLUMNS.len() || found[..COLUMNS.len()] != COLUMNS {
         return Err(MotionError::Invalid {

@@ -3,7 +3,7 @@
 //! - every class: angular velocity and acceleration over t;
 //! - 1R/1R1T: the unwrapped angle θ(t) with the keyframes marked; 1R1T also the height;
 //! - 3R: ZYX Euler angles over t (for reading only: the law itself is interpolated on
-//!   SO(3)), and the path of the end-effector axis (follower-local +z) in an azimuthal
+//!   SO(3)), tilt of the end-effector axis and roll about it over t, and the path of the end-effector axis (follower-local +z) in an azimuthal
 //!   equidistant projection around its rest direction, with keyframes, the start and the
 //!   [`super::MAX_TILT_DEG`] circle.
 //!
@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 
 use crate::plot::{Chart, PlotError, Series};
 
-use super::rotation::end_effector_axis;
+use super::rotation::{end_effector_axis, roll_deg, tilt_deg};
 use super::{Motion, MotionClass};
 
 /// Unwrap a sequence of angles in degrees (remove ±360° jumps).
@@ -151,6 +151,48 @@ pub fn charts(motion: &Motion, n: usize) -> Vec<(String, Chart)> {
             c.x_range = xr;
             out.push(("euler".to_string(), c));
 
+            // The direction form's own terms: tilt of the axis and roll about it.
+            let mut roll: Vec<f64> = samples.iter().map(|s| roll_deg(&s.rotation)).collect();
+            unwrap_deg(&mut roll);
+            let mut c = Chart::new(
+                format!("{name}: end-effector axis tilt and roll about it"),
+                t_label,
+                "angle [deg]",
+            )
+            .with(Series::line(
+                "tilt from rest",
+                samples
+                    .iter()
+                    .map(|s| (s.t, tilt_deg(&s.rotation)))
+                    .collect(),
+                0,
+            ))
+            .with(Series::line(
+                "roll",
+                ts.iter().zip(&roll).map(|(&t, &r)| (t, r)).collect(),
+                1,
+            ))
+            .with(Series::points(
+                "keyframes",
+                motion
+                    .keyframes()
+                    .iter()
+                    .flat_map(|k| {
+                        let i = ((k.t * n as f64).round() as usize).min(n);
+                        let r = roll_deg(&k.rotation);
+                        [
+                            (k.t, tilt_deg(&k.rotation)),
+                            (k.t, r - 360.0 * ((r - roll[i]) / 360.0).round()),
+                        ]
+                    })
+                    .collect(),
+                5,
+                6,
+            ));
+            c.h_lines.push((super::MAX_TILT_DEG, "tilt warning".into()));
+            c.x_range = xr;
+            out.push(("tilt-roll".to_string(), c));
+
             // End-effector axis path.
             let project = |q: &nalgebra::UnitQuaternion<f64>| {
                 let a = q * end_effector_axis();
@@ -270,4 +312,46 @@ pub enum FigureError {
     /// A chart could not be drawn.
     #[error(transparent)]
     Plot(#[from] PlotError),
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::motion::spec::parse_spec;
+
+    /// Guards `motion show`'s output: each class gets its charts (3R: Euler angles, tilt and
+    /// roll, axis path, rates), all written as PNG and SVG.
+    #[test]
+    fn writes_the_charts_of_each_class() {
+        let dir = tempfile::tempdir().unwrap();
+        let cases = [
+            (
+                "class = \"1R\"\nnet_rotation = 360\n[[key]]\nt = 0.0\nangle = 0.0\n",
+                3,
+            ),
+            (
+                "class = \"1R1T\"\n[[key]]\nt = 0.0\nangle = 0.0\nheight = 0.0\n\
+                 [[key]]\nt = 0.5\nangle = 30.0\nheight = 1.0\n",
+                5,
+            ),
+            (
+                "class = \"3R\"\n[[key]]\nt = 0.0\nazimuth = 0\nelevation = 80\n\
+                 [[key]]\nt = 0.3\nazimuth = 120\nelevation = 80\nroll = 20\n\
+                 [[key]]\nt = 0.6\nazimuth = 240\nelevation = 80\n",
+                5,
+            ),
+        ];
+        for (i, (text, charts)) in cases.iter().enumerate() {
+            let m = parse_spec(text, Some(Path::new(&format!("case{i}.toml")))).unwrap();
+            let files = write_all(&m, dir.path(), 200).unwrap();
+            assert_eq!(files.len(), 2 * charts, "case {i}");
+            for f in files {
+                assert!(
+                    std::fs::metadata(&f).unwrap().len() > 1000,
+                    "{}",
+                    f.display()
+                );
+            }
+        }
+    }
 }

@@ -118,7 +118,7 @@ pub struct PoseSample {
     pub rotation: UnitQuaternion<f64>,
     /// T₂(t).
     pub translation: Vector3<f64>,
-    /// ω in frame R: dR₂/dt = [ω]ₓ R₂ (rad per period).
+    /// ω in frame R: dR₂/dt = \[ω\]ₓ R₂ (rad per period).
     pub angular_velocity: Vector3<f64>,
     /// dω/dt (rad per period²).
     pub angular_acceleration: Vector3<f64>,

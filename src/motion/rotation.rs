@@ -5,7 +5,7 @@
 //! (each one is negated if that brings it closer to its predecessor, so consecutive keys are
 //! at most 180° apart on the quaternion sphere and the path never takes the long way round).
 //! The four components are then interpolated by one periodic cubic spline
-//! ([`super::spline`]), and the result p(t) is normalized: q(t) = p(t)/|p(t)|. If the loop
+//! (the `spline` module), and the result p(t) is normalized: q(t) = p(t)/|p(t)|. If the loop
 //! of keys closes with a sign flip (the last key is nearer to −q₀ than to q₀: the motion
 //! contains a net turn that is not contractible in SO(3)), the spline is anti-periodic,
 //! p(t + 1) = −p(t), which describes the same rotations. Normalization keeps every key
@@ -14,7 +14,7 @@
 //!
 //! **Derivatives.** With r = |p|: q′ = (p′ − q r′)/r and q″ = (p″ − 2q′r′ − q r″)/r where
 //! r′ = q·p′ and r″ = (|p′|² + p·p″ − r′²)/r. The angular velocity in the reference frame R
-//! (dR/dt = [ω]ₓR) is ω = 2·vec(q′ q̄) and its derivative is ω′ = 2·vec(q″ q̄) (the term
+//! (dR/dt = \[ω\]ₓR) is ω = 2·vec(q′ q̄) and its derivative is ω′ = 2·vec(q″ q̄) (the term
 //! q′ q̄′ = |q′|² is real).
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3, Vector4};
@@ -123,14 +123,43 @@ pub fn end_effector_axis() -> Vector3<f64> {
     Vector3::z()
 }
 
-/// Orientation from the end-effector axis direction and a roll about that axis (degrees):
-/// R = Rz(azimuth)·Ry(90° − elevation)·Rz(roll). The axis then points at azimuth
-/// (from +x towards +y) and elevation (above the xy plane; 90° is the rest direction +z);
-/// roll turns the follower about its own axis. At elevation 90° azimuth and roll add up.
+/// Orientation from the end-effector axis direction and a roll about that axis (degrees).
+///
+/// R = T·Rz(roll), where T = Rz(azimuth)·Ry(90° − elevation)·Rz(−azimuth) is the *swing*:
+/// the smallest rotation that tips the axis from rest (+z) to the direction at `azimuth`
+/// (from +x towards +y) and `elevation` (above the xy plane; 90° is rest). Roll turns the
+/// follower about its own axis relative to that swing. Because the swing does not spin the
+/// follower about z, a path that circles the rest direction does not make the follower
+/// turn with it, and at elevation 90° the azimuth has no effect (no singularity at rest).
 pub fn from_direction_roll_deg(azimuth: f64, elevation: f64, roll: f64) -> UnitQuaternion<f64> {
-    UnitQuaternion::from_axis_angle(&Vector3::z_axis(), azimuth.to_radians())
-        * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), (90.0 - elevation).to_radians())
+    swing(azimuth, 90.0 - elevation)
         * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), roll.to_radians())
+}
+
+/// The swing T = Rz(a)·Ry(tilt)·Rz(−a), degrees.
+fn swing(azimuth: f64, tilt: f64) -> UnitQuaternion<f64> {
+    let rz = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), azimuth.to_radians());
+    rz * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), tilt.to_radians()) * rz.inverse()
+}
+
+/// Roll (degrees, in (−180°, 180°]) of `q` about the end-effector axis relative to the
+/// swing that tips the axis to where it points (the inverse of
+/// [`from_direction_roll_deg`]'s roll). Undefined when the axis points straight down; 0
+/// is returned there.
+pub fn roll_deg(q: &UnitQuaternion<f64>) -> f64 {
+    let a = q * end_effector_axis();
+    let tilt = a.z.clamp(-1.0, 1.0).acos().to_degrees();
+    if tilt > 179.999 {
+        return 0.0;
+    }
+    let az = a.y.atan2(a.x).to_degrees();
+    let r = swing(az, tilt).inverse() * q;
+    let d = (2.0 * r.k.atan2(r.w)).to_degrees().rem_euclid(360.0);
+    if d > 180.0 {
+        d - 360.0
+    } else {
+        d
+    }
 }
 
 /// Azimuth and elevation (degrees) of the end-effector axis under rotation `q`.
@@ -238,6 +267,37 @@ mod tests {
         }
     }
 
+    /// Guards C² continuity of the SO(3) law at every keyframe and across the wrap: the
+    /// rotation, ω and dω/dt agree from both sides (after removing the smooth change over
+    /// the probe distance).
+    #[test]
+    fn rotation_law_is_c2_at_keys_and_wrap() {
+        let mut rng = ChaCha8Rng::seed_from_u64(33);
+        let (knots, keys) = random_keys(&mut rng, 6);
+        let law = RotationLaw::new(&knots, &keys);
+        let eps = 1e-7;
+        let mut joints = knots.clone();
+        joints.push(knots[0] + 1.0);
+        for &t in &joints {
+            let (l, r) = (law.eval(t - eps), law.eval(t + eps));
+            assert!(
+                l.rotation.angle_to(&r.rotation) < 3.0 * eps * (1.0 + l.angular_velocity.norm())
+            );
+            let dw = r.angular_velocity
+                - l.angular_velocity
+                - (l.angular_acceleration + r.angular_acceleration) * eps;
+            assert!(
+                dw.norm() < 1e-6 * (1.0 + l.angular_velocity.norm()),
+                "ω jumps at {t}"
+            );
+            let da = (r.angular_acceleration - l.angular_acceleration).norm();
+            assert!(
+                da < 1e-3 * (1.0 + l.angular_acceleration.norm()),
+                "dω/dt jumps at {t}: {da}"
+            );
+        }
+    }
+
     /// Guards the direction/roll convention: the end-effector axis lands at the requested
     /// azimuth and elevation, and roll does not move it.
     #[test]
@@ -251,7 +311,22 @@ mod tests {
             let (a, e) = direction_deg(&q);
             assert!((a - az).abs() < 1e-9 && (e - el).abs() < 1e-9);
             assert!((tilt_deg(&q) - (90.0 - el)).abs() < 1e-9);
+            assert!((roll_deg(&q) - roll).abs() < 1e-9);
         }
+    }
+
+    /// Guards the swing convention: at rest (elevation 90°) the azimuth has no effect, and
+    /// circling the rest direction at constant tilt and zero roll never spins the follower
+    /// about z by more than the tilt itself implies (no accumulated turn).
+    #[test]
+    fn direction_form_does_not_spin_with_azimuth() {
+        let a = from_direction_roll_deg(0.0, 90.0, 10.0);
+        let b = from_direction_roll_deg(123.0, 90.0, 10.0);
+        assert!(a.angle_to(&b) < 1e-12);
+        // Quarter steps around a 20° cone: consecutive orientations differ by the swing only.
+        let q0 = from_direction_roll_deg(0.0, 70.0, 0.0);
+        let q1 = from_direction_roll_deg(90.0, 70.0, 0.0);
+        assert!(q0.angle_to(&q1) < 30.0_f64.to_radians());
     }
 
     /// Guards the Euler convention: R = Rz·Ry·Rx maps x to the yaw/pitch direction.

@@ -21,7 +21,9 @@
 //! - `euler_zyx = [z, y, x]`: intrinsic yaw–pitch–roll in degrees, R = Rz·Ry·Rx;
 //! - `azimuth = a`, `elevation = e`, optional `roll = r` (3R): the direction of the
 //!   end-effector axis (follower-local +z; rest is straight up, elevation 90°) and a roll
-//!   about it, R = Rz(a)·Ry(90° − e)·Rz(r) — "a path on a sphere plus roll".
+//!   about it — "a path on a sphere plus roll". R = T·Rz(r) where the swing
+//!   T = Rz(a)·Ry(90° − e)·Rz(−a) tips the axis the shortest way from rest, so circling
+//!   the rest direction does not spin the follower, and at rest (e = 90°) a is irrelevant.
 //!
 //! In 1R/1R1T every form must be a rotation about z; angles from non-`angle` forms are
 //! unwrapped to the branch nearest the previous key. `translation = [x, y, z]` is accepted
@@ -536,7 +538,7 @@ mod tests {
         let q = from_euler_zyx_deg(20.0, 30.0, 0.0);
         let (axis, angle) = q.axis_angle().unwrap();
         let a = from_direction_roll_deg(20.0, 90.0 - 30.0, -20.0);
-        // Rz(20)·Ry(30)·Rz(−20) tilts the z axis by 30° towards azimuth 20.
+        // The axis tilted 30° towards azimuth 20°, rolled −20° about itself.
         let forms = [
             format!("quaternion = [{}, {}, {}, {}]", a.w, a.i, a.j, a.k),
             format!(

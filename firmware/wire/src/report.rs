@@ -34,6 +34,20 @@ impl BoardName {
         })
     }
 
+    /// The name cut to at most [`BOARD_NAME_MAX`] bytes (at a character boundary).
+    pub fn truncated(name: &str) -> Self {
+        let mut end = name.len().min(BOARD_NAME_MAX);
+        while !name.is_char_boundary(end) {
+            end -= 1;
+        }
+        let mut bytes = [0u8; BOARD_NAME_MAX];
+        bytes[..end].copy_from_slice(&name.as_bytes()[..end]);
+        Self {
+            len: end as u8,
+            bytes,
+        }
+    }
+
     /// The name as text.
     pub fn as_str(&self) -> &str {
         // Constructed from &str or checked UTF-8 only.
@@ -650,5 +664,10 @@ mod tests {
             "rp2040-pico"
         );
         assert!(BoardName::new("a-board-name-that-is-too-long").is_none());
+        assert_eq!(
+            BoardName::truncated("a-board-name-that-is-too-long").as_str(),
+            "a-board-name-tha"
+        );
+        assert_eq!(BoardName::truncated("ääääääääé").as_str(), "ääääääää");
     }
 }

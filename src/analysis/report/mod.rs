@@ -414,9 +414,6 @@ fn blocks(s: &Summary, a: &Analysis, pictures: &[plots::Picture]) -> Vec<Block> 
     for l in lines {
         b.push(Block::Para(l));
     }
-    for c in &s.checks {
-        let _ = c;
-    }
     if !s.checks.is_empty() {
         b.push(Block::Table(
             vec![
@@ -759,6 +756,7 @@ pub fn write_report(
     }
     if law.rotation.is_some() {
         pics.push(plots::axis_chart(out_dir, run, law, a)?);
+        pics.push(plots::axis_over_driver_chart(out_dir, run, law, a)?);
     }
     for dof in [Dof::Rz, Dof::Tz] {
         if a.alignment.dofs.iter().any(|d| d.dof == dof) {

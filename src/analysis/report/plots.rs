@@ -393,3 +393,74 @@ pub fn axis_chart(
         stem.with_extension("png"),
     ))
 }
+
+/// 3R: the end-effector axis projection coordinates (tilt towards +x and +y) over one
+/// driver revolution, measured (frame offsets removed, cycles folded) against target.
+pub fn axis_over_driver_chart(
+    dir: &Path,
+    run: &MeasuredRun,
+    law: &TargetLaw,
+    a: &Analysis,
+) -> Result<Picture, AnalysisError> {
+    let (Some(meas), Some(rot), Some(off)) = (&run.rotation, &law.rotation, a.alignment.rotation)
+    else {
+        return Err(AnalysisError::Mismatch(
+            "no orientation data to plot".into(),
+        ));
+    };
+    let mut chart = Chart::new(
+        format!(
+            "{}: end-effector axis over one driver revolution — measured vs target",
+            law.name
+        ),
+        "driver angle within the cycle [°]",
+        "axis tilt towards +x / +y [°]",
+    );
+    chart.x_range = Some((0.0, 360.0));
+    let idx: Vec<usize> = run.measured_indices().step_by(stride(run.len())).collect();
+    let folded = |i: usize| run.driver_deg[i].rem_euclid(360.0);
+    let m: Vec<(f64, (f64, f64))> = idx
+        .iter()
+        .map(|&i| {
+            (
+                folded(i),
+                project(off.world.inverse() * meas[i] * off.mount.inverse() * Vector3::z()),
+            )
+        })
+        .collect();
+    let t: Vec<(f64, (f64, f64))> = (0..=720)
+        .map(|k| {
+            let phi = k as f64 * 0.5;
+            (phi, project(rot.eval(phi) * Vector3::z()))
+        })
+        .collect();
+    chart = chart
+        .with(Series::points(
+            "measured, towards +x",
+            m.iter().map(|p| (p.0, p.1 .0)).collect(),
+            2,
+            0,
+        ))
+        .with(Series::points(
+            "measured, towards +y",
+            m.iter().map(|p| (p.0, p.1 .1)).collect(),
+            2,
+            1,
+        ))
+        .with(Series::dashed(
+            "target, towards +x",
+            t.iter().map(|p| (p.0, p.1 .0)).collect(),
+            6,
+        ))
+        .with(Series::dashed(
+            "target, towards +y",
+            t.iter().map(|p| (p.0, p.1 .1)).collect(),
+            3,
+        ));
+    let stem = dir.join("follower_axis");
+    chart.write(&stem)?;
+    Ok((
+        "End-effector axis tilt over one driver revolution (all cycles folded): measured against target.".into(),
+        stem.with_extension("png"),
+    ))
+}

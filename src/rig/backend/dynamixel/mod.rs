@@ -41,6 +41,15 @@ pub const VELOCITY_UNIT_RPM: f64 = 0.229;
 /// Extended Position Control range, pulses either side of zero (±256 turns).
 pub const EXTENDED_POSITION_LIMIT: i64 = 1_048_575;
 
+/// After a silence of at least this fraction of the bus watchdog period the backend checks
+/// whether the watchdog tripped. Default 0.8: the servo's timer and ours start at slightly
+/// different moments.
+pub const WATCHDOG_CHECK_FRACTION: f64 = 0.8;
+
+/// Attempts per command transaction before giving up. Default 3: a reply lost to line noise
+/// or a busy host is retried, a servo that is really gone fails within ~0.1 s at 57600 baud.
+pub const COMMAND_ATTEMPTS: u32 = 3;
+
 /// Bus watchdog unit (address 98), ms per count.
 pub const BUS_WATCHDOG_UNIT_MS: u32 = 20;
 
@@ -68,6 +77,17 @@ struct Follower {
     id: u8,
 }
 
+/// The last motion command, to repeat after the bus watchdog stopped the driver.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Motion {
+    /// Stopped or holding.
+    Idle,
+    /// Constant speed, driver rpm.
+    RunAt(f64),
+    /// Moving to an absolute driver angle, deg.
+    MoveTo(f64),
+}
+
 /// State shared with the sample conversion.
 #[derive(Debug, Clone, Copy)]
 struct Shared {
@@ -79,6 +99,8 @@ struct Shared {
     mode: u8,
     /// Torque on.
     enabled: bool,
+    /// What the driver was last told to do.
+    motion: Motion,
 }
 
 /// A Dynamixel bench: driver servo plus torque-off follower servos on one bus.
@@ -88,6 +110,7 @@ pub struct DynamixelBench {
     followers: Vec<Follower>,
     max_speed_rpm: f64,
     velocity_limit_units: i32,
+    watchdog_counts: u8,
     tx: Sender<Message>,
     events: Receiver<Event>,
     thread: Option<JoinHandle<()>>,
@@ -199,6 +222,7 @@ impl DynamixelBench {
             followers,
             max_speed_rpm: rig.safety.max_speed_rpm,
             velocity_limit_units: 0,
+            watchdog_counts: watchdog_counts as u8,
             tx,
             events: erx,
             thread: Some(thread),
@@ -208,6 +232,7 @@ impl DynamixelBench {
                 estop: false,
                 mode: MODE_VELOCITY,
                 enabled: false,
+                motion: Motion::Idle,
             },
             device: DeviceInfo {
                 backend: "dynamixel".into(),
@@ -222,15 +247,16 @@ impl DynamixelBench {
         Ok(bench)
     }
 
-    /// Run a transaction on the bus thread.
+    /// Run a transaction on the bus thread, retrying it on a timeout or a damaged reply
+    /// (every transaction the backend makes is idempotent).
     fn bus<T: Send + 'static>(
         &self,
         what: &str,
-        f: impl FnOnce(&mut DxlBus) -> Result<T, dynamixel2::TransferError> + Send + 'static,
+        f: impl Fn(&mut DxlBus) -> Result<T, dynamixel2::TransferError> + Send + 'static,
     ) -> Result<T, RigError> {
-        match call(&self.tx, f) {
-            Some(Ok(v)) => Ok(v),
-            Some(Err(e)) => Err(self.transfer_error(what, &e)),
+        match call(&self.tx, move |b| with_retries(b, f)) {
+            Some((Ok(v), _)) => Ok(v),
+            Some((Err(e), attempts)) => Err(self.transfer_error(what, &e, attempts)),
             None => Err(RigError::Disconnected {
                 path: self.path.clone(),
                 message: "the bus thread has ended".into(),
@@ -238,7 +264,7 @@ impl DynamixelBench {
         }
     }
 
-    fn transfer_error(&self, what: &str, e: &dynamixel2::TransferError) -> RigError {
+    fn transfer_error(&self, what: &str, e: &dynamixel2::TransferError, attempts: u32) -> RigError {
         use dynamixel2::{ReadError, TransferError};
         match e {
             TransferError::ReadError(ReadError::MotorError(m)) => RigError::Device {
@@ -256,10 +282,10 @@ impl DynamixelBench {
                 RigError::CommandTimeout {
                     path: self.path.clone(),
                     command: what.to_string(),
-                    attempts: 1,
+                    attempts,
                 }
             }
-            other => io_err(&self.path, what, other),
+            other => io_err(&self.path, &format!("{what} ({attempts} attempts)"), other),
         }
     }
 
@@ -289,7 +315,7 @@ impl DynamixelBench {
             .collect();
         let mut firmware = Vec::new();
         for (id, role) in ids {
-            let ping = call(&self.tx, move |b| b.ping(id));
+            let ping = call(&self.tx, move |b| with_retries(b, |b| b.ping(id)).0);
             let ping = match ping {
                 Some(Ok(p)) => p,
                 Some(Err(e)) => {
@@ -507,6 +533,59 @@ impl DynamixelBench {
         )
     }
 
+    /// After the bus was silent for `silent`: if that was long enough for the servos' bus
+    /// watchdog to trip, clear it, re-arm it and repeat the last motion command. Returns
+    /// whether the watchdog had tripped (counted as a reconnect).
+    fn rearm_after_silence(&mut self, silent: Duration) -> Result<bool, RigError> {
+        let period = Duration::from_millis(
+            u64::from(self.watchdog_counts) * u64::from(BUS_WATCHDOG_UNIT_MS),
+        );
+        if silent < period.mul_f64(WATCHDOG_CHECK_FRACTION) {
+            return Ok(false);
+        }
+        let id = self.driver.id;
+        let wd = self.bus("read bus watchdog", move |b| {
+            b.read_u8(id, BUS_WATCHDOG).map(|r| r.data)
+        })?;
+        if wd != 0xFF {
+            return Ok(false);
+        }
+        tracing::warn!(
+            "the bus was silent for {:.0} ms and the driver's bus watchdog stopped it; re-arming and resuming",
+            silent.as_secs_f64() * 1e3
+        );
+        self.write_u8(id, BUS_WATCHDOG, 0, "clear bus watchdog error")?;
+        self.write_u8(
+            id,
+            BUS_WATCHDOG,
+            self.watchdog_counts,
+            "re-arm bus watchdog",
+        )?;
+        // The trip zeroed the profile registers: restore them before repeating the command.
+        self.write_i32(
+            id,
+            PROFILE_ACCELERATION,
+            self.driver.profile_acceleration as i32,
+            "set profile acceleration",
+        )?;
+        self.write_i32(
+            id,
+            PROFILE_VELOCITY,
+            self.driver.profile_velocity as i32,
+            "set profile velocity",
+        )?;
+        match self.shared.motion {
+            Motion::Idle => {}
+            Motion::RunAt(rpm) => self.run_at(rpm)?,
+            Motion::MoveTo(deg) => self.move_to(deg)?,
+        }
+        self.counts
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .reconnects += 1;
+        Ok(true)
+    }
+
     /// The port path.
     pub fn path(&self) -> &Path {
         &self.path
@@ -523,6 +602,7 @@ impl Driver for DynamixelBench {
     }
 
     fn disable(&mut self) -> Result<(), RigError> {
+        self.shared.motion = Motion::Idle;
         self.write_u8(self.driver.id, TORQUE_ENABLE, 0, "torque off")?;
         self.shared.enabled = false;
         Ok(())
@@ -569,6 +649,7 @@ impl Driver for DynamixelBench {
                 )?;
             }
         }
+        self.shared.motion = Motion::RunAt(rpm);
         Ok(())
     }
 
@@ -585,7 +666,9 @@ impl Driver for DynamixelBench {
                 "set profile velocity",
             )?;
         }
-        self.goal_position(target)
+        self.goal_position(target)?;
+        self.shared.motion = Motion::MoveTo(deg);
+        Ok(())
     }
 
     fn move_by(&mut self, deg: f64) -> Result<(), RigError> {
@@ -594,6 +677,7 @@ impl Driver for DynamixelBench {
     }
 
     fn stop(&mut self) -> Result<(), RigError> {
+        self.shared.motion = Motion::Idle;
         if self.shared.mode == MODE_VELOCITY {
             self.write_i32(self.driver.id, GOAL_VELOCITY, 0, "stop (goal velocity 0)")
         } else {
@@ -687,6 +771,11 @@ impl SampleStream for DynamixelBench {
                     if self.shared.estop {
                         f |= flags::ESTOP;
                     }
+                    if let Some(silent) = raw.resumed_after {
+                        if self.rearm_after_silence(silent)? {
+                            f |= flags::RECONNECTED;
+                        }
+                    }
 
                     out.push(Sample {
                         device_time_us: raw.device_time_us,
@@ -726,6 +815,33 @@ impl Drop for DynamixelBench {
         let _ = self.tx.send(Message::Quit);
         if let Some(t) = self.thread.take() {
             let _ = t.join();
+        }
+    }
+}
+
+/// Whether a failed transaction is worth repeating: no reply in time, or a reply damaged on
+/// the wire. A servo's own error reply (e.g. Access error) is not.
+fn retryable(e: &dynamixel2::TransferError) -> bool {
+    use dynamixel2::{ReadError, TransferError};
+    match e {
+        TransferError::ReadError(ReadError::Io(io)) => io.kind() == std::io::ErrorKind::TimedOut,
+        TransferError::ReadError(ReadError::InvalidMessage(_)) => true,
+        TransferError::ReadError(ReadError::BufferFull(_)) => true,
+        _ => false,
+    }
+}
+
+/// Run `f` up to [`COMMAND_ATTEMPTS`] times while it fails retryably; returns the last result
+/// and the number of attempts made.
+fn with_retries<T>(
+    bus: &mut DxlBus,
+    f: impl Fn(&mut DxlBus) -> Result<T, dynamixel2::TransferError>,
+) -> (Result<T, dynamixel2::TransferError>, u32) {
+    let mut attempt = 1;
+    loop {
+        match f(bus) {
+            Err(e) if retryable(&e) && attempt < COMMAND_ATTEMPTS => attempt += 1,
+            r => return (r, attempt),
         }
     }
 }

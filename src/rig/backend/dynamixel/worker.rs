@@ -30,8 +30,21 @@ pub const STREAM_BLOCK_ADDRESS: u16 = 224;
 pub const INDIRECT_ADDRESS_1: u16 = 168;
 
 /// The control-table bytes mapped into the streamed block, in order: Realtime Tick (120,
-/// 2 bytes), Present Velocity (128, 4 bytes), Present Position (132, 4 bytes).
-pub const STREAM_SOURCES: [u16; 10] = [120, 121, 128, 129, 130, 131, 132, 133, 134, 135];
+/// 2 bytes), Present Velocity (128, 4 bytes), Moving (122, 1 byte), Present Position (132,
+/// 4 bytes).
+///
+/// Moving (always 0 or 1) sits between velocity and position on purpose: `dynamixel2` 0.9.1
+/// fails to remove byte stuffing after a run of three `FF` (its matcher restarts from
+/// scratch instead of from the last `FF`), so a small negative velocity (`xx FF FF FF`)
+/// directly followed by a position byte `FD` would be misread. With the separator, and with
+/// the tick's high byte below 0x80 and |velocity| ≤ 1023, no in-range block contains
+/// `FF FF FF FD` (guarded by a test below).
+pub const STREAM_SOURCES: [u16; 11] = [120, 121, 128, 129, 130, 131, 122, 132, 133, 134, 135];
+
+/// Offset of Present Velocity in the streamed block.
+const BLOCK_VELOCITY: usize = 2;
+/// Offset of Present Position in the streamed block.
+const BLOCK_POSITION: usize = 7;
 
 /// Length of the streamed block, bytes.
 pub const STREAM_BLOCK_LEN: u16 = STREAM_SOURCES.len() as u16;
@@ -60,6 +73,9 @@ pub struct RawSample {
     pub flags: u32,
     /// Whether any servo set the alert bit (a hardware error is latched).
     pub alert: bool,
+    /// On the first sample after failed reads: how long the bus was silent (the servos'
+    /// bus watchdog may have stopped the driver meanwhile).
+    pub resumed_after: Option<Duration>,
 }
 
 /// What the worker reports while streaming.
@@ -118,6 +134,8 @@ struct Streamer {
     last_followers: Vec<i32>,
     failures_in_a_row: u32,
     gap_pending: bool,
+    /// When the last sample was read successfully.
+    last_success: Instant,
 }
 
 /// Run the worker until [`Message::Quit`] or the sender is dropped.
@@ -153,6 +171,7 @@ pub fn run(
                     last_followers: vec![0; setup.follower_ids.len()],
                     failures_in_a_row: 0,
                     gap_pending: false,
+                    last_success: Instant::now(),
                 });
                 continue;
             }
@@ -248,15 +267,18 @@ fn sample_once(
     }
     s.last_tick = Some(tick);
     let mut sample_flags = 0;
+    let mut resumed_after = None;
     if s.gap_pending {
         sample_flags |= flags::GAP_BEFORE;
         s.gap_pending = false;
+        resumed_after = Some(s.last_success.elapsed());
     }
+    s.last_success = Instant::now();
     let mut followers = Vec::with_capacity(ids.len() - 1);
     for (k, block) in blocks.iter().enumerate().skip(1) {
         match block {
             Some(b) => {
-                let p = i32::from_le_bytes([b[6], b[7], b[8], b[9]]);
+                let p = block_i32(b, BLOCK_POSITION);
                 s.last_followers[k - 1] = p;
                 followers.push(p);
             }
@@ -270,13 +292,18 @@ fn sample_once(
     drop(c);
     let _ = events.send(Event::Sample(RawSample {
         device_time_us: s.time_ms * 1000,
-        driver_velocity: i32::from_le_bytes([driver[2], driver[3], driver[4], driver[5]]),
-        driver_position: i32::from_le_bytes([driver[6], driver[7], driver[8], driver[9]]),
+        driver_velocity: block_i32(driver, BLOCK_VELOCITY),
+        driver_position: block_i32(driver, BLOCK_POSITION),
         followers,
         flags: sample_flags,
         alert,
+        resumed_after,
     }));
     None
+}
+
+fn block_i32(b: &[u8], at: usize) -> i32 {
+    i32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]])
 }
 
 /// Run `f` on the worker and wait for its result.
@@ -290,4 +317,60 @@ pub fn call<T: Send + 'static>(
     })))
     .ok()?;
     rrx.recv().ok()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The block as a servo sends it, preceded by the status error byte.
+    fn block(tick: u16, velocity: i32, moving: u8, position: i32) -> Vec<u8> {
+        let mut b = vec![0x80]; // error field with the alert bit: the worst case
+        b.extend_from_slice(&tick.to_le_bytes());
+        b.extend_from_slice(&velocity.to_le_bytes());
+        b.push(moving);
+        b.extend_from_slice(&position.to_le_bytes());
+        b
+    }
+
+    fn has_triple_ff_fd(b: &[u8]) -> bool {
+        b.windows(4).any(|w| w == [0xFF, 0xFF, 0xFF, 0xFD])
+    }
+
+    /// Guards the stream layout against dynamixel2's unstuffing bug: no in-range block
+    /// (tick < 32768, |velocity| ≤ 1023, any position within ±8191 turns) contains the
+    /// `FF FF FF FD` run it misreads — while the naive layout (velocity then position) does.
+    #[test]
+    fn stream_block_never_contains_the_pattern_dynamixel2_misreads() {
+        assert_eq!(STREAM_SOURCES.len(), usize::from(STREAM_BLOCK_LEN));
+        assert_eq!(STREAM_SOURCES[BLOCK_VELOCITY], 128);
+        assert_eq!(STREAM_SOURCES[BLOCK_POSITION], 132);
+        // Positions around zero and around the byte values that stuff (FD, FF), plus a
+        // sweep of the multi-turn range.
+        let mut positions: Vec<i32> = (-260..260).step_by(3).collect();
+        positions.extend([
+            0x00FD_FFFF,
+            -131_073,
+            -3,
+            0x01FD,
+            -0x0203,
+            0x7FFF_FFFD_u32 as i32,
+        ]);
+        positions.extend((-8191 * 4096..8191 * 4096).step_by(409_597));
+        for v in -1023..=1023 {
+            for &p in &positions {
+                for tick in [0x00FFu16, 0x7FFF] {
+                    for moving in [0u8, 1] {
+                        let b = block(tick, v, moving, p);
+                        assert!(!has_triple_ff_fd(&b), "v={v} p={p} tick={tick}");
+                    }
+                }
+            }
+        }
+        // Without the separator, velocity −1 followed by a position whose low byte is FD
+        // produces the run.
+        let mut naive = (-1i32).to_le_bytes().to_vec();
+        naive.extend_from_slice(&0x0000_01FDi32.to_le_bytes());
+        assert!(has_triple_ff_fd(&naive));
+    }
 }

@@ -377,14 +377,20 @@ mod tests {
                 body: body.to_vec()
             }))
         );
-        // A body of FF FF FD FD must survive too (stuffs to FF FF FD FD FD).
-        let tricky = [0xFF, 0xFF, 0xFD, 0xFD];
-        let pkt = encode(1, inst::WRITE, &tricky);
-        let mut d = Decoder::new();
-        d.push(&pkt);
-        match d.next_packet() {
-            Some(Decoded::Packet(p)) => assert_eq!(p.body, tricky),
-            other => panic!("unexpected {other:?}"),
+        // FF FF FD FD (stuffs to FF FF FD FD FD) and three FF before FD (stuffs the last
+        // three) must survive too.
+        for (tricky, stuffed_len) in [
+            (vec![0xFF, 0xFF, 0xFD, 0xFD], 5),
+            (vec![0x51, 0xFF, 0xFF, 0xFF, 0xFD, 0x01], 7),
+        ] {
+            let pkt = encode(1, inst::WRITE, &tricky);
+            assert_eq!(pkt.len(), 8 + stuffed_len + 2, "{tricky:02X?}");
+            let mut d = Decoder::new();
+            d.push(&pkt);
+            match d.next_packet() {
+                Some(Decoded::Packet(p)) => assert_eq!(p.body, tricky),
+                other => panic!("unexpected {other:?}"),
+            }
         }
     }
 
