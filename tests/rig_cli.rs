@@ -147,7 +147,10 @@ fn host_crash_leaves_valid_recording_and_watchdog_stops_motor() {
     // Watchdog 250 ms + deceleration from 1 rev/s at 1440 °/s² (0.25 s).
     std::thread::sleep(std::time::Duration::from_millis(1200));
     let status = sim.stop().unwrap();
-    assert!(!status.moving, "watchdog did not stop the motor: {status:?}");
+    assert!(
+        !status.moving,
+        "watchdog did not stop the motor: {status:?}"
+    );
     let r = mpc_rig::rig::recording::Recording::load(&rec).unwrap();
     assert!(!r.meta.complete);
     assert!(r.len() > 500, "{} rows survived", r.len());

@@ -92,7 +92,10 @@ fn dynamixel_bus_on_the_port_is_reported() {
     let err = StepperBench::open(&rig_on(sim.path())).err().unwrap();
     let msg = err.to_string();
     assert!(
-        matches!(err, RigError::NoAnswer { .. } | RigError::WrongDevice { .. }),
+        matches!(
+            err,
+            RigError::NoAnswer { .. } | RigError::WrongDevice { .. }
+        ),
         "{msg}"
     );
     assert!(msg.contains("right port"), "{msg}");

@@ -251,7 +251,11 @@ fn imu_bench_records_follower_orientation() {
     }
     // 100 Hz IMU at 30 rpm: the held value lags up to 10 ms = 1.8° of driver angle.
     assert!(worst < 3.0, "orientation error up to {worst}°");
-    let stale = rec.flags.iter().filter(|f| *f & flags::IMU_STALE != 0).count();
+    let stale = rec
+        .flags
+        .iter()
+        .filter(|f| *f & flags::IMU_STALE != 0)
+        .count();
     let frac = stale as f64 / rec.len() as f64;
     assert!((0.6..0.95).contains(&frac), "stale fraction {frac}");
     assert_motor_stopped(&status);

@@ -334,9 +334,7 @@ impl Bench {
             self.bus_b.set_as5600_angle(counts);
         }
         if self.mech.imu {
-            let q = self
-                .plant
-                .imu_reading(f.rotation * self.mech.imu_mounting);
+            let q = self.plant.imu_reading(f.rotation * self.mech.imu_mounting);
             self.bus_a.set_quaternion([q.w, q.i, q.j, q.k]);
         }
         if let Some(mm) = self.mech.quadrature_mm_per_count {
