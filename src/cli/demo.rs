@@ -119,9 +119,12 @@ fn synth_options(args: &DemoArgs) -> SynthOptions {
         ..SynthOptions::default()
     };
     if args.quick {
-        o.candidates = 8;
-        o.generations = 60;
-        o.population = 16;
+        // The paper's d_x for 1R/1R1T, fewer candidates and a shorter GA: a valid but less
+        // polished mechanism in a fraction of the time.
+        o.dx = Some(6.0);
+        o.candidates = 6;
+        o.generations = 40;
+        o.population = 12;
     }
     o
 }
@@ -168,12 +171,14 @@ fn mechanism_for(
     motion_path: &Path,
     motion: &Motion,
 ) -> anyhow::Result<(PathBuf, bool)> {
-    let bytes = std::fs::read(motion_path)
-        .with_context(|| format!("reading {}", motion_path.display()))?;
+    let bytes =
+        std::fs::read(motion_path).with_context(|| format!("reading {}", motion_path.display()))?;
     let o = synth_options(args);
-    let dir = args
-        .out
-        .join(format!("mechanism-{}-{}", motion.name(), cache_key(&bytes, &o)));
+    let dir = args.out.join(format!(
+        "mechanism-{}-{}",
+        motion.name(),
+        cache_key(&bytes, &o)
+    ));
     let file = dir.join("mechanism.json");
     if file.exists() && !args.resynthesize {
         match Mechanism::load(&file) {
@@ -233,7 +238,11 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
     eprintln!(
         "[3/4] measuring {} cycle(s){} at {} rpm",
         args.cycles,
-        if args.no_reverse { "" } else { " forward and reverse" },
+        if args.no_reverse {
+            ""
+        } else {
+            " forward and reverse"
+        },
         args.speed
     );
     let run_dir = args.out.join("runs").join(format!(
@@ -296,7 +305,11 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
     let summary = analyze_and_report(&outcome.dir, &report)
         .with_context(|| format!("analysing {}", outcome.dir.display()))?;
     println!();
-    println!("mechanism: {}{}", mech_path.display(), if cached { " (cached)" } else { "" });
+    println!(
+        "mechanism: {}{}",
+        mech_path.display(),
+        if cached { " (cached)" } else { "" }
+    );
     println!("recording: {}", outcome.dir.display());
     crate::cli::analyze::print_summary(&summary, &outcome.dir.join("report"));
     Ok(crate::cli::analyze::exit_code(&summary))

@@ -9,6 +9,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 pub mod analyze;
+pub mod demo;
 pub mod measure;
 pub mod motion;
 pub mod ports;
@@ -35,6 +36,8 @@ pub enum Command {
     /// Compare a recording with its target law and write the report (plots, report.md,
     /// report.html, summary.json).
     Analyze(analyze::AnalyzeArgs),
+    /// The main job on a simulated bench: synthesize the example, measure it, report.
+    Demo(demo::DemoArgs),
     /// Check, plot and sample motion specifications.
     Motion(motion::MotionArgs),
     /// List serial ports with USB vendor/product/serial where known.
@@ -72,6 +75,7 @@ pub fn init_logging(verbose: u8, quiet: bool) {
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Analyze(args) => analyze::run(args),
+        Command::Demo(args) => demo::run(args),
         Command::Motion(args) => motion::run(args),
         Command::Ports(args) => ports::run(args),
         Command::Synth(args) => synth::run(args),
