@@ -13,7 +13,7 @@ use crate::cli::ExitStatusError;
 use crate::rig::session::{self, EndReason, MeasureOptions, Progress, TargetSpec};
 
 /// Exit code when the device disconnected during the run (recording kept, incomplete).
-pub const EXIT_DISCONNECTED: u8 = 3;
+pub const EXIT_DISCONNECTED: u8 = 5;
 /// Exit code when the run stopped at `safety.max_run_s` or on another error mid-run.
 pub const EXIT_INCOMPLETE: u8 = 4;
 /// Exit code after Ctrl-C (the shell convention 128 + SIGINT).
@@ -51,7 +51,7 @@ pub struct MeasureArgs {
     /// Also run the same cycles in reverse (for backlash).
     #[arg(long)]
     pub reverse: bool,
-    /// Recording directory (default out/measure/<UTC timestamp>).
+    /// Recording directory (default `out/measure/<UTC timestamp>`).
     #[arg(short, long, value_name = "DIR")]
     pub output: Option<PathBuf>,
     /// Do not analyse the recording at the end (run `mpc-rig analyze DIR` later).

@@ -723,3 +723,76 @@ fn random_sessions_are_deterministic_and_consistent() {
         assert_eq!(a, b, "seed {seed}");
     }
 }
+
+/// Guards the device side of the golden frames in `data/wire/`: the stored command frames,
+/// fed to the device as raw bytes, are decoded and executed (each answered with its golden
+/// sequence number and `Ok`), and the motor turns the way `cmd_run_speed_negative` says.
+#[test]
+fn golden_command_frames_drive_the_device() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/wire");
+    let frame = |name: &str| std::fs::read(dir.join(format!("{name}.bin"))).unwrap();
+    let mut b = Bench::new();
+    b.device.receive(&frame("cmd_hello"));
+    b.collect();
+    assert!(matches!(b.reply_to(0), Some(Report::Hello(_))));
+    for (name, seq) in [
+        ("cmd_configure_default", 1),
+        ("cmd_set_motor_enabled", 2),
+        ("cmd_run_speed_negative", 3),
+    ] {
+        b.device.receive(&frame(name));
+        b.collect();
+        assert_eq!(
+            b.reply_to(seq),
+            Some(Report::Ack {
+                ack: seq,
+                code: AckCode::Ok
+            }),
+            "{name}"
+        );
+    }
+    b.run_until(b.now() + 200_000, 50_000);
+    assert!(b.device.position() < 0, "RunSpeed −180°/s turns backwards");
+    b.device.receive(&frame("cmd_emergency_stop"));
+    b.collect();
+    assert_eq!(
+        b.reply_to(0xFFFF),
+        Some(Report::Ack {
+            ack: 0xFFFF,
+            code: AckCode::Ok
+        })
+    );
+    assert!(b.device.estop_latched());
+    b.device.receive(&frame("cmd_move_to"));
+    b.collect();
+    assert_eq!(
+        b.reply_to(4),
+        Some(Report::Ack {
+            ack: 4,
+            code: AckCode::EStopLatched
+        })
+    );
+}
+
+/// Guards the session start: a Hello from a new host stops the stream and decelerates the
+/// motion left running by a previous session.
+#[test]
+fn hello_stops_what_a_previous_session_left_running() {
+    let mut b = Bench::new();
+    b.configure(config());
+    b.request(Command::SetMotorEnabled(true));
+    b.request(Command::StartStream);
+    b.request(Command::RunSpeed {
+        speed_mdeg_s: 360_000,
+    });
+    b.run_until(1_000_000, 100_000);
+    assert!(b.device.is_streaming() && b.device.is_moving());
+    b.request(Command::Hello {
+        protocol_version: PROTOCOL_VERSION,
+    });
+    assert!(!b.device.is_streaming());
+    b.run_until(2_000_000, 100_000);
+    assert!(!b.device.is_moving());
+    assert_eq!(b.events(EventKind::Stopped).len(), 1);
+    assert_eq!(b.device.position(), b.net_steps.get());
+}
