@@ -13,6 +13,7 @@ pub mod measure;
 pub mod motion;
 pub mod ports;
 pub mod sim_device;
+pub mod synth;
 
 /// Design, fabricate and bench-verify multi-point conjugation mechanisms.
 #[derive(Debug, Parser)]
@@ -38,6 +39,8 @@ pub enum Command {
     Motion(motion::MotionArgs),
     /// List serial ports with USB vendor/product/serial where known.
     Ports(ports::PortsArgs),
+    /// Synthesize conjugate curve pairs with dynamic form closure, or check a mechanism file.
+    Synth(synth::SynthArgs),
     /// Serve a simulated bench device on a pseudo-terminal (prints its path first).
     SimDevice(sim_device::SimDeviceArgs),
     /// Measure a mechanism on a bench (real or simulated) and record it.
@@ -71,6 +74,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Analyze(args) => analyze::run(args),
         Command::Motion(args) => motion::run(args),
         Command::Ports(args) => ports::run(args),
+        Command::Synth(args) => synth::run(args),
         Command::SimDevice(args) => sim_device::run(args),
         Command::Measure(args) => measure::run(args),
     }

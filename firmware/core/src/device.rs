@@ -220,6 +220,17 @@ impl<P: Platform> Device<P> {
         self.outbox.pop(out)
     }
 
+    /// Copy up to `out.len()` queued bytes without removing them (for a link that may time
+    /// out); call [`Device::consume_output`] with what was actually sent.
+    pub fn peek_output(&self, out: &mut [u8]) -> usize {
+        self.outbox.peek(out)
+    }
+
+    /// Drop the first `n` queued bytes after the link took them.
+    pub fn consume_output(&mut self, n: usize) {
+        self.outbox.consume(n);
+    }
+
     /// The earliest time at which [`Device::poll`] has work: next step, next sample or the
     /// watchdog deadline. A loop may sleep until then (or until bytes arrive).
     pub fn next_deadline_us(&self) -> Option<u64> {

@@ -63,14 +63,27 @@ impl Outbox {
         true
     }
 
-    /// Move up to `out.len()` queued bytes into `out`; returns how many.
-    pub fn pop(&mut self, out: &mut [u8]) -> usize {
+    /// Copy up to `out.len()` queued bytes into `out` without removing them; returns how
+    /// many. Pair with [`Outbox::consume`] once the link has taken them.
+    pub fn peek(&self, out: &mut [u8]) -> usize {
         let n = out.len().min(self.len);
         let first = n.min(OUTBOX_CAPACITY - self.head);
         out[..first].copy_from_slice(&self.buf[self.head..self.head + first]);
         out[first..n].copy_from_slice(&self.buf[..n - first]);
+        n
+    }
+
+    /// Remove the first `n` queued bytes (at most all of them).
+    pub fn consume(&mut self, n: usize) {
+        let n = n.min(self.len);
         self.head = (self.head + n) % OUTBOX_CAPACITY;
         self.len -= n;
+    }
+
+    /// Move up to `out.len()` queued bytes into `out`; returns how many.
+    pub fn pop(&mut self, out: &mut [u8]) -> usize {
+        let n = self.peek(out);
+        self.consume(n);
         n
     }
 }
@@ -100,5 +113,18 @@ mod tests {
         assert_eq!(&out[..10], &[7u8; 10]);
         assert_eq!(&out[10..35], &frame);
         assert!(o.is_empty());
+    }
+
+    /// Guards that peek does not remove and consume removes exactly what it is told.
+    #[test]
+    fn peek_then_consume() {
+        let mut o = Outbox::new();
+        assert!(o.push(&[1, 2, 3, 4]));
+        let mut out = [0u8; 3];
+        assert_eq!(o.peek(&mut out), 3);
+        assert_eq!(o.len(), 4);
+        o.consume(2);
+        assert_eq!(o.pop(&mut out), 2);
+        assert_eq!(&out[..2], &[3, 4]);
     }
 }

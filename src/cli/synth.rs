@@ -1,0 +1,225 @@
+//! `mpc-rig synth`: synthesize a mechanism from a motion, or check a mechanism file.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use anyhow::{bail, Context};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+
+use crate::motion::Motion;
+use crate::synth::mechanism::Attempt;
+use crate::synth::{self, Mechanism, SynthError, SynthOptions, SynthProgress};
+
+use super::ExitStatusError;
+
+/// Arguments of `mpc-rig synth`.
+#[derive(Debug, Args)]
+pub struct SynthArgs {
+    /// Motion file (.toml or .csv).
+    #[arg(required_unless_present = "check")]
+    pub motion: Option<PathBuf>,
+    /// Output directory (gets mechanism.json and report/).
+    #[arg(short, long, required_unless_present = "check")]
+    pub output: Option<PathBuf>,
+    /// Re-verify a mechanism.json (file or directory) from its samples alone.
+    #[arg(long, conflicts_with_all = ["motion", "output"])]
+    pub check: Option<PathBuf>,
+    /// Random seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Number of curve pairs K (default: search from the minimum dof + 1).
+    #[arg(long)]
+    pub k: Option<usize>,
+    /// Driver offset d_x in model units (default: search a grid).
+    #[arg(long)]
+    pub dx: Option<f64>,
+    /// Samples per period N.
+    #[arg(long, default_value_t = 360)]
+    pub samples: usize,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Candidates per band M (paper: 30).
+    #[arg(long, default_value_t = synth::search::CANDIDATES)]
+    pub candidates: usize,
+    /// GA generations (paper: 300).
+    #[arg(long, default_value_t = synth::ga::GENERATIONS)]
+    pub generations: usize,
+    /// Millimetres per model unit written into the file.
+    #[arg(long, default_value_t = synth::mechanism::DEFAULT_SCALE_MM)]
+    pub scale_mm: f64,
+}
+
+struct Bar {
+    bar: ProgressBar,
+}
+
+impl SynthProgress for Bar {
+    fn attempt_started(&self, k: usize, dx: f64, new_candidates: usize) {
+        self.bar.reset();
+        self.bar.set_length(new_candidates as u64);
+        self.bar.set_position(0);
+        self.bar
+            .set_message(format!("K = {k}, d_x = {dx}: candidates"));
+    }
+    fn candidate_done(&self) {
+        self.bar.inc(1);
+    }
+    fn generation(&self, g: usize, total: usize) {
+        if g == 1 {
+            self.bar.reset();
+            self.bar.set_length(total as u64);
+            self.bar.set_message("GA generations");
+        }
+        self.bar.set_position(g as u64);
+    }
+    fn attempt_finished(&self, a: &Attempt) {
+        let line = format!(
+            "  K = {}, d_x = {}: E_valiTime {:.3}, robust {:.3}, E_maxDist {:.3}, usable candidates {:?}{}",
+            a.k,
+            a.dx,
+            a.vali_time,
+            a.robust_vali_time,
+            a.max_dist.min(99.0),
+            a.valid_candidates,
+            if a.accepted { "  → accepted" } else { "" }
+        );
+        if self.bar.is_hidden() {
+            eprintln!("{line}");
+        } else {
+            self.bar.println(line);
+        }
+    }
+}
+
+fn summary(m: &Mechanism) -> String {
+    let over = m.closure.oversampled.as_ref();
+    format!(
+        "class  K  d_x    E_valiTime  E_maxDist  robust_vali  robust_max  vali@4x  residual°  time s\n\
+         {:<6} {:<2} {:<6} {:<11.4} {:<10.4} {:<12.4} {:<11.4} {:<8.4} {:<10.3} {:.1}",
+        m.class.label(),
+        m.curve_pairs.len(),
+        m.driver_offset,
+        m.closure.vali_time,
+        m.closure.max_dist.min(99.0),
+        m.closure.robust_vali_time,
+        m.closure.robust_max_dist.min(99.0),
+        over.map_or(f64::NAN, |o| o.vali_time),
+        m.closure.worst_residual_deg,
+        m.solve.seconds
+    )
+}
+
+fn write_partial(m: &Mechanism, dir: &Path) -> anyhow::Result<PathBuf> {
+    let path = dir.join("mechanism.partial.json");
+    m.save(&path)?;
+    Ok(path)
+}
+
+/// Run `mpc-rig synth`.
+pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
+    if let Some(file) = &args.check {
+        let m = Mechanism::load(file)?;
+        let report = m.check();
+        println!("{report}");
+        if report.passed() {
+            return Ok(ExitCode::SUCCESS);
+        }
+        return Err(ExitStatusError {
+            code: 2,
+            message: format!("{} fails the mechanism check", file.display()),
+        }
+        .into());
+    }
+    let (Some(motion_path), Some(out)) = (&args.motion, &args.output) else {
+        bail!("synth needs a MOTION file and -o DIR (or --check FILE)");
+    };
+    let motion = Motion::from_file(motion_path)
+        .with_context(|| format!("loading motion {}", motion_path.display()))?;
+    for w in motion.warnings() {
+        eprintln!("warning: {w}");
+    }
+    let cancel = Arc::new(AtomicBool::new(false));
+    {
+        let c = cancel.clone();
+        // A second handler cannot be installed (e.g. in tests calling run twice): then
+        // Ctrl-C simply ends the process as usual.
+        let _ = ctrlc::set_handler(move || c.store(true, Ordering::Relaxed));
+    }
+    let opts = SynthOptions {
+        seed: args.seed,
+        k: args.k,
+        dx: args.dx,
+        samples: args.samples,
+        threads: args.threads,
+        cancel: Some(cancel),
+        candidates: args.candidates,
+        generations: args.generations,
+        scale_mm: args.scale_mm,
+        ..SynthOptions::default()
+    };
+    let bar = ProgressBar::new(0);
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} {msg} [{bar:30}] {pos}/{len} {elapsed}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let progress = Bar { bar };
+    let result = synth::synthesize(&motion, &opts, &progress);
+    progress.bar.finish_and_clear();
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    match result {
+        Ok(m) => {
+            let file = out.join("mechanism.json");
+            m.save(&file)?;
+            // A partial file from an earlier failed or cancelled run would now be stale.
+            let stale = out.join("mechanism.partial.json");
+            if stale.exists() {
+                std::fs::remove_file(&stale)
+                    .with_context(|| format!("removing stale {}", stale.display()))?;
+            }
+            let plots = synth::report::write_report(&m, &out.join("report"))?;
+            println!("{}", summary(&m));
+            println!(
+                "wrote {} and {} report files in {}",
+                file.display(),
+                plots.len(),
+                out.join("report").display()
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+        Err(SynthError::Cancelled { partial }) => {
+            let msg = match partial {
+                Some(m) => {
+                    let p = write_partial(&m, out)?;
+                    println!("{}", summary(&m));
+                    format!("cancelled; best design so far written to {} (marked partial, not accepted)", p.display())
+                }
+                None => "cancelled before any design was found; nothing written".to_string(),
+            };
+            Err(ExitStatusError {
+                code: 130,
+                message: msg,
+            }
+            .into())
+        }
+        Err(SynthError::Infeasible { message, best }) => {
+            let mut msg = message;
+            if let Some(m) = best {
+                let p = write_partial(&m, out)?;
+                msg.push_str(&format!(
+                    "\nthe best (not accepted) design was written to {} for inspection",
+                    p.display()
+                ));
+            }
+            Err(ExitStatusError {
+                code: 3,
+                message: msg,
+            }
+            .into())
+        }
+        Err(e) => Err(e.into()),
+    }
+}

@@ -1,0 +1,436 @@
+//! Stage A: candidate curve pairs for one height band (paper §5.2.3, supplementary notes).
+//!
+//! Owns the initial guesses (circle-like curves with seeded variations of phase,
+//! eccentricity, waviness and height, and a start normal that is feasible for the class),
+//! one SLSQP solve per candidate, and the post-solve checks that decide whether a candidate
+//! may enter the combination: exact feasibility and a conjugation residual within
+//! [`MAX_RESIDUAL_DEG`] at [`OVERSAMPLE`]× the sample density. It does not combine
+//! candidates (see `ga`).
+//!
+//! **Initial guess.** For 1R and 1R1T we pick a contact path in frame R near the driver
+//! (azimuth ψ₀ ∈ ±50°, radius r₀ varying with waviness in radius and height) and pull it
+//! back into the follower frame, c² = R₂ᵀ(p − T₂): for a follower that turns, the contact
+//! then stays between the two axes as in a gear pair. For 3R the path is a circle-like
+//! curve directly in follower coordinates. Control points come from a linear least-squares
+//! fit to the path, radially rescaled so the length is mid-way between L₁ and L₂. The start
+//! normal is the circumferential direction ±ẑ×p̂ made perpendicular to T² (1R, 1R1T; the
+//! sign alternates between candidates so every band gets both torque directions) or
+//! n = T̂² × p̂ (3R: inside the 10° cone by construction; the exact conjugate normal
+//! T² × T¹ violates the cone and SLSQP diverged from it in a prototype).
+
+use std::f64::consts::TAU;
+
+use nalgebra::{DMatrix, DVector};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::bspline;
+use super::closure::{self, Class};
+use super::dual::V3;
+use super::energy::{PairProblem, LENGTH_BOUNDS};
+use super::model::{self, ANGLE_CPS, CURVE_CPS, NV};
+use super::optimizer::{Minimizer, SolveStatus};
+
+/// Largest accepted conjugation residual, degrees. Default 1° (conventions: acceptance).
+pub const MAX_RESIDUAL_DEG: f64 = 1.0;
+/// Oversampling factor of the residual and closure checks. Default 4 (conventions).
+pub const OVERSAMPLE: usize = 4;
+/// Constraint violation tolerated in the feasibility check, in the constraints' own units
+/// (relative length, model units, squared sines). Default 1e-6.
+pub const FEAS_TOL: f64 = 1e-6;
+
+/// A solved candidate with what the combination needs.
+#[derive(Clone, Debug)]
+pub struct Candidate {
+    /// Band index k.
+    pub band: usize,
+    /// Candidate index within the band.
+    pub index: usize,
+    /// Design vector.
+    pub x: Vec<f64>,
+    /// Objective value.
+    pub f: f64,
+    /// Solver status.
+    pub status: SolveStatus,
+    /// Passed feasibility and residual checks.
+    pub valid: bool,
+    /// Why it is not valid.
+    pub reason: Option<String>,
+    /// Worst conjugation residual at OVERSAMPLE× density, degrees.
+    pub residual_deg: f64,
+    /// Per sample: ñ (zero-padded) or None when it vanishes.
+    pub ntilde: Vec<Option<[f64; 3]>>,
+    /// Per sample: whether the contact counts for the robust closure.
+    pub robust: Vec<bool>,
+    /// Objective evaluations used.
+    pub evals: usize,
+}
+
+/// Signed normalized ẑ×p̂ circumferential direction made perpendicular to t.
+fn circumferential_normal(p: [f64; 3], t: [f64; 3], sign: f64) -> [f64; 3] {
+    let c = [-p[1], p[0], 0.0];
+    let tl = (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt().max(1e-12);
+    let th = [t[0] / tl, t[1] / tl, t[2] / tl];
+    let d = c[0] * th[0] + c[1] * th[1] + c[2] * th[2];
+    let mut n = [c[0] - d * th[0], c[1] - d * th[1], c[2] - d * th[2]];
+    let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+    if l < 1e-9 {
+        // Fall back to t × p.
+        n = [
+            th[1] * p[2] - th[2] * p[1],
+            th[2] * p[0] - th[0] * p[2],
+            th[0] * p[1] - th[1] * p[0],
+        ];
+        let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt().max(1e-12);
+        return [sign * n[0] / l, sign * n[1] / l, sign * n[2] / l];
+    }
+    [sign * n[0] / l, sign * n[1] / l, sign * n[2] / l]
+}
+
+/// Least-squares fit of closed-spline control points to samples at tᵢ = i/N (per column).
+fn fit_spline(n_cps: usize, values: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    let n = values.len();
+    let dim = values[0].len();
+    let mut a = DMatrix::<f64>::zeros(n, n_cps);
+    for i in 0..n {
+        let b = bspline::basis(n_cps, i as f64 / n as f64);
+        for r in 0..4 {
+            a[(i, b.idx[r])] += b.w0[r];
+        }
+    }
+    let ata = a.transpose() * &a;
+    let chol = ata
+        .cholesky()
+        .expect("uniform B-spline normal matrix is SPD for N ≥ n");
+    let mut out = vec![vec![0.0; dim]; n_cps];
+    for d in 0..dim {
+        let y = DVector::from_iterator(n, values.iter().map(|v| v[d]));
+        let s = chol.solve(&(a.transpose() * y));
+        for j in 0..n_cps {
+            out[j][d] = s[j];
+        }
+    }
+    out
+}
+
+/// Length of the follower curve of a design (mean speed over N samples).
+fn curve_length(x: &[f64], n: usize) -> f64 {
+    let cps = model::curve_cps(x);
+    (0..n)
+        .map(|i| {
+            let d = bspline::eval_point(&cps, i as f64 / n as f64)[1];
+            (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
+        })
+        .sum::<f64>()
+        / n as f64
+}
+
+/// Build the initial design of candidate `index` in band `band`.
+pub fn initial_guess(pb: &PairProblem, seed: u64, band: usize, index: usize) -> Vec<f64> {
+    let mut rng = ChaCha8Rng::seed_from_u64(
+        seed ^ (band as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            ^ (index as u64 + 1).wrapping_mul(0xD1B5_4A32_D192_ED03),
+    );
+    let poses = &pb.poses.samples;
+    let n = poses.len();
+    let (zlo, zhi) = pb.band;
+    let zc = 0.5 * (zlo + zhi);
+    let zh = 0.5 * (zhi - zlo);
+    let psi0 =
+        rng.random_range(15f64..55.0).to_radians() * if rng.random_bool(0.5) { 1.0 } else { -1.0 };
+    // Tube winding: the contact circles a torus-like tube m times per period, so (ṙ, ż)
+    // never vanish together and a normal with a steady circumferential part exists.
+    let m_wind = rng.random_range(2..=3) as f64;
+    let tube_r = rng.random_range(0.15..0.45);
+    let tube_z = rng.random_range(0.5..0.9) * zh;
+    let wind_dir = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
+    let ph1 = rng.random_range(0.0..TAU);
+    let ecc = rng.random_range(0.0..0.15);
+    let wob = rng.random_range(0.0..0.25);
+    let sign = if index % 2 == 0 { 1.0 } else { -1.0 };
+    let path = |scale: f64| -> Vec<Vec<f64>> {
+        (0..n)
+            .map(|i| {
+                let t = i as f64 / n as f64;
+                let pose = &poses[i];
+                let w = m_wind * TAU * t + ph1;
+                let r = scale * (1.0 + ecc * (TAU * t + ph1).cos()) + tube_r * scale * w.cos();
+                let z = zc + wind_dir * tube_z * w.sin();
+                match pb.class {
+                    Class::R3 => {
+                        let a = TAU * t + psi0;
+                        let rr = r * (1.0 + wob * (3.0 * TAU * t).sin());
+                        vec![rr * a.cos(), rr * a.sin(), z]
+                    }
+                    _ => {
+                        let a = psi0 + wob * (TAU * t + ph1).cos();
+                        let p = [r * a.cos(), r * a.sin(), 0.0];
+                        // c² = R₂ᵀ p (rotation about z only for these classes), local z = z.
+                        let q = V3::<f64>::cst(p).rot_t(&pose.rot);
+                        vec![q.x, q.y, z]
+                    }
+                }
+            })
+            .collect()
+    };
+    let target_len = 0.5 * (LENGTH_BOUNDS[0] + LENGTH_BOUNDS[1]);
+    let mut scale = 2.0;
+    let mut x = vec![0.0; NV];
+    for _ in 0..4 {
+        let cps = fit_spline(CURVE_CPS, &path(scale));
+        for (j, c) in cps.iter().enumerate() {
+            x[3 * j] = c[0];
+            x[3 * j + 1] = c[1];
+            x[3 * j + 2] = c[2].clamp(zlo, zhi);
+        }
+        let len = curve_length(&x, n);
+        if len > 1e-9 {
+            scale *= (target_len / len).clamp(0.3, 3.0);
+        }
+    }
+    // Start normals: for 1R/1R1T the exact conjugate normal ±T² × T¹ (continuous sign,
+    // overall sign chosen so that the mean torque has the candidate's sign); where T¹ ∥ T²
+    // the previous normal is kept (projected). For 3R, T̂² × p̂ (inside the cone).
+    let contacts: Vec<_> = poses
+        .iter()
+        .map(|pose| model::contact_f64(&x, pose, pb.dx))
+        .collect();
+    let wants: Vec<[f64; 3]> = match pb.class {
+        Class::R3 => contacts
+            .iter()
+            .map(|c| {
+                let v = c.t2.unit().cross(c.p.unit());
+                let l = v.norm().max(1e-12);
+                v.scalec(sign / l).vals()
+            })
+            .collect(),
+        _ => {
+            let mut out: Vec<V3<f64>> = Vec::with_capacity(n);
+            let mut prev: Option<V3<f64>> = None;
+            for c in &contacts {
+                let t2 = c.t2.unit();
+                let cr = t2.cross(c.t1.unit());
+                let mut v = if cr.norm() > 0.05 {
+                    cr.unit()
+                } else if let Some(pv) = prev {
+                    (pv - t2.scale(pv.dot(t2))).unit()
+                } else {
+                    V3::cst(circumferential_normal(c.p.vals(), c.t2.vals(), 1.0))
+                };
+                if let Some(pv) = prev {
+                    if v.dot(pv) < 0.0 {
+                        v = -v;
+                    }
+                }
+                prev = Some(v);
+                out.push(v);
+            }
+            let torque: f64 = out
+                .iter()
+                .zip(&contacts)
+                .map(|(v, c)| c.p.cross(*v).z)
+                .sum();
+            let flip = if torque * sign < 0.0 { -1.0 } else { 1.0 };
+            out.iter().map(|v| v.scalec(flip).vals()).collect()
+        }
+    };
+    let mut thetas = Vec::with_capacity(n);
+    let mut prev: Option<f64> = None;
+    for ((pose, c), want) in poses.iter().zip(&contacts).zip(&wants) {
+        let want = *want;
+        // Express in the local frame: θ = atan2(n·B, n·N) with N, B rotated into R.
+        let th0 = model::contact_f64(
+            &{
+                let mut y = x.clone();
+                for v in y[3 * CURVE_CPS..].iter_mut() {
+                    *v = 0.0;
+                }
+                y
+            },
+            pose,
+            pb.dx,
+        );
+        let nn = th0.n.vals(); // θ = 0 → N
+        let tt = c.t2.unit().vals();
+        let bb = [
+            tt[1] * nn[2] - tt[2] * nn[1],
+            tt[2] * nn[0] - tt[0] * nn[2],
+            tt[0] * nn[1] - tt[1] * nn[0],
+        ];
+        let dn = want[0] * nn[0] + want[1] * nn[1] + want[2] * nn[2];
+        let db = want[0] * bb[0] + want[1] * bb[1] + want[2] * bb[2];
+        let mut a = db.atan2(dn);
+        if let Some(pv) = prev {
+            while a - pv > std::f64::consts::PI {
+                a -= TAU;
+            }
+            while a - pv < -std::f64::consts::PI {
+                a += TAU;
+            }
+        }
+        prev = Some(a);
+        thetas.push(vec![a]);
+    }
+    // A closed spline cannot follow a net 2π winding; remove the linear drift if any.
+    let drift = {
+        let first = thetas[0][0];
+        let last = thetas[n - 1][0];
+        ((last - first) / TAU).round() * TAU
+    };
+    if drift != 0.0 {
+        for (i, v) in thetas.iter_mut().enumerate() {
+            v[0] -= drift * i as f64 / n as f64;
+        }
+    }
+    let th = fit_spline(ANGLE_CPS, &thetas);
+    for j in 0..ANGLE_CPS {
+        x[3 * CURVE_CPS + j] = th[j][0].clamp(-super::energy::THETA_BOX, super::energy::THETA_BOX);
+    }
+    x
+}
+
+/// Worst conjugation residual (degrees) at `over`× the sample density.
+pub fn worst_residual(pb: &PairProblem, x: &[f64], over: usize) -> f64 {
+    let m = pb.poses.len() * over;
+    (0..m)
+        .map(|i| {
+            let t = i as f64 / m as f64;
+            let pose = (pb.poses.at)(t);
+            let c = model::contact_f64(x, &pose, pb.dx);
+            model::conjugation_residual_deg(c.n.vals(), c.t1.vals(), c.t2.vals())
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Solve one candidate and run the checks.
+pub fn solve(
+    pb: &PairProblem,
+    minimizer: &dyn Minimizer,
+    seed: u64,
+    band: usize,
+    index: usize,
+    max_eval: usize,
+) -> Candidate {
+    let x0 = initial_guess(pb, seed, band, index);
+    let res = minimizer.minimize(pb, &x0, max_eval);
+    let x = res.x;
+    let mut reason = None;
+    let finite = x.iter().all(|v| v.is_finite()) && res.f.is_finite();
+    let (mut ntilde, mut robust, mut residual) = (Vec::new(), Vec::new(), f64::INFINITY);
+    if !finite {
+        reason = Some("optimizer returned NaN".to_string());
+    } else {
+        let ev = pb.evaluate(&x);
+        if !pb.feasible(&x, &ev, FEAS_TOL) {
+            let worst = ev
+                .cons_exact
+                .iter()
+                .enumerate()
+                .max_by(|a, b| a.1.total_cmp(b.1))
+                .map(|(i, v)| format!("{} violated by {v:.3e}", super::energy::CONSTRAINT_NAMES[i]))
+                .unwrap_or_default();
+            reason = Some(format!("infeasible ({:?}): {worst}", res.status));
+        }
+        residual = worst_residual(pb, &x, OVERSAMPLE);
+        if reason.is_none() && residual > MAX_RESIDUAL_DEG {
+            reason = Some(format!(
+                "conjugation residual {residual:.2}° > {MAX_RESIDUAL_DEG}°"
+            ));
+        }
+        for pose in &pb.poses.samples {
+            let c = model::contact_f64(&x, pose, pb.dx);
+            let (p, n) = (c.p.vals(), c.n.vals());
+            ntilde.push(closure::project(pb.class, p, n));
+            robust.push(closure::is_robust(pb.class, p, n));
+        }
+    }
+    Candidate {
+        band,
+        index,
+        f: res.f,
+        valid: reason.is_none(),
+        reason,
+        residual_deg: residual,
+        status: res.status,
+        x,
+        ntilde,
+        robust,
+        evals: res.evals,
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use crate::synth::energy::{W_CLOSURE, W_ROBUST};
+    use crate::synth::optimizer::SlsqpRs;
+    use crate::synth::pose::{pose_1r, PoseFn, PoseTrack};
+    use std::sync::Arc;
+
+    /// A 1R motion like the paper's Fig. 11: one turn per period, non-uniform speed.
+    pub(crate) fn half_turn_like(n: usize) -> Arc<PoseTrack> {
+        let at: PoseFn = Arc::new(|t: f64| {
+            let a = 0.5;
+            let w = TAU * t;
+            pose_1r(t, w - a * w.sin(), TAU * (1.0 - a * w.cos()))
+        });
+        Arc::new(PoseTrack::from_fn(n, at))
+    }
+
+    pub(crate) fn problem_1r(n: usize) -> PairProblem {
+        PairProblem {
+            class: Class::R1,
+            poses: half_turn_like(n),
+            dx: 6.0,
+            band: (-0.5, 0.5),
+            vary: None,
+            w_closure: W_CLOSURE,
+            w_robust: std::env::var("WROB")
+                .ok()
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(W_ROBUST),
+        }
+    }
+
+    /// Exploration aid (ignored): solve a few 1R candidates and print what happened.
+    #[test]
+    #[ignore]
+    fn explore_candidates_1r() {
+        let w: f64 = std::env::var("WCL")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(W_CLOSURE);
+        let mut pb = problem_1r(360);
+        pb.w_closure = w;
+        let mut tot = 0;
+        for i in 0..12 {
+            let t0 = std::time::Instant::now();
+            let x0 = initial_guess(&pb, 1, 0, i);
+            let e0 = pb.evaluate(&x0);
+            eprintln!(
+                "start cons {:?}",
+                e0.cons_exact
+                    .iter()
+                    .map(|v| format!("{v:.3}"))
+                    .collect::<Vec<_>>()
+            );
+            let c = solve(&pb, &SlsqpRs, 1, 0, i, 400);
+            let nrob = c.robust.iter().filter(|r| **r).count();
+            let pos = c
+                .ntilde
+                .iter()
+                .zip(&c.robust)
+                .filter(|(v, r)| **r && v.is_some_and(|v| v[0] > 0.0))
+                .count();
+            eprintln!(
+                "cand {i}: f={:.2} status={:?} evals={} valid={} reason={:?} res={:.3}° robust={} pos={} {:.2}s",
+                c.f, c.status, c.evals, c.valid, c.reason, c.residual_deg, nrob, pos,
+                t0.elapsed().as_secs_f64()
+            );
+            if c.valid {
+                tot += nrob;
+            }
+        }
+        eprintln!("total robust samples over valid candidates: {tot}");
+    }
+}

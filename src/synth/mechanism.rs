@@ -1,0 +1,592 @@
+//! The `mechanism.json` file (format `mpcmech-mechanism/1`) and its independent check.
+//!
+//! Owns the serde model of the file exactly as fixed in `docs/conventions.md` (plus our
+//! extra fields: robust distances, oversampled closure, per-pair residuals, solve details),
+//! loading with file/line/field errors, saving, and [`Mechanism::check`], which re-verifies
+//! a file **from its sampled arrays alone** (it never re-evaluates the splines): coincident
+//! points, opposite normals, conjugation residual, band separation, the closure figures and
+//! (3R) the normal cone. It does not synthesize.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use super::closure::{self, Class, EPSILON, GAMMA0_DEG};
+use super::error::SynthError;
+
+/// The format tag.
+pub const FORMAT: &str = "mpcmech-mechanism/1";
+/// Default millimetres per model unit. Default 10: a follower curve of length 4π–6π units
+/// becomes a part about 50–60 mm across, printable on any desktop printer and large enough
+/// for 0.4 mm nozzles to render the contact curves.
+pub const DEFAULT_SCALE_MM: f64 = 10.0;
+/// Tolerance of the coincidence and normal checks, model units / unit-vector components.
+/// Default 1e-6: the file stores full double precision, so anything above is a real error.
+pub const CHECK_TOL: f64 = 1e-6;
+/// Tolerance when comparing the stored dist(t) with the recomputed one. Default 1e-9.
+pub const DIST_TOL: f64 = 1e-9;
+
+/// Follower pose at one sample.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FollowerPose {
+    /// tᵢ.
+    pub t: f64,
+    /// Unit quaternion, scalar first.
+    pub rotation: [f64; 4],
+    /// Translation.
+    pub translation: [f64; 3],
+}
+
+/// Where the motion came from.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MotionInfo {
+    /// Motion file name.
+    pub source: String,
+    /// Motion name.
+    #[serde(default)]
+    pub name: String,
+}
+
+/// A closed cubic B-spline curve in follower coordinates.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SplineCurve {
+    /// Always 3.
+    pub degree: usize,
+    /// Always true.
+    pub closed: bool,
+    /// Control points (knot convention in `bspline`).
+    pub control_points: Vec<[f64; 3]>,
+}
+
+/// A closed cubic B-spline of angles.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SplineAngle {
+    /// Always 3.
+    pub degree: usize,
+    /// Always true.
+    pub closed: bool,
+    /// Control values, radians.
+    pub control_points: Vec<f64>,
+}
+
+/// Sampled contact data of one pair (index i ↔ tᵢ).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PairSamples {
+    /// Contact point in R.
+    pub p: Vec<[f64; 3]>,
+    /// Contact normal in R (driver → follower).
+    pub n: Vec<[f64; 3]>,
+    /// Driver-local point.
+    pub c1: Vec<[f64; 3]>,
+    /// Driver outward normal, driver-local.
+    pub n1: Vec<[f64; 3]>,
+    /// Follower-local point.
+    pub c2: Vec<[f64; 3]>,
+    /// Follower outward normal, follower-local.
+    pub n2: Vec<[f64; 3]>,
+}
+
+/// One conjugate curve pair.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CurvePair {
+    /// Height band [z_min, z_max] of c².
+    pub slab: [f64; 2],
+    /// c².
+    pub follower_curve: SplineCurve,
+    /// θ.
+    pub normal_angle: SplineAngle,
+    /// Samples.
+    pub samples: PairSamples,
+    /// Worst conjugation residual of this pair at 4× density, degrees (ours).
+    #[serde(default)]
+    pub residual_deg: f64,
+}
+
+/// Closure figures at a denser sampling (ours).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct OversampledClosure {
+    /// Oversampling factor.
+    pub factor: usize,
+    /// E_valiTime at that density.
+    pub vali_time: f64,
+    /// E_maxDist at that density.
+    pub max_dist: f64,
+    /// Robust E_valiTime at that density.
+    pub robust_vali_time: f64,
+    /// Robust E_maxDist at that density.
+    pub robust_max_dist: f64,
+}
+
+/// The closure block.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ClosureBlock {
+    /// ε.
+    pub epsilon: f64,
+    /// dist(tᵢ).
+    pub dist: Vec<f64>,
+    /// E_valiTime.
+    pub vali_time: f64,
+    /// E_maxDist.
+    pub max_dist: f64,
+    /// Robust E_valiTime.
+    pub robust_vali_time: f64,
+    /// Robust E_maxDist.
+    pub robust_max_dist: f64,
+    /// Robust dist(tᵢ) (ours).
+    #[serde(default)]
+    pub robust_dist: Vec<f64>,
+    /// Closure at 4× density (ours).
+    #[serde(default)]
+    pub oversampled: Option<OversampledClosure>,
+    /// Worst conjugation residual over all pairs at 4× density, degrees (ours).
+    #[serde(default)]
+    pub worst_residual_deg: f64,
+}
+
+/// One (K, d_x) attempt of the search.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Attempt {
+    /// K.
+    pub k: usize,
+    /// d_x.
+    pub dx: f64,
+    /// Usable candidates per band.
+    pub valid_candidates: Vec<usize>,
+    /// Best E_valiTime.
+    pub vali_time: f64,
+    /// Best robust E_valiTime.
+    pub robust_vali_time: f64,
+    /// Best E_maxDist.
+    pub max_dist: f64,
+    /// Accepted.
+    pub accepted: bool,
+}
+
+/// How the mechanism was found.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SolveInfo {
+    /// Seed.
+    pub seed: u64,
+    /// Wall-clock seconds.
+    pub seconds: f64,
+    /// K values tried.
+    pub k_tried: Vec<usize>,
+    /// d_x values tried.
+    pub dx_tried: Vec<f64>,
+    /// SLSQP backend.
+    #[serde(default)]
+    pub backend: String,
+    /// Worker threads.
+    #[serde(default)]
+    pub threads: usize,
+    /// Candidates per band (M).
+    #[serde(default)]
+    pub candidates_per_band: usize,
+    /// GA generations limit.
+    #[serde(default)]
+    pub generations: usize,
+    /// Every attempt.
+    #[serde(default)]
+    pub attempts: Vec<Attempt>,
+    /// Meets the paper's criteria and robust closure at every sample.
+    #[serde(default)]
+    pub accepted: bool,
+    /// Written after Ctrl-C or failure: best so far, not accepted.
+    #[serde(default)]
+    pub partial: bool,
+}
+
+/// A mechanism: the content of `mechanism.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Mechanism {
+    /// Always [`FORMAT`].
+    pub format: String,
+    /// Class.
+    pub class: Class,
+    /// d_x.
+    pub driver_offset: f64,
+    /// N.
+    pub samples: usize,
+    /// Millimetres per model unit.
+    pub scale_mm: f64,
+    /// [L₁, L₂].
+    pub length_bounds: [f64; 2],
+    /// Motion source.
+    pub motion: MotionInfo,
+    /// M²(tᵢ).
+    pub follower_motion: Vec<FollowerPose>,
+    /// K pairs.
+    pub curve_pairs: Vec<CurvePair>,
+    /// Closure.
+    pub closure: ClosureBlock,
+    /// Solve details.
+    pub solve: SolveInfo,
+}
+
+/// One line of a check report.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CheckItem {
+    /// What was checked.
+    pub name: String,
+    /// Passed.
+    pub passed: bool,
+    /// Measured figure and limit.
+    pub detail: String,
+}
+
+/// Result of [`Mechanism::check`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CheckReport {
+    /// Items in order.
+    pub items: Vec<CheckItem>,
+}
+
+impl CheckReport {
+    /// All items passed.
+    pub fn passed(&self) -> bool {
+        !self.items.is_empty() && self.items.iter().all(|i| i.passed)
+    }
+    fn add(&mut self, name: &str, passed: bool, detail: String) {
+        self.items.push(CheckItem {
+            name: name.to_string(),
+            passed,
+            detail,
+        });
+    }
+}
+
+impl std::fmt::Display for CheckReport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        for i in &self.items {
+            writeln!(
+                f,
+                "{} {:<28} {}",
+                if i.passed { "ok  " } else { "FAIL" },
+                i.name,
+                i.detail
+            )?;
+        }
+        write!(
+            f,
+            "{}",
+            if self.passed() {
+                "mechanism passes every check"
+            } else {
+                "mechanism FAILS"
+            }
+        )
+    }
+}
+
+fn qrot(q: [f64; 4], v: [f64; 3]) -> [f64; 3] {
+    let [w, x, y, z] = q;
+    let uq = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
+    let r = uq * nalgebra::Vector3::new(v[0], v[1], v[2]);
+    [r.x, r.y, r.z]
+}
+fn rzv(a: f64, v: [f64; 3]) -> [f64; 3] {
+    let (s, c) = a.sin_cos();
+    [c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]]
+}
+fn dist3(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+impl Mechanism {
+    /// Write as pretty JSON.
+    pub fn save(&self, path: &Path) -> Result<(), SynthError> {
+        let io = |source| SynthError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
+        if let Some(dir) = path.parent() {
+            if !dir.as_os_str().is_empty() {
+                std::fs::create_dir_all(dir).map_err(io)?;
+            }
+        }
+        let text = serde_json::to_string_pretty(self).map_err(|e| SynthError::Invalid {
+            path: path.to_path_buf(),
+            field: "(whole file)".into(),
+            message: e.to_string(),
+        })?;
+        std::fs::write(path, text).map_err(io)
+    }
+
+    /// Read a mechanism from a file or from a directory holding `mechanism.json`.
+    pub fn load(path: &Path) -> Result<Mechanism, SynthError> {
+        let file: PathBuf = if path.is_dir() {
+            path.join("mechanism.json")
+        } else {
+            path.to_path_buf()
+        };
+        let text = std::fs::read_to_string(&file).map_err(|source| SynthError::Io {
+            path: file.clone(),
+            source,
+        })?;
+        let m: Mechanism = serde_json::from_str(&text).map_err(|e| SynthError::Parse {
+            path: file.clone(),
+            line: e.line(),
+            column: e.column(),
+            message: e.to_string(),
+        })?;
+        m.validate(&file)?;
+        Ok(m)
+    }
+
+    /// Structural validation: format tag, array lengths, finite numbers.
+    pub fn validate(&self, file: &Path) -> Result<(), SynthError> {
+        let bad = |field: String, message: String| SynthError::Invalid {
+            path: file.to_path_buf(),
+            field,
+            message,
+        };
+        if self.format != FORMAT {
+            return Err(bad(
+                "format".into(),
+                format!("expected {FORMAT:?}, found {:?}", self.format),
+            ));
+        }
+        let n = self.samples;
+        if n < 8 {
+            return Err(bad(
+                "samples".into(),
+                format!("{n} samples is too few (≥ 8)"),
+            ));
+        }
+        if self.follower_motion.len() != n {
+            return Err(bad(
+                "follower_motion".into(),
+                format!(
+                    "{} entries, expected samples = {n}",
+                    self.follower_motion.len()
+                ),
+            ));
+        }
+        if self.curve_pairs.is_empty() {
+            return Err(bad("curve_pairs".into(), "no curve pairs".into()));
+        }
+        if !(self.driver_offset.is_finite() && self.driver_offset > 0.0) {
+            return Err(bad(
+                "driver_offset".into(),
+                format!("must be a positive number, found {}", self.driver_offset),
+            ));
+        }
+        for (k, cp) in self.curve_pairs.iter().enumerate() {
+            let s = &cp.samples;
+            for (name, arr) in [
+                ("p", &s.p),
+                ("n", &s.n),
+                ("c1", &s.c1),
+                ("n1", &s.n1),
+                ("c2", &s.c2),
+                ("n2", &s.n2),
+            ] {
+                if arr.len() != n {
+                    return Err(bad(
+                        format!("curve_pairs[{k}].samples.{name}"),
+                        format!("{} entries, expected samples = {n}", arr.len()),
+                    ));
+                }
+                if let Some(i) = arr.iter().position(|v| v.iter().any(|x| !x.is_finite())) {
+                    return Err(bad(
+                        format!("curve_pairs[{k}].samples.{name}[{i}]"),
+                        "not a finite number".into(),
+                    ));
+                }
+            }
+            if cp.slab[0].partial_cmp(&cp.slab[1]) != Some(std::cmp::Ordering::Less) {
+                return Err(bad(
+                    format!("curve_pairs[{k}].slab"),
+                    format!("z_min {} must be below z_max {}", cp.slab[0], cp.slab[1]),
+                ));
+            }
+        }
+        if self.closure.dist.len() != n {
+            return Err(bad(
+                "closure.dist".into(),
+                format!(
+                    "{} entries, expected samples = {n}",
+                    self.closure.dist.len()
+                ),
+            ));
+        }
+        for (i, fm) in self.follower_motion.iter().enumerate() {
+            let q = fm.rotation;
+            let l = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
+            if (l - 1.0).abs().partial_cmp(&1e-6) != Some(std::cmp::Ordering::Less) {
+                return Err(bad(
+                    format!("follower_motion[{i}].rotation"),
+                    format!("quaternion norm {l} is not 1"),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Re-verify from the sampled arrays alone (the `synth --check` verification).
+    pub fn check(&self) -> CheckReport {
+        let mut r = CheckReport::default();
+        let n = self.samples;
+        let dt = 1.0 / n as f64;
+        let d = [self.driver_offset, 0.0, 0.0];
+        let tau = std::f64::consts::TAU;
+        // Coincident points and opposite normals.
+        let (mut e2, mut e1, mut en2, mut en1, mut eu) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0.0f64);
+        for cp in &self.curve_pairs {
+            let s = &cp.samples;
+            for i in 0..n {
+                let fm = &self.follower_motion[i];
+                let phi = tau * i as f64 * dt;
+                let q = fm.rotation;
+                let p2 = qrot(q, s.c2[i]);
+                let p2 = [
+                    p2[0] + fm.translation[0],
+                    p2[1] + fm.translation[1],
+                    p2[2] + fm.translation[2],
+                ];
+                e2 = e2.max(dist3(p2, s.p[i]));
+                let p1 = rzv(phi, s.c1[i]);
+                e1 = e1.max(dist3([p1[0] + d[0], p1[1], p1[2]], s.p[i]));
+                let m2 = qrot(q, s.n2[i]);
+                en2 = en2.max(dist3(m2, [-s.n[i][0], -s.n[i][1], -s.n[i][2]]));
+                en1 = en1.max(dist3(rzv(phi, s.n1[i]), s.n[i]));
+                eu = eu.max((dist3(s.n[i], [0.0; 3]) - 1.0).abs());
+            }
+        }
+        r.add(
+            "coincident points",
+            e1.max(e2) <= CHECK_TOL,
+            format!("max |R2·c2+T2−p| = {e2:.2e}, |Rz·c1+D−p| = {e1:.2e} (≤ {CHECK_TOL:e})"),
+        );
+        r.add(
+            "opposite normals",
+            en1.max(en2).max(eu) <= CHECK_TOL,
+            format!("max |R2·n2+n| = {en2:.2e}, |Rz·n1−n| = {en1:.2e}, ||n|−1| = {eu:.2e}"),
+        );
+        // Conjugation residual from 4th-order central differences of c1, c2.
+        let mut worst = 0.0f64;
+        let mut worst_at = (0, 0);
+        for (k, cp) in self.curve_pairs.iter().enumerate() {
+            let s = &cp.samples;
+            let der = |arr: &[[f64; 3]], i: usize| -> [f64; 3] {
+                let g = |o: isize| arr[((i as isize + o).rem_euclid(n as isize)) as usize];
+                let (a, b, c, e) = (g(-2), g(-1), g(1), g(2));
+                let mut out = [0.0; 3];
+                for x in 0..3 {
+                    out[x] = (a[x] - 8.0 * b[x] + 8.0 * c[x] - e[x]) / (12.0 * dt);
+                }
+                out
+            };
+            for i in 0..n {
+                let fm = &self.follower_motion[i];
+                let t2 = qrot(fm.rotation, der(&s.c2, i));
+                let t1 = rzv(tau * i as f64 * dt, der(&s.c1, i));
+                let res = super::model::conjugation_residual_deg(s.n[i], t1, t2);
+                if res > worst {
+                    worst = res;
+                    worst_at = (k, i);
+                }
+            }
+        }
+        let lim = super::candidate::MAX_RESIDUAL_DEG;
+        r.add(
+            "conjugation residual",
+            worst <= lim,
+            format!(
+                "worst {worst:.3}° (pair {}, t = {:.4}) ≤ {lim}°",
+                worst_at.0,
+                worst_at.1 as f64 * dt
+            ),
+        );
+        // Bands.
+        let mut band_ok = true;
+        let mut band_detail = String::from("every c2.z inside its slab; slabs disjoint");
+        for (k, cp) in self.curve_pairs.iter().enumerate() {
+            if let Some(i) = cp
+                .samples
+                .c2
+                .iter()
+                .position(|c| c[2] < cp.slab[0] - 1e-9 || c[2] > cp.slab[1] + 1e-9)
+            {
+                band_ok = false;
+                band_detail = format!(
+                    "pair {k}: c2.z = {:.4} at sample {i} outside slab [{}, {}]",
+                    cp.samples.c2[i][2], cp.slab[0], cp.slab[1]
+                );
+            }
+            for (j, other) in self.curve_pairs.iter().enumerate().skip(k + 1) {
+                if cp.slab[0] < other.slab[1] && other.slab[0] < cp.slab[1] {
+                    band_ok = false;
+                    band_detail = format!("slabs of pairs {k} and {j} overlap");
+                }
+            }
+        }
+        r.add("band separation", band_ok, band_detail);
+        // Closure recomputed from p, n.
+        let class = self.class;
+        let mut dist = Vec::with_capacity(n);
+        let mut rdist = Vec::with_capacity(n);
+        for i in 0..n {
+            let contacts: Vec<_> = self
+                .curve_pairs
+                .iter()
+                .map(|cp| (cp.samples.p[i], cp.samples.n[i]))
+                .collect();
+            let (a, b) = closure::dist_at(class, &contacts);
+            dist.push(a);
+            rdist.push(b);
+        }
+        let mismatch = dist
+            .iter()
+            .zip(&self.closure.dist)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        let s = closure::ClosureSummary::from_dists(dist, rdist);
+        r.add(
+            "stored dist(t) reproduced",
+            mismatch <= DIST_TOL
+                && (s.vali_time - self.closure.vali_time).abs() <= 1e-12
+                && (s.max_dist - self.closure.max_dist).abs() <= DIST_TOL,
+            format!("max |Δdist| = {mismatch:.2e}"),
+        );
+        let worst_t = s
+            .dist
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(i, _)| i as f64 * dt)
+            .unwrap_or(0.0);
+        r.add(
+            "dynamic form closure",
+            s.vali_time >= 1.0 && s.max_dist <= -EPSILON,
+            format!(
+                "E_valiTime = {:.4}, E_maxDist = {:.4} (worst at t = {worst_t:.4}; need 1 and ≤ −{EPSILON})",
+                s.vali_time, s.max_dist
+            ),
+        );
+        r.add(
+            "robust closure",
+            s.robust_vali_time >= 1.0 && s.robust_max_dist <= -EPSILON,
+            format!(
+                "robust E_valiTime = {:.4}, robust E_maxDist = {:.4}",
+                s.robust_vali_time, s.robust_max_dist
+            ),
+        );
+        if class == Class::R3 {
+            let sg = GAMMA0_DEG.to_radians().sin();
+            let mut w = 0.0f64;
+            for cp in &self.curve_pairs {
+                for (p, nn) in cp.samples.p.iter().zip(&cp.samples.n) {
+                    let l = dist3(*p, [0.0; 3]).max(1e-300);
+                    w = w.max(((p[0] * nn[0] + p[1] * nn[1] + p[2] * nn[2]) / l).abs());
+                }
+            }
+            r.add(
+                "3R normal cone",
+                w <= sg + CHECK_TOL,
+                format!("max |n·p̂| = {w:.4} ≤ sin {GAMMA0_DEG}° = {sg:.4}"),
+            );
+        }
+        r
+    }
+}

@@ -1,0 +1,124 @@
+//! The follower motion as the synthesis sees it: poses and their time derivatives sampled
+//! over one period.
+//!
+//! Owns [`Pose`] (rotation matrix, translation, angular and linear velocity of M²(t)) and
+//! [`PoseTrack`] (N samples plus a way to evaluate any t, for oversampled checks). It is
+//! built from a [`crate::motion::Motion`] or, in tests, from any function of t. It does not
+//! interpolate keyframes (the motion module does).
+
+use std::sync::Arc;
+
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+
+/// One follower pose with first derivatives, in frame R.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pose {
+    /// t ∈ [0, 1).
+    pub t: f64,
+    /// R₂(t), row-major.
+    pub rot: [[f64; 3]; 3],
+    /// T₂(t).
+    pub trans: [f64; 3],
+    /// ω (dR₂/dt = [ω]ₓ R₂), per unit t.
+    pub omega: [f64; 3],
+    /// dT₂/dt.
+    pub vel: [f64; 3],
+}
+
+impl Pose {
+    /// From a unit quaternion and vectors.
+    pub fn new(
+        t: f64,
+        q: &UnitQuaternion<f64>,
+        trans: Vector3<f64>,
+        omega: Vector3<f64>,
+        vel: Vector3<f64>,
+    ) -> Self {
+        let m: Matrix3<f64> = *q.to_rotation_matrix().matrix();
+        let mut rot = [[0.0; 3]; 3];
+        for (r, row) in rot.iter_mut().enumerate() {
+            for (c, x) in row.iter_mut().enumerate() {
+                *x = m[(r, c)];
+            }
+        }
+        Self {
+            t,
+            rot,
+            trans: trans.into(),
+            omega: omega.into(),
+            vel: vel.into(),
+        }
+    }
+
+    /// Rotation as a unit quaternion.
+    pub fn quaternion(&self) -> UnitQuaternion<f64> {
+        let m = Matrix3::from_fn(|r, c| self.rot[r][c]);
+        UnitQuaternion::from_matrix(&m)
+    }
+}
+
+/// Function giving the pose at any t (periodic).
+pub type PoseFn = Arc<dyn Fn(f64) -> Pose + Send + Sync>;
+
+/// The follower motion sampled at tᵢ = i/N, plus the underlying function of t.
+#[derive(Clone)]
+pub struct PoseTrack {
+    /// Samples i = 0..N−1.
+    pub samples: Vec<Pose>,
+    /// Pose at any t.
+    pub at: PoseFn,
+}
+
+impl std::fmt::Debug for PoseTrack {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PoseTrack")
+            .field("n", &self.samples.len())
+            .finish()
+    }
+}
+
+impl PoseTrack {
+    /// Sample `at` at N points.
+    pub fn from_fn(n: usize, at: PoseFn) -> Self {
+        let samples = (0..n).map(|i| at(i as f64 / n as f64)).collect();
+        Self { samples, at }
+    }
+
+    /// From a motion specification (poses and derivatives from `Motion::sample`).
+    pub fn from_motion(motion: &crate::motion::Motion, n: usize) -> Self {
+        let m = motion.clone();
+        let at: PoseFn = Arc::new(move |t: f64| {
+            let s = m.sample(t);
+            Pose::new(
+                t,
+                &s.rotation,
+                s.translation,
+                s.angular_velocity,
+                s.velocity,
+            )
+        });
+        Self::from_fn(n, at)
+    }
+
+    /// Number of samples N.
+    pub fn len(&self) -> usize {
+        self.samples.len()
+    }
+
+    /// Whether there are no samples.
+    pub fn is_empty(&self) -> bool {
+        self.samples.is_empty()
+    }
+}
+
+/// A 1R pose about z with angle, rate (per unit t): used by tests and benchmarks.
+pub fn pose_1r(t: f64, angle: f64, rate: f64) -> Pose {
+    let (s, c) = angle.sin_cos();
+    Pose {
+        t,
+        rot: [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]],
+        trans: [0.0; 3],
+        omega: [0.0, 0.0, rate],
+        vel: [0.0; 3],
+    }
+}

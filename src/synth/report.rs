@@ -1,0 +1,157 @@
+//! The synthesis report: PNG/SVG plots of a mechanism, drawn through the shared `plot`
+//! module.
+//!
+//! Owns the choice of plots: dist(t) against −ε (paper Fig. 8 middle), the curve pairs in
+//! the follower's and the driver's local frames (top and side views), and the projected
+//! normals ñ with their hull at the worst instant (paper Fig. 8 right). It reads only the
+//! mechanism file's content; it does not synthesize or check.
+
+use std::path::{Path, PathBuf};
+
+use crate::plot::{Chart, Series};
+
+use super::closure::{self, Class, EPSILON, NO_INTERIOR_DIST};
+use super::error::SynthError;
+use super::mechanism::Mechanism;
+
+/// dist values above this are drawn clipped (no-interior samples carry
+/// [`NO_INTERIOR_DIST`]). Default 1.2: every real distance of unit vectors is within ±1.
+pub const DIST_PLOT_CLIP: f64 = 1.2;
+
+/// Write every report plot into `dir`; returns the files written.
+pub fn write_report(m: &Mechanism, dir: &Path) -> Result<Vec<PathBuf>, SynthError> {
+    std::fs::create_dir_all(dir).map_err(|source| SynthError::Io {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let mut out = Vec::new();
+    let n = m.samples as f64;
+    let clip = |d: f64| d.min(DIST_PLOT_CLIP);
+    let mut dist = Chart::new(
+        format!(
+            "dist(t), {} K = {}, d_x = {}: E_valiTime {:.3}, E_maxDist {:.3}",
+            m.class.label(),
+            m.curve_pairs.len(),
+            m.driver_offset,
+            m.closure.vali_time,
+            m.closure.max_dist.min(99.0)
+        ),
+        "t (fraction of the period)",
+        "signed distance (clipped at 1.2 = no interior)",
+    )
+    .with(Series::line(
+        "dist(t) (paper)",
+        m.closure
+            .dist
+            .iter()
+            .enumerate()
+            .map(|(i, d)| (i as f64 / n, clip(*d)))
+            .collect(),
+        0,
+    ));
+    if m.closure.robust_dist.len() == m.samples {
+        dist.series.push(Series::dashed(
+            "robust dist(t)",
+            m.closure
+                .robust_dist
+                .iter()
+                .enumerate()
+                .map(|(i, d)| (i as f64 / n, clip(*d)))
+                .collect(),
+            1,
+        ));
+    }
+    dist.h_lines.push((-EPSILON, "−ε".into()));
+    dist.h_lines.push((0.0, "0".into()));
+    dist.y_range = Some((-1.1, DIST_PLOT_CLIP + 0.05));
+    out.extend(dist.write(&dir.join("dist"))?);
+
+    for (frame, name) in [("follower", "c2"), ("driver", "c1")] {
+        for (view, a, b) in [("top", 0usize, 1usize), ("side", 0, 2)] {
+            let mut c = Chart::new(
+                format!("curves in the {frame} frame ({view} view)"),
+                if a == 0 { "x (model units)" } else { "y" },
+                if b == 1 {
+                    "y (model units)"
+                } else {
+                    "z (model units)"
+                },
+            );
+            c.equal_aspect = true;
+            for (k, cp) in m.curve_pairs.iter().enumerate() {
+                let pts = if frame == "follower" {
+                    &cp.samples.c2
+                } else {
+                    &cp.samples.c1
+                };
+                let mut v: Vec<(f64, f64)> = pts.iter().map(|p| (p[a], p[b])).collect();
+                v.push(v[0]);
+                c.series
+                    .push(Series::line(format!("{name} pair {k}"), v, k));
+            }
+            c.series
+                .push(Series::points("axis", vec![(0.0, 0.0)], 4, 7));
+            out.extend(c.write(&dir.join(format!("curves-{frame}-{view}")))?);
+        }
+    }
+
+    // Projected normals at the worst time.
+    let worst = m
+        .closure
+        .dist
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .map(|(i, _)| i)
+        .unwrap_or(0);
+    let pts: Vec<[f64; 3]> = m
+        .curve_pairs
+        .iter()
+        .filter_map(|cp| closure::project(m.class, cp.samples.p[worst], cp.samples.n[worst]))
+        .collect();
+    let d = m.closure.dist[worst];
+    let title = format!(
+        "projected normals at the worst time t = {:.3} (dist {})",
+        worst as f64 / n,
+        if d >= NO_INTERIOR_DIST {
+            "no interior".to_string()
+        } else {
+            format!("{d:.3}")
+        }
+    );
+    let views: Vec<(usize, usize, &str)> = match m.class {
+        Class::R1 | Class::R1T1 => vec![(0, 1, "")],
+        Class::R3 => vec![(0, 1, "-xy"), (0, 2, "-xz")],
+    };
+    for (a, b, suffix) in views {
+        let mut c = Chart::new(
+            format!("{title}{}", suffix.replace('-', " ")),
+            match m.class {
+                Class::R1 => "ñ (sign of torque)",
+                Class::R1T1 => "ñ₁ (n·z, normalized)",
+                Class::R3 => "ñ component",
+            },
+            match m.class {
+                Class::R1 => "(unused)",
+                Class::R1T1 => "ñ₂ ((p×n)·z, normalized)",
+                Class::R3 => "ñ component",
+            },
+        );
+        c.equal_aspect = true;
+        c.x_range = Some((-1.2, 1.2));
+        c.y_range = Some((-1.2, 1.2));
+        let proj: Vec<(f64, f64)> = pts.iter().map(|p| (p[a], p[b])).collect();
+        // Hull outline in this view (2-D hull of the projected points).
+        let h = closure::hull_2d(&proj.iter().map(|p| [p.0, p.1]).collect::<Vec<_>>());
+        if h.len() >= 2 {
+            let mut v: Vec<(f64, f64)> = h.iter().map(|p| (p[0], p[1])).collect();
+            v.push(v[0]);
+            c.series.push(Series::line("hull (projected)", v, 3));
+        }
+        c.series.push(Series::points("ñ_k", proj, 6, 0));
+        c.series
+            .push(Series::points("origin", vec![(0.0, 0.0)], 5, 2));
+        out.extend(c.write(&dir.join(format!("normals-worst{suffix}")))?);
+    }
+    Ok(out)
+}

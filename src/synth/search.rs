@@ -1,0 +1,677 @@
+//! The outer search: band layout, K and d_x loops, acceptance, and assembling the
+//! [`Mechanism`] from the chosen candidates.
+//!
+//! Owns [`SynthOptions`], [`SynthProgress`] and the driver of stages A (candidates, in
+//! parallel with rayon) and B (GA). It does not evaluate energies or hulls itself.
+//!
+//! **Loop order.** d_x is the outer loop (from small to large, [`DX_GRID`]) and K the inner
+//! one (from the minimum dof + 1 up to [`MAX_EXTRA_K`] more). Bands are laid out so that K
+//! bands are a prefix of K + 1 bands (band k is centred at s(k)·([`BAND_HEIGHT`] +
+//! [`BAND_GAP`]) with s = 0, +1, −1, +2, −2, …), so growing K only solves candidates for the
+//! new band and the GA reuses the others. The first (d_x, K) whose GA winner meets the
+//! paper's criteria (E_valiTime = 1, E_maxDist ≤ −ε) **and** robust closure at every
+//! sample is accepted; every candidate in it already has a conjugation residual ≤ 1° at 4×
+//! the sample density.
+//!
+//! **Determinism.** Every candidate is seeded from (seed, band, index) and solved
+//! independently; the GA evaluates fitness in parallel but collects results in population
+//! order. Results therefore do not depend on the thread count.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+
+use rayon::prelude::*;
+
+use super::candidate::{self, Candidate, OVERSAMPLE};
+use super::closure::{self, Class, ClosureSummary};
+use super::energy::{PairProblem, LENGTH_BOUNDS, W_CLOSURE, W_ROBUST};
+use super::error::SynthError;
+use super::ga::{self, Fitness, GaSettings, Pool};
+use super::mechanism::*;
+use super::model::{self, ANGLE_CPS, CURVE_CPS};
+use super::optimizer::{default_minimizer, Minimizer, MAX_EVAL};
+use super::pose::PoseTrack;
+
+/// Height of each band, model units. Default 1.0 (10 mm at the default scale): room for a
+/// contact curve with some vertical waviness and for the swept cross-section.
+pub const BAND_HEIGHT: f64 = 1.0;
+/// Gap between bands, model units. Default 0.5 (5 mm): keeps neighbouring swept contact
+/// surfaces apart when printed.
+pub const BAND_GAP: f64 = 0.5;
+/// d_x values tried in order when the user does not fix d_x. Default 5, 6, 7.5, 9: the
+/// paper used 6 for 1R/1R1T and 4.4–9.7 for 3R; below ~4.5 the driver curve runs into the
+/// driver axis clearance for follower curves of radius 2–3.
+pub const DX_GRID: [f64; 4] = [5.0, 6.0, 7.5, 9.0];
+/// How many K beyond the minimum to try. Default 3 (1R: 2..5, 1R1T: 3..6, 3R: 4..7); the
+/// paper's results used at most minimum + 2.
+pub const MAX_EXTRA_K: usize = 3;
+/// Candidates per band (the paper's M). Default 30 (supplementary notes).
+pub const CANDIDATES: usize = 30;
+
+/// Options of [`synthesize`](super::synthesize).
+#[derive(Clone, Debug)]
+pub struct SynthOptions {
+    /// Seed of every random choice.
+    pub seed: u64,
+    /// Fix K (else search from the minimum).
+    pub k: Option<usize>,
+    /// Fix d_x (else search [`DX_GRID`]).
+    pub dx: Option<f64>,
+    /// Samples N per period.
+    pub samples: usize,
+    /// Worker threads (None: all cores).
+    pub threads: Option<usize>,
+    /// Set to true to stop (Ctrl-C); the best so far is returned as partial.
+    pub cancel: Option<Arc<AtomicBool>>,
+    /// Candidates per band M.
+    pub candidates: usize,
+    /// GA generations.
+    pub generations: usize,
+    /// GA population.
+    pub population: usize,
+    /// SLSQP evaluation cap per candidate.
+    pub max_eval: usize,
+    /// Millimetres per model unit written into the file.
+    pub scale_mm: f64,
+    /// Motion source name written into the file.
+    pub source: Option<String>,
+}
+
+impl Default for SynthOptions {
+    fn default() -> Self {
+        Self {
+            seed: 1,
+            k: None,
+            dx: None,
+            samples: 360,
+            threads: None,
+            cancel: None,
+            candidates: CANDIDATES,
+            generations: ga::GENERATIONS,
+            population: ga::POPULATION,
+            max_eval: MAX_EVAL,
+            scale_mm: DEFAULT_SCALE_MM,
+            source: None,
+        }
+    }
+}
+
+/// Progress callbacks (all default to doing nothing). Called from worker threads.
+pub trait SynthProgress: Sync {
+    /// A (K, d_x) attempt starts with `new_candidates` candidates to solve.
+    fn attempt_started(&self, _k: usize, _dx: f64, _new_candidates: usize) {}
+    /// One candidate finished.
+    fn candidate_done(&self) {}
+    /// GA generation `g` of at most `total` finished.
+    fn generation(&self, _g: usize, _total: usize) {}
+    /// An attempt finished.
+    fn attempt_finished(&self, _attempt: &Attempt) {}
+}
+
+/// Progress sink that ignores everything.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct NoProgress;
+impl SynthProgress for NoProgress {}
+
+/// Band k's [z_min, z_max].
+pub fn band(k: usize) -> (f64, f64) {
+    let s = if k == 0 {
+        0.0
+    } else if k % 2 == 1 {
+        k.div_ceil(2) as f64
+    } else {
+        -((k / 2) as f64)
+    };
+    let c = s * (BAND_HEIGHT + BAND_GAP);
+    (c - 0.5 * BAND_HEIGHT, c + 0.5 * BAND_HEIGHT)
+}
+
+fn cancelled(opts: &SynthOptions) -> bool {
+    opts.cancel
+        .as_ref()
+        .is_some_and(|c| c.load(Ordering::Relaxed))
+}
+
+/// Synthesize from a sampled follower motion (the motion-independent core).
+pub fn synthesize_track(
+    class: Class,
+    poses: Arc<PoseTrack>,
+    source: &str,
+    opts: &SynthOptions,
+    progress: &dyn SynthProgress,
+) -> Result<Mechanism, SynthError> {
+    if opts.samples < 8 {
+        return Err(SynthError::BadRequest(format!(
+            "--samples {} is too few (at least 8; the paper uses 360)",
+            opts.samples
+        )));
+    }
+    if let Some(k) = opts.k {
+        if k < class.min_k() {
+            return Err(SynthError::BadRequest(format!(
+                "--k {k} is below the minimum {} for class {} (dof + 1)",
+                class.min_k(),
+                class.label()
+            )));
+        }
+    }
+    if let Some(dx) = opts.dx {
+        if !(dx.is_finite() && dx > 0.0) {
+            return Err(SynthError::BadRequest(format!(
+                "--dx {dx} must be a positive number"
+            )));
+        }
+    }
+    if opts.candidates == 0 || opts.population < 2 || opts.generations == 0 {
+        return Err(SynthError::BadRequest(
+            "candidates, population (≥ 2) and generations must be positive".into(),
+        ));
+    }
+    let threads = opts.threads.unwrap_or(0);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| SynthError::BadRequest(format!("cannot start {threads} threads: {e}")))?;
+    let used_threads = pool.current_num_threads();
+    pool.install(|| search(class, poses, source, opts, progress, used_threads))
+}
+
+struct Best {
+    fitness: Fitness,
+    dx: f64,
+    chosen: Vec<Candidate>,
+}
+
+fn search(
+    class: Class,
+    poses: Arc<PoseTrack>,
+    source: &str,
+    opts: &SynthOptions,
+    progress: &dyn SynthProgress,
+    threads: usize,
+) -> Result<Mechanism, SynthError> {
+    let start = Instant::now();
+    let minimizer = default_minimizer();
+    let k_list: Vec<usize> = match opts.k {
+        Some(k) => vec![k],
+        None => (class.min_k()..=class.min_k() + MAX_EXTRA_K).collect(),
+    };
+    let dx_list: Vec<f64> = match opts.dx {
+        Some(d) => vec![d],
+        None => DX_GRID.to_vec(),
+    };
+    let mut attempts: Vec<Attempt> = Vec::new();
+    let mut best: Option<Best> = None;
+    let mut k_tried = Vec::new();
+    let mut dx_tried = Vec::new();
+    let info =
+        |attempts: &[Attempt], k_tried: &[usize], dx_tried: &[f64], accepted, partial| SolveInfo {
+            seed: opts.seed,
+            seconds: start.elapsed().as_secs_f64(),
+            k_tried: k_tried.to_vec(),
+            dx_tried: dx_tried.to_vec(),
+            backend: minimizer.name().to_string(),
+            threads,
+            candidates_per_band: opts.candidates,
+            generations: opts.generations,
+            attempts: attempts.to_vec(),
+            accepted,
+            partial,
+        };
+    'dx: for &dx in &dx_list {
+        dx_tried.push(dx);
+        let mut bands: Vec<Vec<Candidate>> = Vec::new();
+        for &k in &k_list {
+            if !k_tried.contains(&k) {
+                k_tried.push(k);
+            }
+            let new = k.saturating_sub(bands.len());
+            progress.attempt_started(k, dx, new * opts.candidates);
+            while bands.len() < k {
+                let b = bands.len();
+                let cands = solve_band(class, &poses, dx, b, opts, minimizer, progress);
+                if cancelled(opts) {
+                    break 'dx;
+                }
+                if cands
+                    .iter()
+                    .all(|c| c.reason.as_deref() == Some("optimizer returned NaN"))
+                {
+                    return Err(SynthError::Numerical(format!(
+                        "every candidate of band {b} at d_x = {dx} came back as NaN from SLSQP ({})",
+                        minimizer.name()
+                    )));
+                }
+                bands.push(cands);
+            }
+            let valid: Vec<Vec<&Candidate>> = bands[..k]
+                .iter()
+                .map(|b| b.iter().filter(|c| c.valid).collect())
+                .collect();
+            let counts: Vec<usize> = valid.iter().map(|v| v.len()).collect();
+            if counts.contains(&0) {
+                let a = Attempt {
+                    k,
+                    dx,
+                    valid_candidates: counts,
+                    vali_time: 0.0,
+                    robust_vali_time: 0.0,
+                    max_dist: closure::NO_INTERIOR_DIST,
+                    accepted: false,
+                };
+                progress.attempt_finished(&a);
+                attempts.push(a);
+                continue;
+            }
+            let pool = Pool {
+                class,
+                bands: valid
+                    .iter()
+                    .map(|b| {
+                        b.iter()
+                            .map(|c| (c.ntilde.as_slice(), c.robust.as_slice()))
+                            .collect()
+                    })
+                    .collect(),
+            };
+            let settings = GaSettings {
+                population: opts.population,
+                generations: opts.generations,
+                seed: opts.seed ^ ((k as u64) << 32) ^ dx.to_bits(),
+            };
+            let total = opts.generations;
+            let res = ga::run(&pool, settings, &mut |g| {
+                progress.generation(g + 1, total);
+                !cancelled(opts)
+            });
+            let chosen: Vec<Candidate> = res
+                .genome
+                .iter()
+                .enumerate()
+                .map(|(b, &g)| valid[b][g].clone())
+                .collect();
+            let summary = pool.summary(&res.genome);
+            let accepted = summary.accepted();
+            let a = Attempt {
+                k,
+                dx,
+                valid_candidates: counts,
+                vali_time: res.fitness.vali_time,
+                robust_vali_time: res.fitness.robust_vali_time,
+                max_dist: res.fitness.max_dist,
+                accepted,
+            };
+            progress.attempt_finished(&a);
+            attempts.push(a);
+            let better = best
+                .as_ref()
+                .is_none_or(|b| res.fitness.cmp_better(&b.fitness) == std::cmp::Ordering::Greater);
+            if better {
+                best = Some(Best {
+                    fitness: res.fitness.clone(),
+                    dx,
+                    chosen: chosen.clone(),
+                });
+            }
+            if accepted {
+                let info = info(&attempts, &k_tried, &dx_tried, true, false);
+                return Ok(assemble(class, &poses, source, dx, &chosen, opts, info));
+            }
+            if cancelled(opts) {
+                break 'dx;
+            }
+        }
+    }
+    let partial = best.as_ref().map(|b| {
+        Box::new(assemble(
+            class,
+            &poses,
+            source,
+            b.dx,
+            &b.chosen,
+            opts,
+            info(&attempts, &k_tried, &dx_tried, false, true),
+        ))
+    });
+    if cancelled(opts) {
+        return Err(SynthError::Cancelled { partial });
+    }
+    let message = match &partial {
+        None => format!(
+            "no usable candidates for class {} at any tried K {:?} and d_x {:?}: every candidate \
+             failed its feasibility or 1° conjugation check. Try other --dx values or more \
+             --samples; the motion may be too wild for curves of length 4π–6π.",
+            class.label(),
+            k_tried,
+            dx_tried
+        ),
+        Some(m) => {
+            let mut worst: Vec<(usize, f64)> = m
+                .closure
+                .dist
+                .iter()
+                .cloned()
+                .enumerate()
+                .zip(m.closure.robust_dist.iter())
+                .map(|((i, d), r)| (i, d.max(*r)))
+                .collect();
+            worst.sort_by(|a, b| b.1.total_cmp(&a.1));
+            let shown: Vec<String> = worst
+                .iter()
+                .take(5)
+                .map(|(i, d)| {
+                    format!(
+                        "t = {:.3} (dist {:.3})",
+                        *i as f64 / m.samples as f64,
+                        d.min(99.0)
+                    )
+                })
+                .collect();
+            format!(
+                "motion too wild for the tried K {:?} and d_x {:?}: best E_valiTime {:.3} \
+                 (robust {:.3}, E_maxDist {:.3}) at K = {}, d_x = {}; worst samples: {}. \
+                 Try a larger --k, another --dx, or a different --seed.",
+                k_tried,
+                dx_tried,
+                m.closure.vali_time,
+                m.closure.robust_vali_time,
+                m.closure.max_dist.min(99.0),
+                m.curve_pairs.len(),
+                m.driver_offset,
+                shown.join(", ")
+            )
+        }
+    };
+    Err(SynthError::Infeasible {
+        message,
+        best: partial,
+    })
+}
+
+/// The candidate problem of band `b`.
+pub fn band_problem(class: Class, poses: &Arc<PoseTrack>, dx: f64, b: usize) -> PairProblem {
+    PairProblem {
+        class,
+        poses: poses.clone(),
+        dx,
+        band: band(b),
+        vary: None,
+        w_closure: W_CLOSURE,
+        w_robust: W_ROBUST,
+    }
+}
+
+fn solve_band(
+    class: Class,
+    poses: &Arc<PoseTrack>,
+    dx: f64,
+    b: usize,
+    opts: &SynthOptions,
+    minimizer: &dyn Minimizer,
+    progress: &dyn SynthProgress,
+) -> Vec<Candidate> {
+    let n = poses.len();
+    let m = opts.candidates;
+    (0..m)
+        .into_par_iter()
+        .map(|i| {
+            let mut pb = band_problem(class, poses, dx, b);
+            if class != Class::R1 {
+                pb.vary = Some((i * n / m) % n);
+            }
+            let c = if cancelled(opts) {
+                Candidate {
+                    band: b,
+                    index: i,
+                    x: Vec::new(),
+                    f: f64::NAN,
+                    status: super::optimizer::SolveStatus::Failed("cancelled".into()),
+                    valid: false,
+                    reason: Some("cancelled".into()),
+                    residual_deg: f64::INFINITY,
+                    ntilde: Vec::new(),
+                    robust: Vec::new(),
+                    evals: 0,
+                }
+            } else {
+                candidate::solve(&pb, minimizer, opts.seed, b, i, opts.max_eval)
+            };
+            progress.candidate_done();
+            c
+        })
+        .collect()
+}
+
+fn neg(v: [f64; 3]) -> [f64; 3] {
+    [-v[0], -v[1], -v[2]]
+}
+
+/// Build the mechanism file content from chosen candidates (one per band).
+pub fn assemble(
+    class: Class,
+    poses: &Arc<PoseTrack>,
+    source: &str,
+    dx: f64,
+    chosen: &[Candidate],
+    opts: &SynthOptions,
+    solve: SolveInfo,
+) -> Mechanism {
+    let n = poses.len();
+    let tau = std::f64::consts::TAU;
+    let mut pairs = Vec::with_capacity(chosen.len());
+    for c in chosen {
+        let mut s = PairSamples {
+            p: Vec::with_capacity(n),
+            n: Vec::with_capacity(n),
+            c1: Vec::with_capacity(n),
+            n1: Vec::with_capacity(n),
+            c2: Vec::with_capacity(n),
+            n2: Vec::with_capacity(n),
+        };
+        for pose in &poses.samples {
+            let ct = model::contact_f64(&c.x, pose, dx);
+            let nn = ct.n.vals();
+            s.p.push(ct.p.vals());
+            s.n.push(nn);
+            s.c1.push(ct.c1.vals());
+            s.c2.push(ct.c2.vals());
+            let phi = tau * pose.t;
+            let n1 = super::dual::V3::<f64>::cst(nn)
+                .rot_t(&model::rz(phi))
+                .vals();
+            s.n1.push(n1);
+            let n2 = super::dual::V3::<f64>::cst(neg(nn)).rot_t(&pose.rot).vals();
+            s.n2.push(n2);
+        }
+        let (zlo, zhi) = band(c.band);
+        pairs.push(CurvePair {
+            slab: [zlo, zhi],
+            follower_curve: SplineCurve {
+                degree: 3,
+                closed: true,
+                control_points: model::curve_cps(&c.x),
+            },
+            normal_angle: SplineAngle {
+                degree: 3,
+                closed: true,
+                control_points: model::angle_cps(&c.x),
+            },
+            samples: s,
+            residual_deg: c.residual_deg,
+        });
+    }
+    let contacts_at = |i: usize| -> Vec<([f64; 3], [f64; 3])> {
+        pairs
+            .iter()
+            .map(|p| (p.samples.p[i], p.samples.n[i]))
+            .collect()
+    };
+    let (dist, rdist): (Vec<f64>, Vec<f64>) = (0..n)
+        .map(|i| closure::dist_at(class, &contacts_at(i)))
+        .unzip();
+    let summary = ClosureSummary::from_dists(dist, rdist);
+    // Oversampled closure from the splines.
+    let m = n * OVERSAMPLE;
+    let (od, ord): (Vec<f64>, Vec<f64>) = (0..m)
+        .map(|i| {
+            let pose = (poses.at)(i as f64 / m as f64);
+            let cs: Vec<_> = chosen
+                .iter()
+                .map(|c| {
+                    let ct = model::contact_f64(&c.x, &pose, dx);
+                    (ct.p.vals(), ct.n.vals())
+                })
+                .collect();
+            closure::dist_at(class, &cs)
+        })
+        .unzip();
+    let over = ClosureSummary::from_dists(od, ord);
+    let worst_residual = chosen.iter().map(|c| c.residual_deg).fold(0.0, f64::max);
+    debug_assert_eq!(CURVE_CPS, pairs[0].follower_curve.control_points.len());
+    debug_assert_eq!(ANGLE_CPS, pairs[0].normal_angle.control_points.len());
+    Mechanism {
+        format: FORMAT.to_string(),
+        class,
+        driver_offset: dx,
+        samples: n,
+        scale_mm: opts.scale_mm,
+        length_bounds: LENGTH_BOUNDS,
+        motion: MotionInfo {
+            source: opts.source.clone().unwrap_or_else(|| source.to_string()),
+            name: source.to_string(),
+        },
+        follower_motion: poses
+            .samples
+            .iter()
+            .map(|p| {
+                let q = p.quaternion();
+                FollowerPose {
+                    t: p.t,
+                    rotation: [q.w, q.i, q.j, q.k],
+                    translation: p.trans,
+                }
+            })
+            .collect(),
+        curve_pairs: pairs,
+        closure: ClosureBlock {
+            epsilon: summary.epsilon,
+            dist: summary.dist.clone(),
+            vali_time: summary.vali_time,
+            max_dist: summary.max_dist,
+            robust_vali_time: summary.robust_vali_time,
+            robust_max_dist: summary.robust_max_dist,
+            robust_dist: summary.robust_dist.clone(),
+            oversampled: Some(OversampledClosure {
+                factor: OVERSAMPLE,
+                vali_time: over.vali_time,
+                max_dist: over.max_dist,
+                robust_vali_time: over.robust_vali_time,
+                robust_max_dist: over.robust_max_dist,
+            }),
+            worst_residual_deg: worst_residual,
+        },
+        solve,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synth::candidate::tests::half_turn_like;
+
+    fn small_opts(threads: usize) -> SynthOptions {
+        SynthOptions {
+            seed: 11,
+            k: Some(2),
+            dx: Some(6.0),
+            samples: 60,
+            threads: Some(threads),
+            candidates: 6,
+            generations: 20,
+            population: 8,
+            max_eval: 250,
+            ..Default::default()
+        }
+    }
+
+    fn outcome(r: Result<Mechanism, SynthError>) -> Mechanism {
+        match r {
+            Ok(m) => m,
+            Err(SynthError::Infeasible { best: Some(m), .. }) => *m,
+            Err(e) => panic!("unexpected error {e}"),
+        }
+    }
+
+    /// Guards determinism: the same seed gives the same mechanism with 1 and 2 threads
+    /// (candidates and GA fitness run in parallel with rayon).
+    #[test]
+    fn synthesis_is_deterministic_across_thread_counts() {
+        let track = half_turn_like(60);
+        let a = outcome(synthesize_track(
+            Class::R1,
+            track.clone(),
+            "t",
+            &small_opts(1),
+            &NoProgress,
+        ));
+        let b = outcome(synthesize_track(
+            Class::R1,
+            track,
+            "t",
+            &small_opts(2),
+            &NoProgress,
+        ));
+        assert_eq!(a.curve_pairs, b.curve_pairs);
+        assert_eq!(a.closure, b.closure);
+        assert_eq!(a.solve.attempts, b.solve.attempts);
+    }
+
+    /// Guards that bad requests are typed errors, not panics.
+    #[test]
+    fn bad_requests_are_rejected_with_a_message() {
+        let track = half_turn_like(48);
+        let mut o = small_opts(1);
+        o.k = Some(1);
+        let e = synthesize_track(Class::R1, track.clone(), "t", &o, &NoProgress).unwrap_err();
+        assert!(e.to_string().contains("--k 1"), "{e}");
+        let mut o = small_opts(1);
+        o.dx = Some(-1.0);
+        let e = synthesize_track(Class::R1, track, "t", &o, &NoProgress).unwrap_err();
+        assert!(e.to_string().contains("--dx"), "{e}");
+    }
+
+    /// Guards the band layout: bands are disjoint, equal height, and K bands are a prefix of
+    /// K + 1 bands.
+    #[test]
+    fn bands_are_disjoint_and_nested() {
+        let b: Vec<_> = (0..7).map(band).collect();
+        for i in 0..7 {
+            assert!((b[i].1 - b[i].0 - BAND_HEIGHT).abs() < 1e-12);
+            for j in i + 1..7 {
+                assert!(b[i].1 + BAND_GAP - 1e-12 <= b[j].0 || b[j].1 + BAND_GAP - 1e-12 <= b[i].0);
+            }
+        }
+    }
+
+    /// Exploration aid (ignored): full 1R search on a half-turn-like motion.
+    #[test]
+    #[ignore]
+    fn explore_search_1r() {
+        let t0 = Instant::now();
+        let opts = SynthOptions {
+            candidates: 16,
+            dx: Some(6.0),
+            ..Default::default()
+        };
+        let r = synthesize_track(Class::R1, half_turn_like(360), "test", &opts, &NoProgress);
+        match r {
+            Ok(m) => {
+                eprintln!("{:#?}", m.solve.attempts);
+                eprintln!("{}", m.check());
+            }
+            Err(e) => eprintln!("ERR {e}"),
+        }
+        eprintln!("{:.1}s", t0.elapsed().as_secs_f64());
+    }
+}

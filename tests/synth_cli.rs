@@ -1,0 +1,126 @@
+//! End-to-end tests of `mpc-rig synth` and `mpc-rig synth --check` on the paper's 1R
+//! example with reduced settings (fewer samples, candidates and generations; the same code
+//! path as the defaults).
+
+use assert_cmd::Command;
+use predicates::prelude::*;
+
+const MOTION: &str = "data/motions/half-turn-2to1.toml";
+
+fn synth_small(out: &std::path::Path) -> assert_cmd::assert::Assert {
+    Command::cargo_bin("mpc-rig")
+        .unwrap()
+        .args([
+            "synth",
+            MOTION,
+            "-o",
+            out.to_str().unwrap(),
+            "--samples",
+            "90",
+            "--candidates",
+            "16",
+            "--generations",
+            "100",
+            "--k",
+            "4",
+            "--dx",
+            "6",
+            "--seed",
+            "1",
+        ])
+        .assert()
+}
+
+/// Guards the whole pipeline: synth writes an accepted mechanism.json and the report plots,
+/// `--check` re-verifies it from its samples, and a tampered or malformed file is rejected
+/// with a message naming what is wrong.
+#[test]
+fn synth_end_to_end_then_check_and_reject_tampering() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("ht");
+    synth_small(&out)
+        .success()
+        .stdout(predicate::str::contains("1R"));
+    let file = out.join("mechanism.json");
+    assert!(file.exists());
+    for plot in [
+        "dist.png",
+        "dist.svg",
+        "curves-follower-top.png",
+        "curves-driver-top.svg",
+        "normals-worst.png",
+    ] {
+        assert!(out.join("report").join(plot).exists(), "missing {plot}");
+    }
+    let text = std::fs::read_to_string(&file).unwrap();
+    let json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(json["format"], "mpcmech-mechanism/1");
+    assert_eq!(json["class"], "1R");
+    assert_eq!(json["curve_pairs"].as_array().unwrap().len(), 4);
+    assert_eq!(json["closure"]["vali_time"], 1.0);
+    assert_eq!(json["closure"]["max_dist"], -1.0);
+    assert_eq!(json["closure"]["robust_vali_time"], 1.0);
+    Command::cargo_bin("mpc-rig")
+        .unwrap()
+        .args(["synth", "--check", out.to_str().unwrap()])
+        .assert()
+        .success()
+        .stdout(predicate::str::contains("passes every check"));
+
+    // Tamper: move one contact point of pair 0.
+    let mut bad = json.clone();
+    bad["curve_pairs"][0]["samples"]["p"][5][0] = serde_json::json!(9.0);
+    let bad_file = dir.path().join("bad.json");
+    std::fs::write(&bad_file, serde_json::to_string(&bad).unwrap()).unwrap();
+    Command::cargo_bin("mpc-rig")
+        .unwrap()
+        .args(["synth", "--check", bad_file.to_str().unwrap()])
+        .assert()
+        .code(2)
+        .stdout(predicate::str::contains("FAIL coincident points"));
+
+    // Malformed: truncated JSON gives file:line:column.
+    let trunc = dir.path().join("trunc.json");
+    std::fs::write(&trunc, &text[..text.len() / 2]).unwrap();
+    Command::cargo_bin("mpc-rig")
+        .unwrap()
+        .args(["synth", "--check", trunc.to_str().unwrap()])
+        .assert()
+        .failure()
+        .stderr(predicate::str::contains("trunc.json:"));
+
+    // Wrong array length names the field.
+    let mut short = json;
+    short["curve_pairs"][1]["samples"]["n"]
+        .as_array_mut()
+        .unwrap()
+        .pop();
+    let short_file = dir.path().join("short.json");
+    std::fs::write(&short_file, serde_json::to_string(&short).unwrap()).unwrap();
+    Command::cargo_bin("mpc-rig")
+        .unwrap()
+        .args(["synth", "--check", short_file.to_str().unwrap()])
+        .assert()
+        .failure()
+        .stderr(predicate::str::contains("curve_pairs[1].samples.n"));
+}
+
+/// Guards request validation at the command line: K below dof + 1 is refused with a clear
+/// message and a non-zero exit, not a panic.
+#[test]
+fn synth_refuses_k_below_minimum() {
+    let dir = tempfile::tempdir().unwrap();
+    Command::cargo_bin("mpc-rig")
+        .unwrap()
+        .args([
+            "synth",
+            MOTION,
+            "-o",
+            dir.path().to_str().unwrap(),
+            "--k",
+            "1",
+        ])
+        .assert()
+        .failure()
+        .stderr(predicate::str::contains("--k 1 is below the minimum 2"));
+}
