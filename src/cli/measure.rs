@@ -51,7 +51,7 @@ pub struct MeasureArgs {
     /// Also run the same cycles in reverse (for backlash).
     #[arg(long)]
     pub reverse: bool,
-    /// Recording directory (default out/measure/<UTC timestamp>).
+    /// Recording directory (default `out/measure/<UTC timestamp>`).
     #[arg(short, long, value_name = "DIR")]
     pub output: Option<PathBuf>,
     /// Do not analyse the recording at the end (run `mpc-rig analyze DIR` later).

@@ -1,7 +1,7 @@
 //! SLSQP behind a small trait, with two backends.
 //!
 //! Owns [`Minimizer`], the pure-Rust backend [`SlsqpRs`] (the `slsqp` crate, default) and,
-//! with the cargo feature `nlopt`, [`NloptSlsqp`] (NLopt's own SLSQP). Both see the same
+//! with the cargo feature `nlopt`, `NloptSlsqp` (NLopt's own SLSQP). Both see the same
 //! objective and constraints with exact gradients from `energy`; the per-x evaluation is
 //! cached because SLSQP asks for the objective and each constraint separately at the same
 //! point. It does not judge results: SLSQP often ends with a round-off status next to the

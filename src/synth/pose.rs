@@ -19,7 +19,7 @@ pub struct Pose {
     pub rot: [[f64; 3]; 3],
     /// T₂(t).
     pub trans: [f64; 3],
-    /// ω (dR₂/dt = [ω]ₓ R₂), per unit t.
+    /// ω (`dR₂/dt = [ω]ₓ R₂`), per unit t.
     pub omega: [f64; 3],
     /// dT₂/dt.
     pub vel: [f64; 3],

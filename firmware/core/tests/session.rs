@@ -773,3 +773,26 @@ fn golden_command_frames_drive_the_device() {
         })
     );
 }
+
+/// Guards the session start: a Hello from a new host stops the stream and decelerates the
+/// motion left running by a previous session.
+#[test]
+fn hello_stops_what_a_previous_session_left_running() {
+    let mut b = Bench::new();
+    b.configure(config());
+    b.request(Command::SetMotorEnabled(true));
+    b.request(Command::StartStream);
+    b.request(Command::RunSpeed {
+        speed_mdeg_s: 360_000,
+    });
+    b.run_until(1_000_000, 100_000);
+    assert!(b.device.is_streaming() && b.device.is_moving());
+    b.request(Command::Hello {
+        protocol_version: PROTOCOL_VERSION,
+    });
+    assert!(!b.device.is_streaming());
+    b.run_until(2_000_000, 100_000);
+    assert!(!b.device.is_moving());
+    assert_eq!(b.events(EventKind::Stopped).len(), 1);
+    assert_eq!(b.device.position(), b.net_steps.get());
+}
