@@ -2,7 +2,7 @@
 //! pseudo-terminals: `mpc-rig measure --rig rigs/sim-dynamixel.toml` against `mpc-rig
 //! sim-device dynamixel` (forward and reverse, with the analysis at the end), a session with
 //! link faults injected (recording survives, gaps counted, motor ends stopped), and an
-//! unplug mid-run (recording kept and marked incomplete, clear message, exit code 3).
+//! unplug mid-run (recording kept and marked incomplete, clear message, exit code `EXIT_DISCONNECTED` = 5).
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -213,9 +213,9 @@ fn brief_dropout_rearms_the_watchdog_and_finishes() {
 }
 
 /// Guards the unplug: the simulator closes its end mid-run; `measure` keeps the recording,
-/// marks it incomplete with the reason, says so clearly and exits with code 3.
+/// marks it incomplete with the reason, says so clearly and exits with code 5 (`EXIT_DISCONNECTED`; 3 is a missed tolerance).
 #[test]
-fn unplug_mid_run_keeps_the_recording_and_exits_3() {
+fn unplug_mid_run_keeps_the_recording_and_exits_disconnected() {
     let sim = sim_process(&["disconnect_at_s=2.5"]);
     let out = tempfile::tempdir().unwrap();
     let dir = out.path().join("unplugged");
@@ -238,7 +238,11 @@ fn unplug_mid_run_keeps_the_recording_and_exits_3() {
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&result.stderr);
-    assert_eq!(result.status.code(), Some(3), "{stderr}");
+    assert_eq!(
+        result.status.code(),
+        Some(i32::from(mpc_rig::cli::measure::EXIT_DISCONNECTED)),
+        "{stderr}"
+    );
     assert!(stderr.contains("disconnected"), "{stderr}");
     let rec = Recording::load(&dir).expect("the recording survives the unplug");
     assert!(!rec.meta.complete);

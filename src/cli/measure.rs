@@ -13,7 +13,7 @@ use crate::cli::ExitStatusError;
 use crate::rig::session::{self, EndReason, MeasureOptions, Progress, TargetSpec};
 
 /// Exit code when the device disconnected during the run (recording kept, incomplete).
-pub const EXIT_DISCONNECTED: u8 = 3;
+pub const EXIT_DISCONNECTED: u8 = 5;
 /// Exit code when the run stopped at `safety.max_run_s` or on another error mid-run.
 pub const EXIT_INCOMPLETE: u8 = 4;
 /// Exit code after Ctrl-C (the shell convention 128 + SIGINT).

@@ -16,10 +16,12 @@ use anyhow::Context;
 use clap::{Args, Subcommand};
 
 use crate::motion::Motion;
+use crate::rig::config::RigConfig;
 use crate::rig::sim::dynamixel::{
     self, BusConfig, HardwareFault, MotionTarget, ServerEnd, SimDynamixelOptions,
 };
 use crate::rig::sim::plant::{PlantConfig, FAULT_KEYS};
+use crate::rig::sim::stepper::{self, Mechanics, SimStepperOptions};
 
 /// Serve a simulated device on a pseudo-terminal.
 #[derive(Debug, Args)]
@@ -31,6 +33,9 @@ pub struct SimDeviceArgs {
 /// The simulated devices.
 #[derive(Debug, Subcommand)]
 pub enum SimDevice {
+    /// Our stepper firmware: the real firmware core on emulated pins and I²C sensors
+    /// (AS5600, BNO055) whose follower obeys the plant model.
+    Stepper(SimStepperArgs),
     /// A Dynamixel Protocol 2.0 bus: an XL430-W250 driver servo and a torque-off XL430
     /// follower servo whose present position obeys the plant model.
     Dynamixel(SimDynamixelArgs),
@@ -79,11 +84,89 @@ pub struct SimDynamixelArgs {
     pub overload_at_s: Option<f64>,
 }
 
+/// Options of `sim-device stepper`.
+#[derive(Debug, Args)]
+pub struct SimStepperArgs {
+    #[command(flatten)]
+    pub target: TargetArgs,
+    /// Plant imperfection or link fault, `key=value`, repeatable: backlash_deg,
+    /// phase_lag_deg, gain_error, encoder_noise_counts, encoder_resolution, imu_noise_deg,
+    /// imu_bias_deg, missed_step_prob, scale_mm, drop_prob, corrupt_prob, disconnect_at_s,
+    /// dropout_at_s, dropout_s, protocol_version, seed.
+    #[arg(long = "fault", value_name = "KEY=VALUE")]
+    pub faults: Vec<String>,
+    /// Take the bench's mechanics (steps/rev, microsteps, gear, direction, fitted sensors)
+    /// from this rig file; default: those of rigs/sim-stepper.toml.
+    #[arg(long, value_name = "FILE")]
+    pub rig: Option<PathBuf>,
+    /// Also expose the device at this stable path (a symlink kept across simulated
+    /// re-plugs; one is made in the temp directory when `dropout_at_s` is given).
+    #[arg(long, value_name = "PATH")]
+    pub link: Option<PathBuf>,
+}
+
 /// Run `sim-device`.
 pub fn run(args: SimDeviceArgs) -> anyhow::Result<ExitCode> {
     match args.device {
+        SimDevice::Stepper(a) => run_stepper(a),
         SimDevice::Dynamixel(a) => run_dynamixel(a),
     }
+}
+
+fn plant_from(faults: &[String]) -> anyhow::Result<PlantConfig> {
+    PlantConfig::from_faults(faults).with_context(|| {
+        let keys: Vec<&str> = FAULT_KEYS.iter().map(|k| k.0).collect();
+        format!("known --fault keys: {}", keys.join(", "))
+    })
+}
+
+fn run_stepper(a: SimStepperArgs) -> anyhow::Result<ExitCode> {
+    let motion = load_target(&a.target)?;
+    let plant = plant_from(&a.faults)?;
+    let mechanics = match &a.rig {
+        Some(r) => Mechanics::from_rig(&RigConfig::load(r)?)?,
+        None => Mechanics::default(),
+    };
+    let sim = stepper::spawn(SimStepperOptions {
+        target: motion,
+        plant,
+        mechanics,
+        link: a.link,
+    })
+    .context("starting the simulated stepper bench")?;
+    {
+        let mut out = std::io::stdout().lock();
+        writeln!(out, "{}", sim.path().display())?;
+        out.flush()?;
+    }
+    eprintln!(
+        "simulated stepper bench on {} (firmware core, board `{}`); Ctrl-C stops",
+        sim.path().display(),
+        stepper::SIM_BOARD_NAME
+    );
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
+        .context("installing the Ctrl-C handler")?;
+    while !stop.load(Ordering::Relaxed) && sim.is_running() {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let status = if sim.is_running() {
+        sim.stop()?
+    } else {
+        sim.wait()?
+    };
+    eprintln!(
+        "simulated stepper bench ended after {:.1} s: {} steps ({} missed), {} bytes out ({} dropped, {} corrupted){}",
+        status.time_s,
+        status.steps,
+        status.missed_steps,
+        status.bytes_out,
+        status.bytes_dropped,
+        status.bytes_corrupted,
+        if status.disconnected { "; simulated unplug: pseudo-terminal closed" } else { "" }
+    );
+    Ok(ExitCode::SUCCESS)
 }
 
 fn load_target(t: &TargetArgs) -> anyhow::Result<Motion> {
@@ -100,10 +183,7 @@ fn load_target(t: &TargetArgs) -> anyhow::Result<Motion> {
 fn run_dynamixel(a: SimDynamixelArgs) -> anyhow::Result<ExitCode> {
     let motion = load_target(&a.target)?;
     let target = MotionTarget::new(motion)?;
-    let plant = PlantConfig::from_faults(&a.faults).with_context(|| {
-        let keys: Vec<&str> = FAULT_KEYS.iter().map(|k| k.0).collect();
-        format!("known --fault keys: {}", keys.join(", "))
-    })?;
+    let plant = plant_from(&a.faults)?;
     let mut opts = SimDynamixelOptions::new(Arc::new(target));
     opts.plant = plant;
     opts.bus = BusConfig {

@@ -26,9 +26,11 @@ use crate::rig::recording::{
 };
 use crate::rig::RigError;
 
-/// How long the session waits for samples before declaring the stream stalled: 2 s, many
-/// times the 10 ms batch interval and longer than a brief reconnect's handshake.
-pub const STALL_TIMEOUT: Duration = Duration::from_secs(2);
+/// How long the session waits for samples before declaring the stream stalled: 8 s,
+/// longer than a backend's reconnect window (5 s for the stepper firmware) plus its
+/// handshake, so a brief unplug is survived and a permanent one is reported as such by the
+/// backend.
+pub const STALL_TIMEOUT: Duration = Duration::from_secs(8);
 
 /// Poll interval of the sample loop: 20 ms keeps Ctrl-C and the display responsive
 /// without spinning.
@@ -47,6 +49,12 @@ pub const REST_TOLERANCE_DEG: f64 = 0.05;
 
 /// Window over which rest is judged.
 pub const REST_WINDOW: Duration = Duration::from_millis(150);
+
+/// Driver angle (deg) by which the forward and reverse phases extend beyond the measured
+/// cycles on each side (taken from the settle cycles before and the run-out after), so that
+/// events exactly at a cycle boundary (a follower crossing 0° at φ = 360°·k) lie inside the
+/// labelled samples. 10° is several samples even at high speed and far less than a cycle.
+pub const PHASE_MARGIN_DEG: f64 = 10.0;
 
 /// Default settle cycles before the measured ones: one revolution lets the mechanism
 /// take up its backlash and the speed settle.
@@ -271,10 +279,12 @@ impl Plan {
         match self.turn {
             None => {
                 let p = angle - self.start;
-                if p < self.settle_deg {
+                let margin = PHASE_MARGIN_DEG.min(self.settle_deg);
+                if p < self.settle_deg - margin {
                     Step::Continue(Phase::Settle, 0.0)
-                } else if p < self.settle_deg + self.measure_deg {
-                    Step::Continue(Phase::Forward, (p - self.settle_deg) / 360.0)
+                } else if p < self.settle_deg + self.measure_deg + PHASE_MARGIN_DEG {
+                    let c = ((p - self.settle_deg) / 360.0).clamp(0.0, self.measure_deg / 360.0);
+                    Step::Continue(Phase::Forward, c)
                 } else if self.reverse {
                     Step::Reverse
                 } else {
@@ -283,10 +293,12 @@ impl Plan {
             }
             Some(turn) => {
                 let q = self.max_seen.max(turn) - angle;
-                if q < self.settle_deg {
+                let margin = PHASE_MARGIN_DEG.min(self.settle_deg);
+                if q < self.settle_deg - margin {
                     Step::Continue(Phase::Settle, 0.0)
-                } else if q < self.settle_deg + self.measure_deg {
-                    Step::Continue(Phase::Reverse, (q - self.settle_deg) / 360.0)
+                } else if q < self.settle_deg + self.measure_deg + PHASE_MARGIN_DEG {
+                    let c = ((q - self.settle_deg) / 360.0).clamp(0.0, self.measure_deg / 360.0);
+                    Step::Continue(Phase::Reverse, c)
                 } else {
                     Step::Done
                 }
@@ -446,12 +458,12 @@ fn drive(
     while !done {
         if opts.cancel.load(Ordering::Relaxed) {
             bench.stop().ok();
-            finish_tail(bench, writer, start, phase)?;
+            finish_tail(bench, writer, start)?;
             return Ok(EndReason::Cancelled);
         }
         if start.elapsed() > max_run {
             bench.stop().ok();
-            finish_tail(bench, writer, start, phase)?;
+            finish_tail(bench, writer, start)?;
             return Ok(EndReason::MaxRunTime);
         }
         batch.clear();
@@ -484,6 +496,8 @@ fn drive(
                     }
                     Step::Done => {
                         done = true;
+                        // The rest of this batch is the start of the stop ramp.
+                        phase = Phase::Settle;
                         bench.stop()?;
                     }
                 }
@@ -523,7 +537,7 @@ fn drive(
             last_progress = Instant::now();
         }
     }
-    finish_tail(bench, writer, start, phase)?;
+    finish_tail(bench, writer, start)?;
     Ok(EndReason::Finished)
 }
 
@@ -533,35 +547,48 @@ fn finish_tail(
     bench: &mut (dyn Bench + Send),
     writer: &mut RecordingWriter,
     start: Instant,
-    phase: Phase,
 ) -> Result<(), RigError> {
     let deadline = Instant::now() + STOP_WAIT;
+    let window_us = REST_WINDOW.as_micros() as u64;
     let mut batch = Vec::new();
-    let mut window: Vec<(Instant, f64)> = Vec::new();
+    // (device time, angle) of the recent samples; rest is judged in device time.
+    let mut window: std::collections::VecDeque<(u64, f64)> = Default::default();
     while Instant::now() < deadline {
         batch.clear();
         bench.poll_samples(POLL_INTERVAL, &mut batch)?;
-        let now = Instant::now();
         let host_time_s = start.elapsed().as_secs_f64();
+        let mut at_rest = false;
         for s in &batch {
             writer.push(&Row {
                 device_time_us: s.device_time_us,
                 host_time_s,
-                phase,
+                // The stop ramp is not part of a measured cycle.
+                phase: Phase::Settle,
                 driver_angle_deg: s.driver_angle_deg,
                 values: &s.values,
                 flags: s.flags,
             })?;
-            window.push((now, s.driver_angle_deg));
+            window.push_back((s.device_time_us, s.driver_angle_deg));
+            let oldest = window.front().map_or(0, |w| w.0);
+            if s.device_time_us.saturating_sub(oldest) >= window_us {
+                let (lo, hi) = window
+                    .iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), w| {
+                        (lo.min(w.1), hi.max(w.1))
+                    });
+                if hi - lo < REST_TOLERANCE_DEG {
+                    at_rest = true;
+                    break;
+                }
+            }
+            while window
+                .front()
+                .is_some_and(|w| s.device_time_us.saturating_sub(w.0) > window_us)
+            {
+                window.pop_front();
+            }
         }
-        window.retain(|(t, _)| now.duration_since(*t) <= REST_WINDOW);
-        let spread = window
-            .iter()
-            .map(|w| w.1)
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), a| {
-                (lo.min(a), hi.max(a))
-            });
-        if window.len() > 2 && spread.1 - spread.0 < REST_TOLERANCE_DEG {
+        if at_rest {
             break;
         }
     }
@@ -590,18 +617,26 @@ mod tests {
             Step::Continue(Phase::Forward, c) => assert!((c - 0.5).abs() < 1e-12),
             _ => panic!(),
         }
-        assert!(matches!(plan.step(1080.0), Step::Reverse));
-        plan.turn = Some(1080.0);
-        // Overshoot while decelerating moves the turning point.
+        // The forward phase runs PHASE_MARGIN_DEG past the last cycle.
+        let m = PHASE_MARGIN_DEG;
         assert!(matches!(
-            plan.step(1085.0),
-            Step::Continue(Phase::Settle, _)
+            plan.step(1080.0 + m / 2.0),
+            Step::Continue(Phase::Forward, _)
         ));
+        assert!(matches!(plan.step(1080.0 + m), Step::Reverse));
+        plan.turn = Some(1080.0 + m);
+        // Overshoot while decelerating moves the turning point.
+        let top = 1080.0 + m + 5.0;
+        assert!(matches!(plan.step(top), Step::Continue(Phase::Settle, _)));
         assert!(matches!(
-            plan.step(1085.0 - 400.0),
+            plan.step(top - 360.0 + m / 2.0),
             Step::Continue(Phase::Reverse, _)
         ));
-        assert!(matches!(plan.step(1085.0 - 1081.0), Step::Done));
+        assert!(matches!(
+            plan.step(top - 400.0),
+            Step::Continue(Phase::Reverse, _)
+        ));
+        assert!(matches!(plan.step(top - 1080.0 - m), Step::Done));
     }
 
     /// Guards: wrapping of the displayed error.

@@ -42,6 +42,11 @@ pub const RECONNECT_WINDOW: Duration = Duration::from_secs(5);
 /// Pause between attempts to reopen a lost port.
 pub const RECONNECT_POLL: Duration = Duration::from_millis(50);
 
+/// How long restoring after a reconnect waits for a device that answers "busy" (still
+/// decelerating after its watchdog stop): 3 s covers a stop from full speed at the
+/// slowest sensible acceleration.
+pub const RESTORE_BUSY_WAIT: Duration = Duration::from_secs(3);
+
 /// Capacity of the sample channel (samples). 60 s at 1 kHz: the session drains it every
 /// few ms, so this only fills if the host stalls badly; beyond it samples are counted lost.
 pub const SAMPLE_QUEUE: usize = 60_000;
@@ -483,7 +488,6 @@ impl IoThread {
             self.path.display()
         );
         let give_up = Instant::now() + RECONNECT_WINDOW;
-        let outage_start = Instant::now();
         loop {
             if self.quit.load(Ordering::Relaxed) {
                 return Err(RigError::Disconnected {
@@ -529,7 +533,8 @@ impl IoThread {
             cmds.extend(restore.motion);
             let mut ok = true;
             for c in cmds {
-                if self.command_sync(c, st).is_err() {
+                if let Err(e) = self.restore_command(c, st) {
+                    tracing::warn!("{}: restoring after reconnect: {e}", self.path.display());
                     ok = false;
                     break;
                 }
@@ -537,13 +542,8 @@ impl IoThread {
             if !ok {
                 continue;
             }
-            // The device clock may have restarted; keep ours monotonic across the outage.
-            st.unwrap = TimestampUnwrapper::new();
-            st.stream_start = None;
-            st.time_offset = st
-                .last_device_us
-                .map_or(0, |t| t + outage_start.elapsed().as_micros() as u64);
-            st.last_device_us = None;
+            // The device clock runs on through a USB drop (a reboot announces itself with a
+            // Boot event, handled where events arrive), so timestamps stay continuous.
             st.gaps = GapCounter::new();
             st.mark_next |= flags::RECONNECTED | flags::GAP_BEFORE;
             let mut sh = self.shared.lock().unwrap_or_else(|p| p.into_inner());
@@ -552,6 +552,28 @@ impl IoThread {
             drop(sh);
             tracing::warn!("{}: reconnected", self.path.display());
             return Ok(());
+        }
+    }
+
+    /// Re-send one command after a reconnect, waiting while the device is still busy
+    /// (decelerating after its watchdog stopped it).
+    fn restore_command(&mut self, command: Command, st: &mut Loop) -> Result<(), RigError> {
+        let deadline = Instant::now() + RESTORE_BUSY_WAIT;
+        loop {
+            match self.command_sync(command, st)? {
+                Report::Ack {
+                    code: AckCode::Busy,
+                    ..
+                } if Instant::now() < deadline => std::thread::sleep(RECONNECT_POLL),
+                Report::Ack { code, .. } if code != AckCode::Ok => {
+                    return Err(RigError::Device {
+                        path: self.path.clone(),
+                        command: command.name().into(),
+                        message: format!("{code:?}"),
+                    })
+                }
+                _ => return Ok(()),
+            }
         }
     }
 

@@ -1,0 +1,158 @@
+//! Link benchmark of the bench host. Prints:
+//! 1. decoder throughput (frames/s, MB/s) on a recorded-style 1 kHz sample stream, and how
+//!    many times faster than the link delivers it (target ≥ 100×);
+//! 2. samples per second sustained end to end — the simulated stepper bench (the real
+//!    firmware core, in its own `mpc-rig sim-device` process) → pseudo-terminal → stepper
+//!    backend — at 1 kHz sampling, with gaps and missing samples (target: 1 kHz, zero loss);
+//! 3. host CPU time per 1000 samples for that stream (this process only: backend I/O
+//!    thread and the consumer).
+//!
+//! Run with `cargo bench --bench link`. `LINK_BENCH_SECONDS` sets the streaming time
+//! (default 10 s).
+
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Command as Process, Stdio};
+use std::time::{Duration, Instant};
+
+use mpc_rig::rig::backend::stepper::StepperBench;
+use mpc_rig::rig::backend::{Driver, SampleStream};
+use mpc_rig::rig::config::RigConfig;
+use mpc_wire::{encode_frame_vec, Decoder, Report, Sample, SampleBatch, SampleFlags, SensorSet};
+
+fn main() {
+    decoder_throughput();
+    end_to_end();
+}
+
+fn decoder_throughput() {
+    // 1 kHz, one AS5600, 10 samples per frame: what the sim-stepper rig streams.
+    let frames = 200_000u32;
+    let mut bytes = Vec::new();
+    for f in 0..frames {
+        let mut batch = SampleBatch::new(SensorSet::ENCODER_A);
+        for i in 0..10u32 {
+            let k = f * 10 + i;
+            batch
+                .push(Sample {
+                    timestamp_us: k * 1000,
+                    position: k as i32 * 3,
+                    flags: SampleFlags::MOVING | SampleFlags::ENABLED,
+                    encoder_a: (k % 4096) as u16,
+                    ..Sample::default()
+                })
+                .expect("batch of 10 fits");
+        }
+        bytes.extend(encode_frame_vec(f as u16, &Report::Samples(batch)).expect("encodes"));
+    }
+    let mut decoder = Decoder::<Report>::new();
+    let mut ok = 0u64;
+    let t = Instant::now();
+    // Feed in 64-byte chunks, as USB CDC delivers.
+    for chunk in bytes.chunks(64) {
+        decoder.feed(chunk, |r| {
+            if r.is_ok() {
+                ok += 1
+            }
+        });
+    }
+    let s = t.elapsed().as_secs_f64();
+    assert_eq!(ok, u64::from(frames));
+    let fps = f64::from(frames) / s;
+    let link_fps = 100.0; // 1 kHz in batches of 10
+    println!(
+        "decoder: {frames} frames ({:.1} MB) in {s:.3} s = {fps:.0} frames/s, {:.1} MB/s, {:.0}x the 1 kHz link's {link_fps} frames/s",
+        bytes.len() as f64 / 1e6,
+        bytes.len() as f64 / 1e6 / s,
+        fps / link_fps
+    );
+}
+
+/// CPU seconds (user + system) of this process, from /proc/self/stat.
+fn process_cpu_s() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    let after = stat.rsplit_once(')').map_or("", |x| x.1);
+    let fields: Vec<&str> = after.split_whitespace().collect();
+    let tick = 100.0; // USER_HZ on Linux
+    let get = |i: usize| {
+        fields
+            .get(i)
+            .and_then(|v| v.parse::<f64>().ok())
+            .unwrap_or(0.0)
+    };
+    // After the comm field: state is index 0, utime index 11, stime index 12.
+    (get(11) + get(12)) / tick
+}
+
+fn end_to_end() {
+    let secs: f64 = std::env::var("LINK_BENCH_SECONDS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(10.0);
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut child = Process::new(env!("CARGO_BIN_EXE_mpc-rig"))
+        .args(["sim-device", "stepper", "--motion"])
+        .arg(root.join("data/motions/half-turn-2to1.toml"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start mpc-rig sim-device stepper");
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().expect("stdout"))
+        .read_line(&mut line)
+        .expect("simulator prints its path");
+    let mut rig = RigConfig::load(&root.join("rigs/sim-stepper.toml")).expect("rig");
+    rig.apply_port_overrides(&[line.trim().to_string()])
+        .expect("port");
+    let mut bench = StepperBench::open(&rig).expect("handshake with the simulator");
+    bench.zero().expect("zero");
+    bench.enable().expect("enable");
+    bench.start_stream(1000.0).expect("stream");
+    bench.run_at(60.0).expect("run");
+    // Let the ramp finish, then measure a steady window.
+    let mut buf = Vec::new();
+    let warm = Instant::now();
+    while warm.elapsed() < Duration::from_secs(1) {
+        buf.clear();
+        bench
+            .poll_samples(Duration::from_millis(20), &mut buf)
+            .expect("stream");
+    }
+    let c0 = bench.counts();
+    let cpu0 = process_cpu_s();
+    let t0 = Instant::now();
+    let mut n = 0u64;
+    let mut first_dev = None;
+    let mut last_dev = 0;
+    while t0.elapsed().as_secs_f64() < secs {
+        buf.clear();
+        bench
+            .poll_samples(Duration::from_millis(20), &mut buf)
+            .expect("stream");
+        for s in &buf {
+            first_dev.get_or_insert(s.device_time_us);
+            last_dev = s.device_time_us;
+        }
+        n += buf.len() as u64;
+    }
+    let wall = t0.elapsed().as_secs_f64();
+    let cpu = process_cpu_s() - cpu0;
+    let c1 = bench.counts();
+    bench.shutdown().expect("shutdown");
+    let _ = child.kill();
+    let _ = child.wait();
+    let dev_span = (last_dev - first_dev.unwrap_or(last_dev)) as f64 / 1e6;
+    println!(
+        "link: {n} samples in {wall:.2} s wall = {:.1} samples/s (device clock span {dev_span:.2} s = {:.1} samples/s of device time); gaps {}, missing samples {}, crc errors {}",
+        n as f64 / wall,
+        n as f64 / dev_span.max(1e-9),
+        c1.gaps - c0.gaps,
+        c1.missing_samples - c0.missing_samples,
+        c1.crc_errors - c0.crc_errors
+    );
+    println!(
+        "host CPU: {cpu:.2} s for {n} samples = {:.2} ms per 1000 samples ({:.1} % of one core)",
+        cpu * 1e6 / (n as f64).max(1.0),
+        cpu / wall * 100.0
+    );
+}

@@ -1,0 +1,157 @@
+//! The bench commands as a user runs them: `mpc-rig sim-device stepper` in its own process
+//! (path on the first stdout line), `mpc-rig measure` against it, and the exit codes and
+//! messages of an unplug and a version mismatch.
+
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+
+fn bin() -> &'static str {
+    env!("CARGO_BIN_EXE_mpc-rig")
+}
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A simulator child process, killed (by its own pid) when dropped.
+struct Sim {
+    child: Child,
+    path: String,
+}
+
+impl Sim {
+    fn start(faults: &[&str]) -> Sim {
+        let mut cmd = Command::new(bin());
+        cmd.args(["sim-device", "stepper", "--motion"])
+            .arg(root().join("data/motions/half-turn-2to1.toml"));
+        for f in faults {
+            cmd.args(["--fault", f]);
+        }
+        let mut child = cmd
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        Sim {
+            child,
+            path: line.trim().to_string(),
+        }
+    }
+}
+
+impl Drop for Sim {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn measure(sim: &Sim, out: &Path) -> std::process::Output {
+    Command::new(bin())
+        .arg("measure")
+        .arg("--rig")
+        .arg(root().join("rigs/sim-stepper.toml"))
+        .args(["--port", &sim.path])
+        .arg("--motion")
+        .arg(root().join("data/motions/half-turn-2to1.toml"))
+        .args(["--speed", "90", "--cycles", "3", "--no-analysis", "-o"])
+        .arg(out)
+        .output()
+        .unwrap()
+}
+
+/// Guards: the simulator prints a usable pseudo-terminal path on its first line.
+#[test]
+fn sim_device_prints_pty_path_first() {
+    let sim = Sim::start(&[]);
+    assert!(sim.path.starts_with("/dev/pts/"), "{}", sim.path);
+    assert!(Path::new(&sim.path).exists());
+}
+
+/// Guards: an unplug mid-run (the simulator closes its end for good) ends `measure` with
+/// exit code 5, a message saying the device disconnected and that the recording is kept,
+/// and an incomplete but readable recording.
+#[test]
+fn measure_reports_unplug_with_exit_code_and_kept_recording() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("rec");
+    let sim = Sim::start(&["disconnect_at_s=1.5"]);
+    let out = measure(&sim, &rec);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(5), "{stderr}");
+    assert!(stderr.contains("device disconnected"), "{stderr}");
+    assert!(stderr.contains("kept and marked incomplete"), "{stderr}");
+    let r = mpc_rig::rig::recording::Recording::load(&rec).unwrap();
+    assert!(!r.meta.complete && !r.is_empty());
+}
+
+/// Guards: a version mismatch stops `measure` before anything moves, with exit code 1 and
+/// a message naming both protocol versions.
+#[test]
+fn measure_reports_version_mismatch() {
+    let dir = tempfile::tempdir().unwrap();
+    let sim = Sim::start(&["protocol_version=7"]);
+    let out = measure(&sim, &dir.path().join("rec"));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("speaks wire protocol version 7, this host speaks 1"),
+        "{stderr}"
+    );
+}
+
+/// Guards: when the host process dies mid-run (SIGKILL, no cleanup at all), the firmware's
+/// dead-man watchdog stops the motor, and the recording on disk is still valid and
+/// analyzable, marked incomplete.
+#[test]
+fn host_crash_leaves_valid_recording_and_watchdog_stops_motor() {
+    use mpc_rig::motion::Motion;
+    use mpc_rig::rig::sim::plant::PlantConfig;
+    use mpc_rig::rig::sim::stepper::{self, Mechanics, SimStepperOptions};
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("rec");
+    let sim = stepper::spawn(SimStepperOptions {
+        target: Motion::from_file(&root().join("data/motions/half-turn-2to1.toml")).unwrap(),
+        plant: PlantConfig::default(),
+        mechanics: Mechanics::default(),
+        link: None,
+    })
+    .unwrap();
+    let mut child = Command::new(bin())
+        .arg("measure")
+        .arg("--rig")
+        .arg(root().join("rigs/sim-stepper.toml"))
+        .args(["--port", &sim.path().display().to_string()])
+        .arg("--motion")
+        .arg(root().join("data/motions/half-turn-2to1.toml"))
+        .args(["--speed", "60", "--cycles", "5", "--no-analysis", "-o"])
+        .arg(&rec)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    // Kill it while the motor runs.
+    let t0 = std::time::Instant::now();
+    while !sim.status().moving && t0.elapsed().as_secs() < 10 {
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    assert!(sim.status().moving, "the motor should run before the crash");
+    child.kill().unwrap(); // SIGKILL: no handler, no shutdown
+    child.wait().unwrap();
+    // Watchdog 250 ms + deceleration from 1 rev/s at 1440 °/s² (0.25 s).
+    std::thread::sleep(std::time::Duration::from_millis(1200));
+    let status = sim.stop().unwrap();
+    assert!(
+        !status.moving,
+        "watchdog did not stop the motor: {status:?}"
+    );
+    let r = mpc_rig::rig::recording::Recording::load(&rec).unwrap();
+    assert!(!r.meta.complete);
+    assert!(r.len() > 500, "{} rows survived", r.len());
+}
