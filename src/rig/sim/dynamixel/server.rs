@@ -19,7 +19,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use super::bus::Bus;
-use super::packet::Decoder;
+use super::packet::{Decoded, Decoder};
 use crate::rig::sim::plant::{LinkByte, LinkFaults, Plant};
 use crate::rig::RigError;
 use nix::fcntl::{fcntl, FcntlArg, OFlag};
@@ -35,6 +35,10 @@ pub const PARTIAL_PACKET_TIMEOUT: Duration = Duration::from_millis(100);
 /// Default 2 ms: the follower keeps moving smoothly between host requests.
 pub const IDLE_POLL: Duration = Duration::from_millis(2);
 
+/// The last stretch of a wait spent spinning instead of sleeping. Default 100 µs: about
+/// the overshoot of a thread sleep on a loaded Linux machine.
+pub const SPIN_MARGIN: Duration = Duration::from_micros(100);
+
 /// A hardware error to raise on a servo at a given time (e.g. an overload mid-run).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct HardwareFault {
@@ -49,8 +53,9 @@ pub struct HardwareFault {
 /// Server behaviour.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ServerOptions {
-    /// Delay each status packet by its transmission time at the control table's baud rate
-    /// (as a real half-duplex bus would). Default true.
+    /// Pace the bus at the baud rate in the driver's control table, as a real half-duplex
+    /// bus is: act on an instruction only after its transmission time, and send each status
+    /// packet after its own. Default true.
     pub pace_wire: bool,
     /// Hardware faults to inject.
     pub hardware_faults: Vec<HardwareFault>,
@@ -171,19 +176,29 @@ impl Server {
                     }
                 }
             }
+            // The bus timeline: when the last byte of what was read had crossed the wire.
+            // Waits are scheduled on it (absolute deadlines), so a late wake-up does not
+            // add up over a transaction's instruction and replies.
+            let mut bus_time = last_byte;
             while let Some(decoded) = decoder.next_packet() {
+                let baud = lock(&self.bus).driver().baud_rate();
+                if self.options.pace_wire {
+                    // The servo acts once the whole instruction has crossed the wire.
+                    if let Decoded::Packet(p) = &decoded {
+                        bus_time += Duration::from_secs_f64(wire_time_s(10 + p.body.len(), baud));
+                        sleep_until(bus_time);
+                    }
+                }
                 let now = start.elapsed().as_secs_f64();
-                let (replies, baud) = {
-                    let mut bus = lock(&self.bus);
-                    let replies = bus.handle(now, &decoded);
-                    (replies, bus.driver().baud_rate())
-                };
+                let replies = lock(&self.bus).handle(now, &decoded);
+                bus_time = bus_time.max(Instant::now());
                 for r in replies {
                     let mut wait = r.delay_s;
                     if self.options.pace_wire {
                         wait += wire_time_s(r.bytes.len(), baud);
                     }
-                    sleep_precise(Duration::from_secs_f64(wait));
+                    bus_time += Duration::from_secs_f64(wait);
+                    sleep_until(bus_time);
                     let bytes = self.apply_link_faults(r.bytes);
                     // A full pty buffer (nobody reading) loses the bytes, as on a real bus.
                     let _ = self.master.write(&bytes);
@@ -225,15 +240,16 @@ pub(super) fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
-/// Sleep for `d`, finishing with a short spin so sub-millisecond return delays are honoured
-/// (a plain sleep overshoots by tens of microseconds).
-fn sleep_precise(d: Duration) {
-    if d.is_zero() {
+/// Sleep until `until`, finishing with a short spin so sub-millisecond return delays are
+/// honoured (a plain sleep overshoots by tens of microseconds).
+fn sleep_until(until: Instant) {
+    let now = Instant::now();
+    if until <= now {
         return;
     }
-    let until = Instant::now() + d;
-    if d > Duration::from_micros(200) {
-        std::thread::sleep(d - Duration::from_micros(100));
+    let d = until - now;
+    if d > SPIN_MARGIN * 2 {
+        std::thread::sleep(d - SPIN_MARGIN);
     }
     while Instant::now() < until {
         std::hint::spin_loop();
