@@ -66,6 +66,34 @@ pub fn write_report(m: &Mechanism, dir: &Path) -> Result<Vec<PathBuf>, SynthErro
     dist.y_range = Some((-1.1, DIST_PLOT_CLIP + 0.05));
     out.extend(dist.write(&dir.join("dist"))?);
 
+    if matches!(m.class, Class::R1 | Class::R1T1) {
+        // Torque arm per contact: what the robust closure looks at.
+        let sg = closure::GAMMA0_DEG.to_radians().sin();
+        let mut c = Chart::new(
+            "torque arm per contact, (p × n)·z / |p_xy| (robust when |arm| ≥ sin 10°)",
+            "t (fraction of the period)",
+            "torque arm per unit radius",
+        );
+        for (k, cp) in m.curve_pairs.iter().enumerate() {
+            let pts = cp
+                .samples
+                .p
+                .iter()
+                .zip(&cp.samples.n)
+                .enumerate()
+                .map(|(i, (p, nn))| {
+                    let pxy = (p[0] * p[0] + p[1] * p[1]).sqrt().max(1e-12);
+                    (i as f64 / n, (p[0] * nn[1] - p[1] * nn[0]) / pxy)
+                })
+                .collect();
+            c.series.push(Series::line(format!("pair {k}"), pts, k));
+        }
+        c.h_lines.push((sg, "+sin 10°".into()));
+        c.h_lines.push((-sg, "−sin 10°".into()));
+        c.y_range = Some((-1.05, 1.05));
+        out.extend(c.write(&dir.join("torque-arm"))?);
+    }
+
     for (frame, name) in [("follower", "c2"), ("driver", "c1")] {
         for (view, a, b) in [("top", 0usize, 1usize), ("side", 0, 2)] {
             let mut c = Chart::new(
