@@ -402,8 +402,8 @@ impl Layout {
             place(*it);
         }
         for n in 1..=INDIRECT_COUNT {
-            // Indirect Address n defaults to Indirect Data n's own address... per e-manual the
-            // default of Indirect Address n is the address of Indirect Data n.
+            // e-manual: the factory default of Indirect Address n is the address of
+            // Indirect Data n (224 for n = 1), i.e. the data byte stands for itself.
             let data = indirect_data_addr(n);
             place(item(
                 indirect_address_addr(n),

@@ -17,7 +17,7 @@
 use std::sync::OnceLock;
 
 use super::control_table::{
-    addr, hw_error, mode, Access, Area, Item, Layout, Range, EXTENDED_POSITION_LIMIT, TABLE_SIZE,
+    addr, mode, Access, Area, Item, Layout, Range, EXTENDED_POSITION_LIMIT, TABLE_SIZE,
 };
 use super::packet::err;
 
@@ -760,11 +760,6 @@ impl Servo {
             self.table[usize::from(addr::FIRMWARE_VERSION)],
         ]
     }
-
-    /// Whether the Hardware Error Status has an overload latched (test helper for hosts).
-    pub fn overloaded(&self) -> bool {
-        self.hardware_error() & hw_error::OVERLOAD != 0
-    }
 }
 
 /// Move `v` toward `target` by at most `step` (infinite step jumps).
@@ -1000,7 +995,7 @@ mod tests {
     fn hardware_error_shuts_down_and_alerts() {
         let mut s = driver();
         s.write(addr::TORQUE_ENABLE, &[1]).unwrap();
-        s.inject_hardware_error(hw_error::OVERLOAD);
+        s.inject_hardware_error(super::super::control_table::hw_error::OVERLOAD);
         assert!(!s.torque_enabled());
         assert_eq!(s.alert(), err::ALERT);
         assert_eq!(s.write(addr::TORQUE_ENABLE, &[1]), Err(err::RESULT_FAIL));
