@@ -438,6 +438,15 @@ fn solve_band(
             } else {
                 candidate::solve(&pb, minimizer, opts.seed, b, i, opts.max_eval)
             };
+            tracing::debug!(
+                band = b,
+                index = i,
+                evals = c.evals,
+                residual_deg = c.residual_deg,
+                "candidate {}: {}",
+                if c.valid { "usable" } else { "rejected" },
+                c.reason.as_deref().unwrap_or("passed the checks")
+            );
             progress.candidate_done();
             c
         })
