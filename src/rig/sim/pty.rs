@@ -26,6 +26,24 @@ fn pty_err(what: &str) -> impl FnOnce(nix::errno::Errno) -> RigError + '_ {
     move |e| RigError::Pty(format!("{what}: {e}"))
 }
 
+/// Open a pseudo-terminal pair with the slave in raw mode and a non-blocking master;
+/// returns (master, slave, slave path). Shared by every simulator's device end.
+pub fn open_raw_pair() -> Result<(OwnedFd, OwnedFd, PathBuf), RigError> {
+    let pair = nix::pty::openpty(None, None).map_err(pty_err("openpty"))?;
+    let mut t = tcgetattr(pair.slave.as_fd()).map_err(pty_err("tcgetattr"))?;
+    cfmakeraw(&mut t);
+    tcsetattr(pair.slave.as_fd(), SetArg::TCSANOW, &t).map_err(pty_err("tcsetattr"))?;
+    let slave_path = nix::unistd::ttyname(pair.slave.as_fd()).map_err(pty_err("ttyname"))?;
+    let fd = pair.master.as_raw_fd();
+    let fl = fcntl(fd, FcntlArg::F_GETFL).map_err(pty_err("fcntl"))?;
+    fcntl(
+        fd,
+        FcntlArg::F_SETFL(OFlag::from_bits_truncate(fl) | OFlag::O_NONBLOCK),
+    )
+    .map_err(pty_err("fcntl"))?;
+    Ok((pair.master, pair.slave, slave_path))
+}
+
 /// The device end of a pseudo-terminal pair.
 pub struct Pty {
     master: File,
@@ -36,21 +54,10 @@ pub struct Pty {
 impl Pty {
     /// Open a new pair in raw mode; the master is non-blocking.
     pub fn open() -> Result<Pty, RigError> {
-        let pair = nix::pty::openpty(None, None).map_err(pty_err("openpty"))?;
-        let mut t = tcgetattr(pair.slave.as_fd()).map_err(pty_err("tcgetattr"))?;
-        cfmakeraw(&mut t);
-        tcsetattr(pair.slave.as_fd(), SetArg::TCSANOW, &t).map_err(pty_err("tcsetattr"))?;
-        let slave_path = nix::unistd::ttyname(pair.slave.as_fd()).map_err(pty_err("ttyname"))?;
-        let fd = pair.master.as_raw_fd();
-        let fl = fcntl(fd, FcntlArg::F_GETFL).map_err(pty_err("fcntl"))?;
-        fcntl(
-            fd,
-            FcntlArg::F_SETFL(OFlag::from_bits_truncate(fl) | OFlag::O_NONBLOCK),
-        )
-        .map_err(pty_err("fcntl"))?;
+        let (master, slave, slave_path) = open_raw_pair()?;
         Ok(Pty {
-            master: File::from(pair.master),
-            _slave: pair.slave,
+            master: File::from(master),
+            _slave: slave,
             slave_path,
         })
     }

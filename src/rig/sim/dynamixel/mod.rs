@@ -220,7 +220,7 @@ pub fn spawn_with_law(
             bus.gear_ratio
         )));
     }
-    let (master, slave, path) = server::open_raw_pty()?;
+    let (master, slave, path) = crate::rig::sim::pty::open_raw_pair()?;
     let bus = Arc::new(Mutex::new(Bus::new(bus, law)));
     let stop = Arc::new(AtomicBool::new(false));
     let thread = server::Server {

@@ -11,8 +11,7 @@
 
 use std::fs::File;
 use std::io::{Read, Write};
-use std::os::fd::{AsFd, AsRawFd, OwnedFd};
-use std::path::PathBuf;
+use std::os::fd::{AsFd, OwnedFd};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -22,9 +21,7 @@ use super::bus::Bus;
 use super::packet::{Decoded, Decoder};
 use crate::rig::sim::plant::{LinkByte, LinkFaults, Plant};
 use crate::rig::RigError;
-use nix::fcntl::{fcntl, FcntlArg, OFlag};
 use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
-use nix::sys::termios::{cfmakeraw, tcgetattr, tcsetattr, SetArg};
 
 /// Inter-byte timeout after which a partial packet is discarded. Default 100 ms: far longer
 /// than any gap inside a packet from a host, short enough to recover quickly from a
@@ -73,26 +70,6 @@ impl Default for ServerOptions {
 /// Seconds to transmit `bytes` at `baud` (10 bits per byte: start, 8 data, stop).
 pub fn wire_time_s(bytes: usize, baud: u32) -> f64 {
     bytes as f64 * 10.0 / f64::from(baud.max(1))
-}
-
-/// Open a pseudo-terminal pair in raw mode; returns (master, slave, slave path).
-pub fn open_raw_pty() -> Result<(OwnedFd, OwnedFd, PathBuf), RigError> {
-    let pty = nix::pty::openpty(None, None).map_err(|e| RigError::Pty(format!("openpty: {e}")))?;
-    let mut t =
-        tcgetattr(pty.slave.as_fd()).map_err(|e| RigError::Pty(format!("tcgetattr: {e}")))?;
-    cfmakeraw(&mut t);
-    tcsetattr(pty.slave.as_fd(), SetArg::TCSANOW, &t)
-        .map_err(|e| RigError::Pty(format!("tcsetattr: {e}")))?;
-    let path = nix::unistd::ttyname(pty.slave.as_fd())
-        .map_err(|e| RigError::Pty(format!("ttyname: {e}")))?;
-    let flags = fcntl(pty.master.as_raw_fd(), FcntlArg::F_GETFL)
-        .map_err(|e| RigError::Pty(format!("fcntl: {e}")))?;
-    fcntl(
-        pty.master.as_raw_fd(),
-        FcntlArg::F_SETFL(OFlag::from_bits_truncate(flags) | OFlag::O_NONBLOCK),
-    )
-    .map_err(|e| RigError::Pty(format!("fcntl: {e}")))?;
-    Ok((pty.master, pty.slave, path))
 }
 
 /// Why the server thread ended.
