@@ -3,7 +3,8 @@
 //! the worst conjugation residual and the wall-clock seconds.
 //!
 //! Run with `cargo bench --bench synth`. Set `SYNTH_BENCH_FILTER=<substring>` to run only
-//! matching motion files and `SYNTH_BENCH_THREADS=<n>` to fix the thread count.
+//! matching motion files, `SYNTH_BENCH_THREADS=<n>` to fix the thread count and
+//! `SYNTH_BENCH_CONE=arm` for the `arm` reading of the 3R cone (`--normal-cone arm`).
 //! Target (issue 3): every example under 60 s on a 2-core machine with E_valiTime = 1
 //! (paper and robust).
 
@@ -11,6 +12,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use mpc_rig::motion::Motion;
+use mpc_rig::synth::closure::NormalCone;
 use mpc_rig::synth::{synthesize, NoProgress, SynthError, SynthOptions};
 
 fn main() {
@@ -18,6 +20,12 @@ fn main() {
     let threads = std::env::var("SYNTH_BENCH_THREADS")
         .ok()
         .and_then(|v| v.parse().ok());
+    // SYNTH_BENCH_CONE=arm: 3R with the `arm` reading of Eq. 30 (see `NormalCone`).
+    let cone = match std::env::var("SYNTH_BENCH_CONE").as_deref() {
+        Ok("arm") => NormalCone::Arm,
+        _ => NormalCone::Tangent,
+    };
+    println!("3R normal cone: {}", cone.label());
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/motions");
     let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
         .expect("data/motions exists")
@@ -50,6 +58,7 @@ fn main() {
         };
         let opts = SynthOptions {
             threads,
+            cone,
             ..SynthOptions::default()
         };
         let t0 = Instant::now();

@@ -124,3 +124,59 @@ fn synth_refuses_k_below_minimum() {
         .failure()
         .stderr(predicate::str::contains("--k 1 is below the minimum 2"));
 }
+
+/// Guards 3R end to end with the `arm` reading of Eq. 30 (`--normal-cone arm`): the
+/// cone-sweep example closes (E_valiTime = 1, E_maxDist ≤ −ε) with reduced settings, the
+/// file records the cone it was designed with, `--check` passes, and the same file claimed
+/// to use the printed cone (|n·p̂| ≤ sin 10°) fails the cone check.
+#[test]
+fn synth_3r_with_arm_cone_closes_and_check_knows_the_cone() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("cs");
+    Command::cargo_bin("mpc-rig")
+        .unwrap()
+        .args([
+            "synth",
+            "data/motions/cone-sweep.toml",
+            "-o",
+            out.to_str().unwrap(),
+            "--samples",
+            "90",
+            "--candidates",
+            "16",
+            "--generations",
+            "100",
+            "--k",
+            "6",
+            "--dx",
+            "6",
+            "--normal-cone",
+            "arm",
+        ])
+        .assert()
+        .success()
+        .stdout(predicate::str::contains("3R"));
+    let file = out.join("mechanism.json");
+    let text = std::fs::read_to_string(&file).unwrap();
+    let json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(json["class"], "3R");
+    assert_eq!(json["solve"]["normal_cone"], "arm");
+    assert_eq!(json["closure"]["vali_time"], 1.0);
+    assert!(json["closure"]["max_dist"].as_f64().unwrap() <= -0.02);
+    Command::cargo_bin("mpc-rig")
+        .unwrap()
+        .args(["synth", "--check", file.to_str().unwrap()])
+        .assert()
+        .success()
+        .stdout(predicate::str::contains("arm cone"));
+    let mut claimed = json;
+    claimed["solve"]["normal_cone"] = serde_json::json!("tangent");
+    let bad = dir.path().join("claimed-tangent.json");
+    std::fs::write(&bad, serde_json::to_string(&claimed).unwrap()).unwrap();
+    Command::cargo_bin("mpc-rig")
+        .unwrap()
+        .args(["synth", "--check", bad.to_str().unwrap()])
+        .assert()
+        .code(2)
+        .stdout(predicate::str::contains("FAIL 3R normal cone"));
+}

@@ -73,6 +73,10 @@ pub struct DemoArgs {
     /// Synthesize again even when a cached mechanism exists.
     #[arg(long)]
     pub resynthesize: bool,
+    /// 3R only: bound on the contact normals (see `mpc-rig synth --help`); the 3R examples
+    /// close with `arm`.
+    #[arg(long, value_enum, default_value_t = crate::cli::synth::ConeArg::Tangent)]
+    pub normal_cone: crate::cli::synth::ConeArg,
     /// Tolerance on the RMS rotation error (degrees) for a pass/fail verdict.
     #[arg(long, value_parser = crate::cli::analyze::positive)]
     pub tol_deg: Option<f64>,
@@ -116,6 +120,7 @@ fn shipped(rel: &str) -> PathBuf {
 fn synth_options(args: &DemoArgs) -> SynthOptions {
     let mut o = SynthOptions {
         seed: args.seed,
+        cone: args.normal_cone.into(),
         ..SynthOptions::default()
     };
     if args.quick {
@@ -135,7 +140,7 @@ fn cache_key(motion_bytes: &[u8], o: &SynthOptions) -> String {
     h.update(motion_bytes);
     h.update(
         format!(
-            "seed={} k={:?} dx={:?} n={} m={} g={} p={} e={} scale={} version={}",
+            "seed={} k={:?} dx={:?} n={} m={} g={} p={} e={} scale={} cone={} version={}",
             o.seed,
             o.k,
             o.dx,
@@ -145,6 +150,7 @@ fn cache_key(motion_bytes: &[u8], o: &SynthOptions) -> String {
             o.population,
             o.max_eval,
             o.scale_mm,
+            o.cone.label(),
             env!("CARGO_PKG_VERSION")
         )
         .as_bytes(),

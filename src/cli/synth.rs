@@ -10,6 +10,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::motion::Motion;
+use crate::synth::closure::NormalCone;
 use crate::synth::mechanism::Attempt;
 use crate::synth::{self, Mechanism, SynthError, SynthOptions, SynthProgress};
 
@@ -51,6 +52,29 @@ pub struct SynthArgs {
     /// Millimetres per model unit written into the file.
     #[arg(long, default_value_t = synth::mechanism::DEFAULT_SCALE_MM)]
     pub scale_mm: f64,
+    /// 3R only: bound on the contact normals. `tangent` is the paper's Eq. 30 as printed
+    /// (|n·p̂| ≤ sin 10°, the conventions' default); `arm` is its stated purpose, "avoid
+    /// n × p = 0" (|n·p̂| ≤ cos 10°), with which the 3R examples close.
+    #[arg(long, value_enum, default_value_t = ConeArg::Tangent)]
+    pub normal_cone: ConeArg,
+}
+
+/// Command-line names of [`synth::closure::NormalCone`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ConeArg {
+    /// |n·p̂| ≤ sin γ₀ (Eq. 30 as printed).
+    Tangent,
+    /// |n·p̂| ≤ cos γ₀ (Eq. 30's purpose: a torque arm of at least sin γ₀·|p|).
+    Arm,
+}
+
+impl From<ConeArg> for synth::closure::NormalCone {
+    fn from(c: ConeArg) -> Self {
+        match c {
+            ConeArg::Tangent => Self::Tangent,
+            ConeArg::Arm => Self::Arm,
+        }
+    }
 }
 
 struct Bar {
@@ -97,9 +121,16 @@ impl SynthProgress for Bar {
 
 fn summary(m: &Mechanism) -> String {
     let over = m.closure.oversampled.as_ref();
+    let note = if m.class == synth::Class::R3 && m.solve.normal_cone == NormalCone::Arm {
+        "\nnormal cone: arm (|n·p̂| ≤ cos 10°); the search's \"robust\" above counts the contacts \
+         this cone allows, robust_vali/robust_max keep the conventions' definition \
+         (|n·p̂| ≤ sin 10°) and are reported only"
+    } else {
+        ""
+    };
     format!(
         "class  K  d_x    E_valiTime  E_maxDist  robust_vali  robust_max  vali@4x  residual°  time s\n\
-         {:<6} {:<2} {:<6} {:<11.4} {:<10.4} {:<12.4} {:<11.4} {:<8.4} {:<10.3} {:.1}",
+         {:<6} {:<2} {:<6} {:<11.4} {:<10.4} {:<12.4} {:<11.4} {:<8.4} {:<10.3} {:.1}{note}",
         m.class.label(),
         m.curve_pairs.len(),
         m.driver_offset,
@@ -159,6 +190,7 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
         candidates: args.candidates,
         generations: args.generations,
         scale_mm: args.scale_mm,
+        cone: args.normal_cone.into(),
         ..SynthOptions::default()
     };
     let bar = ProgressBar::new(0);

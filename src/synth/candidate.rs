@@ -341,7 +341,13 @@ pub fn solve(
             let c = model::contact_f64(&x, pose, pb.dx);
             let (p, n) = (c.p.vals(), c.n.vals());
             ntilde.push(closure::project(pb.class, p, n));
-            robust.push(closure::is_robust(pb.class, p, n));
+            // For 3R the GA counts the contacts that the chosen cone allows (all of them,
+            // since it is a hard constraint); the file still reports the conventions' robust
+            // figure (see `search::assemble`).
+            robust.push(match pb.class {
+                Class::R3 => pb.cone.allows(p, n),
+                _ => closure::is_robust(pb.class, p, n),
+            });
         }
     }
     Candidate {
@@ -389,6 +395,7 @@ pub(crate) mod tests {
                 .ok()
                 .and_then(|v| v.parse().ok())
                 .unwrap_or(W_ROBUST),
+            cone: closure::NormalCone::Tangent,
         }
     }
 

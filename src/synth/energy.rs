@@ -19,11 +19,11 @@
 //! by bounds on the control points' z (B-spline convex hull); minimum distance of the contact
 //! from the follower joint axis (1R/1R1T) or centre (3R) and of c¹ from the driver axis;
 //! a tangent-steepness bound that keeps the {N, B} frame regular; for 3R the cone
-//! |n·p̂| ≤ sin γ₀ (paper Eq. 30). Per-sample constraints are aggregated into one smooth
+//! |n·p̂| ≤ sin γ₀ (paper Eq. 30 as printed; cos γ₀ with [`NormalCone::Arm`]). Per-sample constraints are aggregated into one smooth
 //! Kreisselmeier–Steinhauser maximum each (KS ≥ max, so KS ≤ 0 implies every sample holds);
 //! the acceptance checks use the exact per-sample maxima.
 
-use super::closure::{Class, GAMMA0_DEG};
+use super::closure::{Class, NormalCone};
 use super::dual::{Dual, Scalar, V3};
 use super::model::{self, ANGLE_CPS, CURVE_CPS, NV};
 use super::pose::PoseTrack;
@@ -101,6 +101,8 @@ pub struct PairProblem {
     pub w_closure: f64,
     /// Weight of E_robust (1R, 1R1T).
     pub w_robust: f64,
+    /// Bound on |n·p̂| (3R only; see [`NormalCone`]).
+    pub cone: NormalCone,
 }
 
 /// Names of the constraints, in evaluation order.
@@ -219,7 +221,7 @@ impl PairProblem {
         let mut ks_rd = Ks::new(n);
         let mut ks_sl = Ks::new(n);
         let mut ks_cone = Ks::new(n);
-        let sin_g = GAMMA0_DEG.to_radians().sin();
+        let max_dot = self.cone.max_abs_dot();
         for i in 0..n {
             let pose = &self.poses.samples[i];
             let next = &self.poses.samples[(i + 1) % n];
@@ -301,7 +303,7 @@ impl PairProblem {
             );
             if self.class == Class::R3 {
                 let d = c.n.dot(c.p) / c.p.norm();
-                ks_cone.push(d * d - one * (sin_g * sin_g), j0, ja);
+                ks_cone.push(d * d - one * (max_dot * max_dot), j0, ja);
             }
         }
         if let (Some(iv), true) = (self.vary, self.class != Class::R1) {
@@ -439,6 +441,7 @@ mod tests {
                 vary: Some(3),
                 w_closure: W_CLOSURE,
                 w_robust: W_ROBUST,
+                cone: NormalCone::Tangent,
             },
             x,
         )

@@ -24,7 +24,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use super::candidate::{self, Candidate, OVERSAMPLE};
-use super::closure::{self, Class, ClosureSummary};
+use super::closure::{self, Class, ClosureSummary, NormalCone};
 use super::energy::{PairProblem, LENGTH_BOUNDS, W_CLOSURE, W_ROBUST};
 use super::error::SynthError;
 use super::ga::{self, Fitness, GaSettings, Pool};
@@ -77,6 +77,8 @@ pub struct SynthOptions {
     pub scale_mm: f64,
     /// Motion source name written into the file.
     pub source: Option<String>,
+    /// Bound on the 3R contact normals (default: Eq. 30 as printed, as the conventions).
+    pub cone: NormalCone,
 }
 
 impl Default for SynthOptions {
@@ -94,6 +96,7 @@ impl Default for SynthOptions {
             max_eval: MAX_EVAL,
             scale_mm: DEFAULT_SCALE_MM,
             source: None,
+            cone: NormalCone::default(),
         }
     }
 }
@@ -219,6 +222,7 @@ fn search(
             attempts: attempts.to_vec(),
             accepted,
             partial,
+            normal_cone: opts.cone,
         };
     'dx: for &dx in &dx_list {
         dx_tried.push(dx);
@@ -391,7 +395,13 @@ fn search(
 }
 
 /// The candidate problem of band `b`.
-pub fn band_problem(class: Class, poses: &Arc<PoseTrack>, dx: f64, b: usize) -> PairProblem {
+pub fn band_problem(
+    class: Class,
+    poses: &Arc<PoseTrack>,
+    dx: f64,
+    b: usize,
+    cone: NormalCone,
+) -> PairProblem {
     PairProblem {
         class,
         poses: poses.clone(),
@@ -400,6 +410,7 @@ pub fn band_problem(class: Class, poses: &Arc<PoseTrack>, dx: f64, b: usize) -> 
         vary: None,
         w_closure: W_CLOSURE,
         w_robust: W_ROBUST,
+        cone,
     }
 }
 
@@ -417,7 +428,7 @@ fn solve_band(
     (0..m)
         .into_par_iter()
         .map(|i| {
-            let mut pb = band_problem(class, poses, dx, b);
+            let mut pb = band_problem(class, poses, dx, b, opts.cone);
             if class != Class::R1 {
                 pb.vary = Some((i * n / m) % n);
             }
