@@ -23,9 +23,50 @@ use super::target::TargetLaw;
 /// samples, coarse enough that every bin holds several samples at 10 rpm and 100 Hz.
 pub const PROFILE_BINS: usize = 360;
 
-/// A cycle counts as complete when at least this fraction of its bins hold samples.
-/// Default 0.9: tolerates short gaps while excluding the partial first and last cycles.
+/// A cycle counts as complete when at least this fraction of its revolution is covered
+/// (see [`cycle_coverage`]). Default 0.9: tolerates short gaps while excluding the partial
+/// first and last cycles.
 pub const FULL_CYCLE_COVERAGE: f64 = 0.9;
+
+/// A run of empty bins counts as a gap (not covered) when it is wider than this many times
+/// the median spacing between occupied bins. Default 3: a sensor slower than one sample per
+/// bin (a BNO055 fusing at 100 Hz gives one per 1.8° at 30 rpm) still covers its cycle,
+/// while a dropout of a few samples does not.
+pub const GAP_SPACINGS: usize = 3;
+
+/// Runs of empty bins longer than 1/this of a revolution are always gaps, however sparse
+/// the sampling. Default 36 (10° of driver angle): a 100 Hz IMU still covers its cycles up
+/// to about 160 rpm, and a cycle with a handful of samples is never called complete.
+pub const MAX_GAP_DIVISOR: usize = 36;
+
+/// Fraction of a revolution covered by the occupied bins of one cycle. Every bin counts as
+/// covered except those in runs of empty bins longer than [`GAP_SPACINGS`] times the median
+/// spacing of the occupied bins (at least 2 bins, at most 1/[`MAX_GAP_DIVISOR`] of a
+/// revolution): so the figure is the same for a
+/// 1 kHz encoder and a 100 Hz IMU, and is low only where data is really missing.
+pub fn cycle_coverage(occupied: &[bool]) -> f64 {
+    let n = occupied.len();
+    let hits: Vec<usize> = (0..n).filter(|&b| occupied[b]).collect();
+    if n == 0 || hits.is_empty() {
+        return 0.0;
+    }
+    // Circular spacings between consecutive occupied bins.
+    let gaps: Vec<usize> = hits
+        .iter()
+        .enumerate()
+        .map(|(i, &b)| {
+            let next = hits[(i + 1) % hits.len()];
+            (next + n - b - 1) % n + 1
+        })
+        .collect();
+    let uncovered_in = |g: usize, limit: usize| if g > limit { g - 1 } else { 0 };
+    let mut sorted = gaps.clone();
+    sorted.sort_unstable();
+    let median = sorted[sorted.len() / 2];
+    let limit = (GAP_SPACINGS * median).clamp(2, (n / MAX_GAP_DIVISOR).max(2));
+    let uncovered: usize = gaps.iter().map(|&g| uncovered_in(g, limit)).sum();
+    1.0 - uncovered as f64 / n as f64
+}
 
 /// Statistics of one error signal. Serialized with the unit appended to every field name.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -377,8 +418,8 @@ pub fn channel_metrics(run: &MeasuredRun, ch: &ChannelErrors) -> ChannelMetrics 
             Phase::Reverse
         };
         let di = usize::from(dir < 0);
-        let hit = c.bins.iter().filter(|b| b.1 > 0).count();
-        let coverage = hit as f64 / PROFILE_BINS as f64;
+        let occupied: Vec<bool> = c.bins.iter().map(|b| b.1 > 0).collect();
+        let coverage = cycle_coverage(&occupied);
         let means: Vec<f64> = c
             .bins
             .iter()
@@ -520,6 +561,28 @@ pub fn median_abs(values: &[f64]) -> f64 {
 
 #[cfg(test)]
 mod tests {
+
+    /// Guards the cycle coverage: a 100 Hz IMU at 30 rpm (one sample per 1.8 bins) covers
+    /// its cycle fully, a dropout of 20° is counted as missing, a partial last cycle is
+    /// partial, and one lone sample or none covers nothing useful.
+    #[test]
+    fn coverage_counts_gaps_relative_to_the_sampling_density() {
+        let n = PROFILE_BINS;
+        let sparse: Vec<bool> = (0..n).map(|b| (b * 5) % 9 < 5).collect();
+        assert!((cycle_coverage(&sparse) - 1.0).abs() < 1e-12);
+        let mut dropout = vec![true; n];
+        for b in dropout.iter_mut().skip(100).take(20) {
+            *b = false;
+        }
+        assert!((cycle_coverage(&dropout) - 340.0 / 360.0).abs() < 1e-12);
+        let partial: Vec<bool> = (0..n).map(|b| b < 18).collect();
+        assert!((cycle_coverage(&partial) - 18.0 / 360.0).abs() < 1e-12);
+        let mut one = vec![false; n];
+        one[7] = true;
+        assert!((cycle_coverage(&one) - 1.0 / 360.0).abs() < 1e-12);
+        assert_eq!(cycle_coverage(&vec![false; n]), 0.0);
+    }
+
     use super::*;
     use crate::analysis::run::MeasuredRun;
 
