@@ -237,7 +237,7 @@ impl TargetLaw {
                 name,
                 |t| motion.sample(t).rotation,
                 motion
-                    .keyframes()
+                    .key_poses()
                     .iter()
                     .map(|k| KeyPose {
                         t: k.t,

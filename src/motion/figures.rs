@@ -53,7 +53,7 @@ pub fn charts(motion: &Motion, n: usize) -> Vec<(String, Chart)> {
             .with(Series::points(
                 "keyframes",
                 motion
-                    .keyframes()
+                    .key_poses()
                     .iter()
                     .map(|k| (k.t, angle(k.t)))
                     .collect(),
@@ -76,7 +76,7 @@ pub fn charts(motion: &Motion, n: usize) -> Vec<(String, Chart)> {
                 ))
                 .with(Series::points(
                     "keyframes",
-                    motion.keyframes().iter().map(|k| (k.t, h(k.t))).collect(),
+                    motion.key_poses().iter().map(|k| (k.t, h(k.t))).collect(),
                     5,
                     1,
                 ));
@@ -128,7 +128,7 @@ pub fn charts(motion: &Motion, n: usize) -> Vec<(String, Chart)> {
             // Keyframes: mark on each curve at its sample nearest in value continuity.
             let key_points = |k: usize| -> Vec<(f64, f64)> {
                 motion
-                    .keyframes()
+                    .key_poses()
                     .iter()
                     .map(|kf| {
                         let i = ((kf.t * n as f64).round() as usize).min(n);
@@ -175,7 +175,7 @@ pub fn charts(motion: &Motion, n: usize) -> Vec<(String, Chart)> {
             .with(Series::points(
                 "keyframes",
                 motion
-                    .keyframes()
+                    .key_poses()
                     .iter()
                     .flat_map(|k| {
                         let i = ((k.t * n as f64).round() as usize).min(n);
@@ -224,7 +224,7 @@ pub fn charts(motion: &Motion, n: usize) -> Vec<(String, Chart)> {
             .with(Series::points(
                 "keyframes",
                 motion
-                    .keyframes()
+                    .key_poses()
                     .iter()
                     .map(|k| project(&k.rotation))
                     .collect(),

@@ -180,6 +180,10 @@ enum Law {
     Spherical(RotationLaw),
 }
 
+/// More keyframes than this make a motion dense for [`Motion::key_poses`]. Default 64: the
+/// example specs have 4–8 keys, dense files hundreds of rows.
+pub const MAX_KEY_POSES: usize = 64;
+
 /// A validated, interpolated periodic follower motion.
 #[derive(Debug, Clone)]
 pub struct Motion {
@@ -296,6 +300,17 @@ impl Motion {
     /// The keyframes (for dense inputs: every row).
     pub fn keyframes(&self) -> &[Keyframe] {
         &self.keyframes
+    }
+
+    /// The keyframes worth marking and reporting as key poses: all of them for a keyframe
+    /// spec, none for a dense motion (more than [`MAX_KEY_POSES`] rows: CSV or a mechanism's
+    /// samples), whose rows are samples rather than poses a user chose.
+    pub fn key_poses(&self) -> &[Keyframe] {
+        if self.keyframes.len() <= MAX_KEY_POSES {
+            &self.keyframes
+        } else {
+            &[]
+        }
     }
 
     /// Warnings found while loading and scanning the motion.
