@@ -19,7 +19,7 @@ use clap::{Args, ValueEnum};
 use sha2::{Digest, Sha256};
 
 use crate::analysis::{analyze_and_report, ReportOptions};
-use crate::motion::Motion;
+use crate::motion::{Motion, MotionClass};
 use crate::rig::config::RigConfig;
 use crate::rig::recording::utc_dir_stamp;
 use crate::rig::session::{self, MeasureOptions, Progress, TargetSpec};
@@ -114,6 +114,23 @@ fn shipped(rel: &str) -> PathBuf {
     } else {
         Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)
     }
+}
+
+/// The simulated bench's rig for a motion class: the stepper bench measures a 1R follower
+/// with an AS5600, 1R1T adds a linear encoder, 3R uses a BNO055; the Dynamixel bench has one
+/// follower servo, so only 1R. Refused before any synthesis, with what to use instead.
+fn rig_for(bench: DemoBench, class: MotionClass) -> anyhow::Result<&'static str> {
+    Ok(match (bench, class) {
+        (DemoBench::Stepper, MotionClass::R1) => "rigs/sim-stepper.toml",
+        (DemoBench::Stepper, MotionClass::R1T1) => "rigs/sim-stepper-1r1t.toml",
+        (DemoBench::Stepper, MotionClass::R3) => "rigs/sim-stepper-imu.toml",
+        (DemoBench::Dynamixel, MotionClass::R1) => "rigs/sim-dynamixel.toml",
+        (DemoBench::Dynamixel, c) => bail!(
+            "the simulated Dynamixel bench reads one follower angle (a torque-off servo), so it \
+             can only measure 1R mechanisms; this example is {c}: use `--bench stepper`, whose \
+             simulated firmware has a linear encoder (1R1T) or a BNO055 (3R)"
+        ),
+    })
 }
 
 /// The synthesis settings of the demo.
@@ -221,10 +238,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         .with_context(|| format!("loading {}", motion_path.display()))?;
     let faults: Vec<String> = args.faults.iter().map(|f| fault_alias(f)).collect();
     let plant = PlantConfig::from_faults(&faults)?;
-    let rig_path = shipped(match args.bench {
-        DemoBench::Stepper => "rigs/sim-stepper.toml",
-        DemoBench::Dynamixel => "rigs/sim-dynamixel.toml",
-    });
+    let rig_path = shipped(rig_for(args.bench, motion.class())?);
     let rig = RigConfig::load(&rig_path)?;
 
     eprintln!("[1/4] mechanism for {} ({})", motion.name(), motion.class());
@@ -357,6 +371,48 @@ impl Sim {
         match self {
             Sim::Stepper(h) => h.path(),
             Sim::Dynamixel(h) => h.path(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Guards the demo's bench choice: every class gets a simulated rig that has its
+    /// sensors (and the file loads), and the Dynamixel bench refuses 1R1T and 3R up front,
+    /// naming the stepper bench instead.
+    #[test]
+    fn demo_picks_a_rig_that_can_measure_the_class() {
+        for class in [MotionClass::R1, MotionClass::R1T1, MotionClass::R3] {
+            let path = rig_for(DemoBench::Stepper, class).unwrap();
+            let rig = RigConfig::load(&shipped(path)).unwrap();
+            use crate::rig::config::SensorConfig as S;
+            let has = |kind: &str| {
+                rig.sensors.iter().any(|s| {
+                    matches!(
+                        (kind, s),
+                        ("as5600", S::As5600(_))
+                            | ("quadrature", S::Quadrature(_))
+                            | ("imu", S::Imu(_))
+                    )
+                })
+            };
+            match class {
+                MotionClass::R1 => assert!(has("as5600"), "{path}"),
+                MotionClass::R1T1 => assert!(has("as5600") && has("quadrature"), "{path}"),
+                MotionClass::R3 => assert!(has("imu"), "{path}"),
+            }
+        }
+        assert_eq!(
+            rig_for(DemoBench::Dynamixel, MotionClass::R1).unwrap(),
+            "rigs/sim-dynamixel.toml"
+        );
+        for class in [MotionClass::R1T1, MotionClass::R3] {
+            let e = rig_for(DemoBench::Dynamixel, class)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("--bench stepper"), "{e}");
         }
     }
 }
