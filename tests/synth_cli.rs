@@ -8,11 +8,21 @@ use predicates::prelude::*;
 const MOTION: &str = "data/motions/half-turn-2to1.toml";
 
 fn synth_small(out: &std::path::Path) -> assert_cmd::assert::Assert {
+    synth_reduced(MOTION, out, &["--k", "4", "--dx", "6", "--seed", "1"])
+}
+
+/// `synth` with reduced settings (90 samples, 16 candidates per band, 100 generations) plus
+/// `extra` arguments.
+fn synth_reduced(
+    motion: &str,
+    out: &std::path::Path,
+    extra: &[&str],
+) -> assert_cmd::assert::Assert {
     Command::cargo_bin("mpc-rig")
         .unwrap()
         .args([
             "synth",
-            MOTION,
+            motion,
             "-o",
             out.to_str().unwrap(),
             "--samples",
@@ -21,13 +31,8 @@ fn synth_small(out: &std::path::Path) -> assert_cmd::assert::Assert {
             "16",
             "--generations",
             "100",
-            "--k",
-            "4",
-            "--dx",
-            "6",
-            "--seed",
-            "1",
         ])
+        .args(extra)
         .assert()
 }
 
@@ -133,29 +138,13 @@ fn synth_refuses_k_below_minimum() {
 fn synth_3r_with_arm_cone_closes_and_check_knows_the_cone() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("cs");
-    Command::cargo_bin("mpc-rig")
-        .unwrap()
-        .args([
-            "synth",
-            "data/motions/cone-sweep.toml",
-            "-o",
-            out.to_str().unwrap(),
-            "--samples",
-            "90",
-            "--candidates",
-            "16",
-            "--generations",
-            "100",
-            "--k",
-            "6",
-            "--dx",
-            "6",
-            "--normal-cone",
-            "arm",
-        ])
-        .assert()
-        .success()
-        .stdout(predicate::str::contains("3R"));
+    synth_reduced(
+        "data/motions/cone-sweep.toml",
+        &out,
+        &["--k", "6", "--dx", "6", "--normal-cone", "arm"],
+    )
+    .success()
+    .stdout(predicate::str::contains("3R"));
     let file = out.join("mechanism.json");
     let text = std::fs::read_to_string(&file).unwrap();
     let json: serde_json::Value = serde_json::from_str(&text).unwrap();
