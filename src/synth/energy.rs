@@ -19,9 +19,10 @@
 //! by bounds on the control points' z (B-spline convex hull); minimum distance of the contact
 //! from the follower joint axis (1R/1R1T) or centre (3R) and of c¹ from the driver axis;
 //! a tangent-steepness bound that keeps the {N, B} frame regular; for 3R the cone
-//! |n·p̂| ≤ sin γ₀ (paper Eq. 30 as printed; cos γ₀ with [`NormalCone::Arm`]). Per-sample constraints are aggregated into one smooth
-//! Kreisselmeier–Steinhauser maximum each (KS ≥ max, so KS ≤ 0 implies every sample holds);
-//! the acceptance checks use the exact per-sample maxima.
+//! |n·p̂| ≤ sin γ₀ (paper Eq. 30 as printed; cos γ₀ with [`NormalCone::Arm`]). Per-sample
+//! constraints are aggregated into one smooth Kreisselmeier–Steinhauser maximum each
+//! (KS ≥ max, so KS ≤ 0 implies every sample holds); the acceptance checks use the exact
+//! per-sample maxima.
 
 use super::closure::{Class, NormalCone};
 use super::dual::{Dual, Scalar, V3};
