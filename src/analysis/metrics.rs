@@ -42,12 +42,12 @@ pub const MAX_GAP_DIVISOR: usize = 36;
 /// Fraction of a revolution covered by the occupied bins of one cycle. Every bin counts as
 /// covered except those in runs of empty bins longer than [`GAP_SPACINGS`] times the median
 /// spacing of the occupied bins (at least 2 bins, at most 1/[`MAX_GAP_DIVISOR`] of a
-/// revolution): so the figure is the same for a
-/// 1 kHz encoder and a 100 Hz IMU, and is low only where data is really missing.
+/// revolution): so the figure is the same for a 1 kHz encoder and a 100 Hz IMU, and is low
+/// only where data is really missing.
 pub fn cycle_coverage(occupied: &[bool]) -> f64 {
     let n = occupied.len();
     let hits: Vec<usize> = (0..n).filter(|&b| occupied[b]).collect();
-    if n == 0 || hits.is_empty() {
+    if hits.is_empty() {
         return 0.0;
     }
     // Circular spacings between consecutive occupied bins.
@@ -59,12 +59,12 @@ pub fn cycle_coverage(occupied: &[bool]) -> f64 {
             (next + n - b - 1) % n + 1
         })
         .collect();
-    let uncovered_in = |g: usize, limit: usize| if g > limit { g - 1 } else { 0 };
     let mut sorted = gaps.clone();
     sorted.sort_unstable();
     let median = sorted[sorted.len() / 2];
     let limit = (GAP_SPACINGS * median).clamp(2, (n / MAX_GAP_DIVISOR).max(2));
-    let uncovered: usize = gaps.iter().map(|&g| uncovered_in(g, limit)).sum();
+    // A gap of g bins between two occupied bins leaves g − 1 empty bins.
+    let uncovered: usize = gaps.iter().filter(|&&g| g > limit).map(|&g| g - 1).sum();
     1.0 - uncovered as f64 / n as f64
 }
 
