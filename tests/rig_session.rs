@@ -167,6 +167,7 @@ impl SampleStream for FakeBench {
                 driver_angle_deg: self.angle,
                 values: vec![counts],
                 flags: 0,
+                host_instant: None,
             });
             self.delivered += 1;
         }

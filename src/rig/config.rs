@@ -92,6 +92,12 @@ pub struct RigConfig {
     pub ports: Vec<PortConfig>,
     /// What turns the driver.
     pub driver: DriverConfig,
+    /// Our firmware board when it only reads sensors: a rig whose driver is a Dynamixel
+    /// servo and whose follower is measured by firmware sensors (an IMU for 3R, an
+    /// AS5600 and a linear encoder for 1R1T) names the board's port here. Absent for a
+    /// stepper-firmware driver, whose board reads the firmware sensors itself.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sensor_board: Option<SensorBoardConfig>,
     /// What measures the follower, in column order of the recording.
     #[serde(default)]
     pub sensors: Vec<SensorConfig>,
@@ -126,6 +132,14 @@ pub struct PortConfig {
 
 fn default_baud() -> u32 {
     115_200
+}
+
+/// Our firmware on a board of its own, reading follower sensors next to a Dynamixel bus.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorBoardConfig {
+    /// Name of the port (in `ports`) the board is on; not the Dynamixel bus's port.
+    pub port: String,
 }
 
 /// Direction sign: +1 when the motor's positive direction turns the driver counter-clockwise
@@ -572,6 +586,21 @@ impl RigConfig {
         self.sensors.iter().flat_map(|s| s.columns()).collect()
     }
 
+    /// Whether the rig mixes a Dynamixel driver bus with our firmware board as a sensor
+    /// board (two ports, two device clocks).
+    pub fn is_mixed(&self) -> bool {
+        self.sensor_board.is_some()
+    }
+
+    /// The same rig restricted to the sensors one device reads (`firmware` true: the
+    /// firmware sensors, else the Dynamixel ones), keeping their relative order. A mixed
+    /// bench opens each device with its part.
+    pub fn part(&self, firmware: bool) -> RigConfig {
+        let mut r = self.clone();
+        r.sensors.retain(|s| s.is_firmware() == firmware);
+        r
+    }
+
     /// The port with this name.
     pub fn port(&self, name: &str) -> Option<&PortConfig> {
         self.ports.iter().find(|p| p.name == name)
@@ -794,10 +823,66 @@ impl RigConfig {
                     }
                 }
             }
-            if s.is_firmware() && !matches!(self.driver, DriverConfig::StepperFirmware(_)) {
+            if s.is_firmware()
+                && matches!(self.driver, DriverConfig::Dynamixel(_))
+                && self.sensor_board.is_none()
+            {
                 return bad(
                     f("kind"),
-                    "firmware sensors need the stepper-firmware driver on the same port".into(),
+                    "a firmware sensor on a Dynamixel-driven rig needs our firmware board: add `[sensor_board]` with the board's `port`".into(),
+                );
+            }
+            if let SensorConfig::Dynamixel(d) = s {
+                match &self.driver {
+                    DriverConfig::Dynamixel(drv) if drv.port != d.port => {
+                        return bad(
+                            f("port"),
+                            format!(
+                                "a follower servo must be on the driver's bus `{}` (one Dynamixel bus per rig)",
+                                drv.port
+                            ),
+                        );
+                    }
+                    DriverConfig::StepperFirmware(_) => {
+                        return bad(
+                            f("kind"),
+                            "a Dynamixel follower encoder needs a Dynamixel driver on its bus; a stepper-firmware rig measures the follower with firmware sensors (as5600, quadrature, imu)".into(),
+                        );
+                    }
+                    DriverConfig::Dynamixel(_) => {}
+                }
+            }
+        }
+        if let Some(board) = &self.sensor_board {
+            let f = |k: &'static str| vec![Key("sensor_board"), Key(k)];
+            match &self.driver {
+                DriverConfig::StepperFirmware(_) => {
+                    return bad(
+                        f("port"),
+                        "the stepper-firmware driver's board reads the firmware sensors; `[sensor_board]` is only for a Dynamixel-driven rig".into(),
+                    );
+                }
+                DriverConfig::Dynamixel(d) if d.port == board.port => {
+                    return bad(
+                        f("port"),
+                        format!(
+                            "`{}` is the Dynamixel bus; the firmware board needs a port of its own",
+                            board.port
+                        ),
+                    );
+                }
+                DriverConfig::Dynamixel(_) => {}
+            }
+            if !has_port(&board.port) {
+                return bad(
+                    f("port"),
+                    format!("no [[ports]] entry named `{}`", board.port),
+                );
+            }
+            if !self.sensors.iter().any(SensorConfig::is_firmware) {
+                return bad(
+                    f("port"),
+                    "the sensor board reads no sensor: add a firmware sensor (as5600, quadrature, imu) or remove `[sensor_board]`".into(),
                 );
             }
         }
@@ -978,6 +1063,57 @@ mounting = [0.7071067811865476, 0.0, 0.0, 0.7071067811865476]
             }
             other => panic!("{other}"),
         }
+    }
+
+    /// Guards: the shipped mixed rig (Dynamixel driver + firmware board) loads, splits into
+    /// its two devices' parts in column order, and each misuse of `[sensor_board]` is an
+    /// error naming the field.
+    #[test]
+    fn mixed_rig_loads_and_sensor_board_misuse_is_rejected() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("rigs/sim-dynamixel-imu.toml");
+        let text = std::fs::read_to_string(&path).unwrap();
+        let cfg = load(&text).unwrap();
+        assert!(cfg.is_mixed());
+        assert_eq!(cfg.part(true).sensors.len(), 1);
+        assert!(cfg.part(false).sensors.is_empty());
+        let cases = [
+            (
+                text.replace("[sensor_board]\nport = \"board\"", ""),
+                "sensors[0].kind",
+                "needs our firmware board",
+            ),
+            (
+                text.replace(
+                    "[sensor_board]\nport = \"board\"",
+                    "[sensor_board]\nport = \"dxl\"",
+                ),
+                "sensor_board.port",
+                "is the Dynamixel bus",
+            ),
+            (
+                text.replace(
+                    "[sensor_board]\nport = \"board\"",
+                    "[sensor_board]\nport = \"pico\"",
+                ),
+                "sensor_board.port",
+                "no [[ports]] entry named `pico`",
+            ),
+        ];
+        for (t, field, msg) in cases {
+            let err = load(&t).unwrap_err().to_string();
+            assert!(
+                err.contains(&format!("field `{field}`")) && err.contains(msg),
+                "{err}"
+            );
+        }
+        // A board on a stepper-firmware rig is refused.
+        let err = load(&format!("{GOOD}\n[sensor_board]\nport = \"fw\"\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("sensor_board.port") && err.contains("only for a Dynamixel-driven rig"),
+            "{err}"
+        );
     }
 
     /// Guards: a reference to a port that does not exist is caught.

@@ -57,6 +57,9 @@ pub mod flags {
     pub const LATE: u32 = 1 << 5;
     /// The Dynamixel follower read failed; the value is repeated.
     pub const FOLLOWER_STALE: u32 = 1 << 6;
+    /// Mixed bench: no two bus samples close in time bracket this row, so its driver angle
+    /// (and any follower servo values) are the nearest bus sample's, not interpolated.
+    pub const DRIVER_HELD: u32 = 1 << 7;
 }
 
 /// Part of the run a sample belongs to.

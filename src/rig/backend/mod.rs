@@ -14,7 +14,7 @@
 //! Units at this interface are the driver shaft's (after gear ratio and direction sign):
 //! degrees and rpm, positive = counter-clockwise about +z.
 
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 pub mod stepper;
 
@@ -32,6 +32,11 @@ pub struct Sample {
     pub values: Vec<f64>,
     /// [`crate::rig::recording::flags`] bits.
     pub flags: u32,
+    /// Host-clock estimate of when the sample was taken, when the backend can tell: a
+    /// Dynamixel sample's reply arrival minus the servo's return delay and the reply's wire
+    /// time; a firmware sample's frame arrival (later than the sample by up to a batch).
+    /// The mixed bench maps the two device clocks onto the host clock with it.
+    pub host_instant: Option<Instant>,
 }
 
 /// What turns the driver.
@@ -82,6 +87,7 @@ pub trait Bench: Driver + SampleStream {}
 impl<T: Driver + SampleStream> Bench for T {}
 
 pub mod dynamixel;
+pub mod mixed;
 
 /// Open the backend a rig's driver needs, with ports resolved from the rig (after any
 /// `--port` overrides).
@@ -89,6 +95,7 @@ pub fn open(rig: &crate::rig::config::RigConfig) -> Result<Box<dyn Bench + Send>
     use crate::rig::config::DriverConfig;
     match &rig.driver {
         DriverConfig::StepperFirmware(_) => Ok(Box::new(stepper::StepperBench::open(rig)?)),
+        DriverConfig::Dynamixel(_) if rig.is_mixed() => Ok(Box::new(mixed::MixedBench::open(rig)?)),
         DriverConfig::Dynamixel(_) => Ok(Box::new(dynamixel::DynamixelBench::from_rig(rig)?)),
     }
 }

@@ -207,6 +207,7 @@ impl DynamixelBench {
             driver_id: driver.id,
             follower_ids: followers.iter().map(|f| f.id).collect(),
             heartbeat,
+            baud: driver.baud,
         };
         let (tx, rx) = mpsc::channel();
         let (etx, erx) = mpsc::channel();
@@ -782,6 +783,7 @@ impl SampleStream for DynamixelBench {
                         driver_angle_deg: self.driver_deg(raw.driver_position),
                         values: raw.followers.iter().map(|&p| f64::from(p)).collect(),
                         flags: f,
+                        host_instant: Some(raw.host_instant),
                     });
                     got = true;
                 }

@@ -76,6 +76,9 @@ pub struct RawSample {
     /// On the first sample after failed reads: how long the bus was silent (the servos'
     /// bus watchdog may have stopped the driver meanwhile).
     pub resumed_after: Option<Duration>,
+    /// Host-clock estimate of when the driver latched the sample: the arrival of its reply
+    /// minus its return delay and the reply's wire time.
+    pub host_instant: Instant,
 }
 
 /// What the worker reports while streaming.
@@ -113,6 +116,23 @@ pub struct WorkerSetup {
     pub follower_ids: Vec<u8>,
     /// Heartbeat period when idle (keeps the bus watchdog fed).
     pub heartbeat: Duration,
+    /// Bus baud rate (for the wire time of a reply).
+    pub baud: u32,
+}
+
+/// Return Delay Time (address 9), 2 µs per count; the factory value 250 (500 µs) is
+/// assumed when it cannot be read.
+const RETURN_DELAY_TIME: u16 = 9;
+
+/// Factory Return Delay Time, counts of 2 µs.
+const FACTORY_RETURN_DELAY: u8 = 250;
+
+/// Time from the driver latching a streamed sample to its reply having crossed the wire:
+/// the return delay plus the status packet (11 framing bytes and the block) at 10 bits
+/// per byte.
+pub fn reply_latency(return_delay_counts: u8, baud: u32) -> Duration {
+    let wire_s = (11.0 + f64::from(STREAM_BLOCK_LEN)) * 10.0 / f64::from(baud.max(1));
+    Duration::from_micros(u64::from(return_delay_counts) * 2) + Duration::from_secs_f64(wire_s)
 }
 
 /// Classify a failed transaction: (is a CRC failure, message).
@@ -127,6 +147,8 @@ pub fn describe(e: &TransferError) -> (bool, String) {
 }
 
 struct Streamer {
+    /// [`reply_latency`] of the driver.
+    latency: Duration,
     period: Duration,
     next_due: Instant,
     last_tick: Option<u16>,
@@ -163,7 +185,11 @@ pub fn run(
                 continue;
             }
             Ok(Message::Start(period)) => {
+                let delay = bus
+                    .read_u8(setup.driver_id, RETURN_DELAY_TIME)
+                    .map_or(FACTORY_RETURN_DELAY, |r| r.data);
                 stream = Some(Streamer {
+                    latency: reply_latency(delay, setup.baud),
                     period,
                     next_due: Instant::now(),
                     last_tick: None,
@@ -220,8 +246,12 @@ fn sample_once(
     let mut blocks: Vec<Option<Vec<u8>>> = vec![None; ids.len()];
     let mut alert = false;
     let mut failure: Option<(bool, String)> = None;
+    let mut driver_reply_at = None;
     let sent = bus.sync_read_cb(ids, STREAM_BLOCK_ADDRESS, STREAM_BLOCK_LEN, |r| match r {
         Ok(resp) => {
+            if resp.motor_id == ids[0] {
+                driver_reply_at = Some(Instant::now());
+            }
             if let Some(k) = ids.iter().position(|&id| id == resp.motor_id) {
                 alert |= resp.alert;
                 blocks[k] = Some(resp.data.to_vec());
@@ -298,6 +328,10 @@ fn sample_once(
         flags: sample_flags,
         alert,
         resumed_after,
+        host_instant: driver_reply_at
+            .unwrap_or_else(Instant::now)
+            .checked_sub(s.latency)
+            .unwrap_or_else(Instant::now),
     }));
     None
 }

@@ -402,6 +402,7 @@ impl IoThread {
     }
 
     fn on_bytes(&mut self, bytes: &[u8], st: &mut Loop) {
+        let arrived = Instant::now();
         let mut frames = Vec::new();
         let mut crc = 0;
         let mut other = 0;
@@ -425,7 +426,7 @@ impl IoThread {
             match f.msg {
                 Report::Samples(batch) => {
                     for s in batch.samples() {
-                        self.on_sample(s, st);
+                        self.on_sample(s, st, arrived);
                     }
                 }
                 Report::Event(e) => {
@@ -450,7 +451,7 @@ impl IoThread {
         }
     }
 
-    fn on_sample(&mut self, s: &mpc_wire::Sample, st: &mut Loop) {
+    fn on_sample(&mut self, s: &mpc_wire::Sample, st: &mut Loop, arrived: Instant) {
         let raw = st.unwrap.unwrap(s.timestamp_us);
         let start = *st.stream_start.get_or_insert(raw);
         let t = st.time_offset + raw.saturating_sub(start);
@@ -473,6 +474,7 @@ impl IoThread {
             driver_angle_deg: angle,
             values: st.values.clone(),
             flags: flags_out,
+            host_instant: Some(arrived),
         };
         let mut sh = self.shared.lock().unwrap_or_else(|p| p.into_inner());
         if self.samples.try_send(sample).is_ok() {

@@ -46,6 +46,19 @@ pub const COMMAND_WAIT: Duration = Duration::from_secs(2);
 /// latency at 10 ms.
 pub const FRAMES_PER_SECOND: f64 = 100.0;
 
+/// Placeholder mechanics configured on a sensor board's unused motor output: the
+/// firmware's defaults (1.8° motor, 1/16 microsteps, direct drive) at a crawl of 1 rpm, so
+/// that even a stray command could not spin anything fast.
+pub const SENSOR_BOARD_MOTOR: StepperDriverConfig = StepperDriverConfig {
+    port: String::new(),
+    steps_per_rev: 200,
+    microsteps: 16,
+    gear_ratio: 1.0,
+    max_speed_rpm: 1.0,
+    max_accel: 360.0,
+    direction: 1,
+};
+
 /// The stepper-firmware bench backend.
 pub struct StepperBench {
     path: PathBuf,
@@ -80,6 +93,28 @@ impl StepperBench {
             .ok_or_else(|| RigError::Setup(format!("rig has no port named `{}`", driver.port)))?;
         let path = resolve_port(port_cfg)?;
         Self::open_path(rig, driver, &path, port_cfg.baud)
+    }
+
+    /// Open our firmware as the sensor board of a mixed rig (`[sensor_board]`): the
+    /// handshake, version and capability checks and the sampling configuration are those
+    /// of a stepper bench; the motor output is configured with placeholder mechanics
+    /// ([`SENSOR_BOARD_MOTOR`]) and never enabled. `rig` is the whole rig; only its
+    /// firmware sensors are read.
+    pub fn open_sensor_board(rig: &RigConfig) -> Result<StepperBench, RigError> {
+        let board = rig
+            .sensor_board
+            .as_ref()
+            .ok_or_else(|| RigError::Setup(format!("rig `{}` has no [sensor_board]", rig.name)))?;
+        let port_cfg = rig
+            .port(&board.port)
+            .ok_or_else(|| RigError::Setup(format!("rig has no port named `{}`", board.port)))?;
+        let path = resolve_port(port_cfg)?;
+        let part = rig.part(true);
+        let motor = StepperDriverConfig {
+            port: board.port.clone(),
+            ..SENSOR_BOARD_MOTOR
+        };
+        Self::open_path(&part, &motor, &path, port_cfg.baud)
     }
 
     fn open_path(
