@@ -120,6 +120,7 @@ fn host_crash_leaves_valid_recording_and_watchdog_stops_motor() {
         plant: PlantConfig::default(),
         mechanics: Mechanics::default(),
         link: None,
+        driver: None,
     })
     .unwrap();
     let mut child = Command::new(bin())

@@ -30,6 +30,7 @@ fn sim(faults: &[&str]) -> SimHandle {
         plant: PlantConfig::from_faults(faults).unwrap(),
         mechanics: Mechanics::default(),
         link: None,
+        driver: None,
     })
     .unwrap()
 }
@@ -210,6 +211,7 @@ fn imu_bench_records_follower_orientation() {
         plant: PlantConfig::default(),
         mechanics: Mechanics::from_rig(&rig).unwrap(),
         link: None,
+        driver: None,
     })
     .unwrap();
     let mut opts = MeasureOptions {

@@ -355,6 +355,7 @@ impl Sim {
                     plant,
                     mechanics: crate::rig::sim::stepper::Mechanics::from_rig(rig)?,
                     link: None,
+                    driver: None,
                 };
                 Sim::Stepper(crate::rig::sim::stepper::spawn(opts)?)
             }

@@ -132,6 +132,7 @@ fn run_stepper(a: SimStepperArgs) -> anyhow::Result<ExitCode> {
         plant,
         mechanics,
         link: a.link,
+        driver: None,
     })
     .context("starting the simulated stepper bench")?;
     {

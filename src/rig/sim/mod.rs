@@ -5,12 +5,16 @@
 //!   the link faults, shared by every simulator.
 //! - [`dynamixel`]: a Protocol 2.0 bus with an XL430-class driver servo and a torque-off
 //!   follower servo.
+//! - [`stepper`]: our firmware core on emulated pins and I²C sensors.
+//! - [`mixed`]: a Dynamixel bus turning the mechanism and a firmware sensor board reading
+//!   it, wired from a mixed rig file.
 //! - [`pty`]: pseudo-terminal pairs (and a stable symlink for re-plugging).
 //!
 //! It owns no host-side protocol logic: the backends in [`crate::rig::backend`] are the
 //! same for real and simulated devices.
 
 pub mod dynamixel;
+pub mod mixed;
 pub mod plant;
 pub mod pty;
 pub mod stepper;

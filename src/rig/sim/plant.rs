@@ -61,6 +61,11 @@ pub trait TargetLaw: Send + Sync {
     fn follower_at(&self, t: f64) -> FollowerState;
 }
 
+/// The driver angle (rad, unwrapped) of a mechanism turned by another simulated device,
+/// read at the present instant: how a mixed bench's simulated sensor board learns where
+/// the simulated Dynamixel driver is.
+pub type DriverAngleSource = std::sync::Arc<dyn Fn() -> f64 + Send + Sync>;
+
 /// Follower state.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FollowerState {

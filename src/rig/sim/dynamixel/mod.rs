@@ -36,11 +36,12 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
+use std::time::Instant;
 
 pub use bus::{Bus, BusConfig, FollowerLaw};
 pub use server::{HardwareFault, ServerEnd, ServerOptions};
 
-use crate::rig::sim::plant::{FollowerState, Plant, PlantConfig, TargetLaw};
+use crate::rig::sim::plant::{DriverAngleSource, FollowerState, Plant, PlantConfig, TargetLaw};
 use crate::rig::RigError;
 
 /// A target law shared between threads (the simulator's plant and its caller).
@@ -135,6 +136,7 @@ pub struct SimDynamixelHandle {
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<ServerEnd>>,
     bus: Arc<Mutex<Bus>>,
+    start: Instant,
 }
 
 impl SimDynamixelHandle {
@@ -146,6 +148,18 @@ impl SimDynamixelHandle {
     /// Lock the bus to inspect (or inject faults into) the simulated servos.
     pub fn bus(&self) -> MutexGuard<'_, Bus> {
         server::lock(&self.bus)
+    }
+
+    /// The driver angle (rad) at the present instant, for another simulated device on the
+    /// same mechanism (the sensor board of a mixed bench): it advances the bus's mechanics
+    /// to now before reading, so it is as fresh as the wall clock.
+    pub fn driver_angle_source(&self) -> DriverAngleSource {
+        let (bus, start) = (self.bus.clone(), self.start);
+        Arc::new(move || {
+            let mut b = server::lock(&bus);
+            b.advance(start.elapsed().as_secs_f64());
+            b.driver_angle()
+        })
     }
 
     /// Whether the server thread is still serving.
@@ -223,6 +237,7 @@ pub fn spawn_with_law(
     let (master, slave, path) = crate::rig::sim::pty::open_raw_pair()?;
     let bus = Arc::new(Mutex::new(Bus::new(bus, law)));
     let stop = Arc::new(AtomicBool::new(false));
+    let start = Instant::now();
     let thread = server::Server {
         master: std::fs::File::from(master),
         slave,
@@ -230,6 +245,7 @@ pub fn spawn_with_law(
         plant,
         options: server,
         stop: stop.clone(),
+        start,
     }
     .spawn()?;
     Ok(SimDynamixelHandle {
@@ -237,5 +253,6 @@ pub fn spawn_with_law(
         stop,
         thread: Some(thread),
         bus,
+        start,
     })
 }

@@ -89,6 +89,8 @@ pub(super) struct Server {
     pub plant: Arc<Mutex<Plant>>,
     pub options: ServerOptions,
     pub stop: Arc<AtomicBool>,
+    /// Time zero of the bus's simulation clock.
+    pub start: Instant,
 }
 
 impl Server {
@@ -100,7 +102,7 @@ impl Server {
     }
 
     fn run(mut self) -> ServerEnd {
-        let start = Instant::now();
+        let start = self.start;
         let link: LinkFaults = lock(&self.plant).config().link.clone();
         let mut decoder = Decoder::new();
         let mut last_byte = Instant::now();

@@ -28,7 +28,7 @@ use mpc_wire::{Decoder, Report, SensorSet};
 
 use crate::motion::Motion;
 use crate::rig::config::{DriverConfig, RigConfig};
-use crate::rig::sim::plant::{LinkByte, Plant, PlantConfig};
+use crate::rig::sim::plant::{DriverAngleSource, LinkByte, Plant, PlantConfig};
 use crate::rig::sim::pty::{Pty, StableLink};
 use crate::rig::RigError;
 
@@ -115,20 +115,43 @@ impl Mechanics {
             imu_mounting: nalgebra::UnitQuaternion::identity(),
             quadrature_mm_per_count: None,
         };
+        m.fit_sensors(rig);
+        Ok(m)
+    }
+
+    /// The mechanics of a mixed rig's sensor board: the firmware's default motor output
+    /// (unused) and the rig's firmware sensors.
+    pub fn sensor_board(rig: &RigConfig) -> Result<Mechanics, RigError> {
+        if !rig.is_mixed() {
+            return Err(RigError::Setup(format!(
+                "rig `{}` has no [sensor_board]",
+                rig.name
+            )));
+        }
+        let mut m = Mechanics {
+            as5600: false,
+            ..Mechanics::default()
+        };
+        m.fit_sensors(rig);
+        Ok(m)
+    }
+
+    fn fit_sensors(&mut self, rig: &RigConfig) {
         for s in &rig.sensors {
             use crate::rig::config::SensorConfig as S;
             match s {
-                S::As5600(e) if e.channel == 0 => m.as5600 = true,
-                S::As5600(_) => m.as5600_b = true,
+                S::As5600(e) if e.channel == 0 => self.as5600 = true,
+                S::As5600(_) => self.as5600_b = true,
                 S::Imu(i) => {
-                    m.imu = true;
-                    m.imu_mounting = i.mounting_rotation();
+                    self.imu = true;
+                    self.imu_mounting = i.mounting_rotation();
                 }
-                S::Quadrature(e) => m.quadrature_mm_per_count = e.mm_per_count.or(Some(0.01)),
+                S::Quadrature(e) => {
+                    self.quadrature_mm_per_count = e.mm_per_count.or(Some(0.01));
+                }
                 S::Dynamixel(_) => {}
             }
         }
-        Ok(m)
     }
 
     fn usteps_per_driver_rev(&self) -> f64 {
@@ -166,6 +189,10 @@ pub struct SimStepperOptions {
     /// Also expose the device at this stable path (a symlink re-pointed on re-plug).
     /// Created automatically in the temp directory when a drop-out is configured.
     pub link: Option<PathBuf>,
+    /// `Some` for the sensor board of a mixed bench: the mechanism's driver is turned by
+    /// another device (a simulated Dynamixel) and the plant follows this angle; the
+    /// firmware's own step output drives nothing. `None`: the firmware's steps turn it.
+    pub driver: Option<DriverAngleSource>,
 }
 
 /// What the simulator has done so far.
@@ -306,6 +333,46 @@ struct Bench {
     physical: i64,
     missed: u64,
     last_step_change_us: u64,
+    external: Option<External>,
+}
+
+/// A driver turned by another device: its angle is read once per burst of simulation (at
+/// the burst's end, which is the wall clock's now) and interpolated linearly for the
+/// substeps in between, so sensor readings follow the driver within a substep rather than
+/// a burst.
+struct External {
+    source: DriverAngleSource,
+    /// (simulated µs, angle rad) at the previous burst's end.
+    from: (u64, f64),
+    /// (simulated µs, angle rad) at this burst's end.
+    to: (u64, f64),
+}
+
+impl External {
+    fn new(source: DriverAngleSource) -> Self {
+        let phi = source();
+        Self {
+            source,
+            from: (0, phi),
+            to: (0, phi),
+        }
+    }
+
+    /// Read the driver for a burst ending at `end_us`.
+    fn begin_burst(&mut self, end_us: u64) {
+        self.from = self.to;
+        self.to = (end_us, (self.source)());
+    }
+
+    fn angle_at(&self, now_us: u64) -> f64 {
+        let (t0, a0) = self.from;
+        let (t1, a1) = self.to;
+        if t1 <= t0 {
+            return a1;
+        }
+        let w = (now_us.clamp(t0, t1) - t0) as f64 / (t1 - t0) as f64;
+        a0 + w * (a1 - a0)
+    }
 }
 
 impl Bench {
@@ -324,9 +391,14 @@ impl Bench {
             }
             self.last_steps = steps;
         }
-        let phi = f64::from(self.mech.direction) * self.physical as f64
-            / self.mech.usteps_per_driver_rev()
-            * TAU;
+        let phi = match &self.external {
+            Some(driver) => driver.angle_at(now_us),
+            None => {
+                f64::from(self.mech.direction) * self.physical as f64
+                    / self.mech.usteps_per_driver_rev()
+                    * TAU
+            }
+        };
         let f = self.plant.follower(phi);
         if self.mech.as5600 || self.mech.as5600_b {
             let counts = self.plant.rotary_counts(f.angle_z, 4096.0);
@@ -369,6 +441,7 @@ fn run(
         physical: 0,
         missed: 0,
         last_step_change_us: 0,
+        external: opts.driver.clone().map(External::new),
     };
     bench.update(0);
     let mut fw = firmware::Firmware::new(&mech, clock.clone(), chip, bus_a, bus_b, quadrature)?;
@@ -413,6 +486,9 @@ fn run(
             }
         }
         // Advance simulated time.
+        if let Some(e) = bench.external.as_mut() {
+            e.begin_burst(target_us);
+        }
         while sim_us + SUBSTEP_US <= target_us {
             sim_us += SUBSTEP_US;
             clock.set_us(sim_us);

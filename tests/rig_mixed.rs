@@ -1,0 +1,143 @@
+//! Whole measurement sessions on the simulated mixed bench through real pseudo-terminals: a
+//! Dynamixel bus turns the driver while our firmware on a second port reads the follower
+//! (an IMU for 3R, an AS5600 and a linear encoder for 1R1T). Guards the merge of two
+//! devices' streams into one recording, the analysis of it, and the way out when the
+//! sensor board is unplugged mid-run (recording kept, driver servo stopped).
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+use mpc_rig::analysis::{analyze_and_report, ReportOptions};
+use mpc_rig::motion::Motion;
+use mpc_rig::rig::config::RigConfig;
+use mpc_rig::rig::recording::{flags, Recording};
+use mpc_rig::rig::session::{measure, EndReason, MeasureOptions, TargetSpec};
+use mpc_rig::rig::sim::mixed::{spawn, spawn_with};
+use mpc_rig::rig::sim::plant::PlantConfig;
+
+fn repo(p: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join(p)
+}
+
+fn options(
+    rig: &str,
+    ports: Vec<String>,
+    motion: &Path,
+    out: &Path,
+    cycles: u32,
+) -> MeasureOptions {
+    MeasureOptions {
+        rig_path: repo(rig),
+        ports,
+        target: TargetSpec::Motion(motion.to_path_buf()),
+        speed_rpm: 30.0,
+        cycles,
+        settle_cycles: 1,
+        reverse: false,
+        out_dir: Some(out.to_path_buf()),
+        cancel: Arc::new(AtomicBool::new(false)),
+        progress: None,
+    }
+}
+
+/// Guards the 3R servo bench: a Dynamixel-driven, IMU-measured session records at the
+/// board's rate with no gaps, every measured row carries an interpolated (not held) driver
+/// angle, the sidecar names both devices, and the analysis of an ideal plant finds the
+/// follower within 0.5° RMS of the target with a phase lag under 0.3° of driver: the plant
+/// has none, so that is the error of aligning the two device clocks (30 rpm: 0.18° of
+/// driver per ms, so under 1.7 ms).
+#[test]
+fn mixed_bench_measures_a_3r_follower_turned_by_a_servo() {
+    let rig_path = "rigs/sim-dynamixel-imu.toml";
+    let rig = RigConfig::load(&repo(rig_path)).unwrap();
+    let motion_path = repo("data/motions/cone-sweep.toml");
+    let motion = Motion::from_file(&motion_path).unwrap();
+    let sim = spawn(&rig, motion, PlantConfig::default()).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let rec_dir = tmp.path().join("rec");
+    let mut m = options(rig_path, sim.port_overrides(), &motion_path, &rec_dir, 2);
+    let outcome = measure(&mut m).unwrap();
+    drop(sim);
+    assert!(outcome.complete, "{}", outcome.end);
+    let rec = Recording::load(&rec_dir).unwrap();
+    assert!(
+        rec.meta.device.backend.starts_with("mixed"),
+        "{:?}",
+        rec.meta.device
+    );
+    assert_eq!(rec.meta.device.ports.len(), 2);
+    assert!(rec.meta.device.extra.contains_key("bus"));
+    assert_eq!(rec.meta.counts.gaps, 0, "{:?}", rec.meta.counts);
+    // 3 turns at 30 rpm = 6 s at 500 Hz ≈ 3000 rows (fewer on a loaded machine).
+    assert!(rec.phase.len() > 2000, "{} rows", rec.phase.len());
+    let held = rec
+        .flags
+        .iter()
+        .filter(|&&f| f & flags::DRIVER_HELD != 0)
+        .count();
+    assert!(held * 100 < rec.flags.len(), "{held} held rows");
+    let s = analyze_and_report(&rec_dir, &ReportOptions::default()).unwrap();
+    let rms = s.headline.rms_error_deg.unwrap();
+    let lag = s.headline.phase_lag_deg;
+    eprintln!(
+        "3R mixed: RMS {rms:.4}°, lag {lag:.4}°, held {held} of {}",
+        rec.flags.len()
+    );
+    assert!(rms < 0.5, "RMS {rms}°");
+    // The plant has no lag: what the analysis finds is the clock alignment's error.
+    assert!(lag.abs() < 0.3, "phase lag {lag}° (clock misalignment)");
+}
+
+/// Guards the 1R1T servo bench: the AS5600 and the linear encoder on the board, the driver
+/// angle from the bus, rotation and height both within tolerance of the target.
+#[test]
+fn mixed_bench_measures_a_1r1t_follower_turned_by_a_servo() {
+    let rig_path = "rigs/sim-dynamixel-1r1t.toml";
+    let rig = RigConfig::load(&repo(rig_path)).unwrap();
+    let motion_path = repo("data/motions/screw-bob.toml");
+    let motion = Motion::from_file(&motion_path).unwrap();
+    let sim = spawn(&rig, motion, PlantConfig::default()).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let rec_dir = tmp.path().join("rec");
+    let mut m = options(rig_path, sim.port_overrides(), &motion_path, &rec_dir, 1);
+    let outcome = measure(&mut m).unwrap();
+    drop(sim);
+    assert!(outcome.complete, "{}", outcome.end);
+    let s = analyze_and_report(&rec_dir, &ReportOptions::default()).unwrap();
+    let rms = s.headline.rms_error_deg.unwrap();
+    let mm = s.headline.rms_error_mm.unwrap();
+    let lag = s.headline.phase_lag_deg;
+    eprintln!("1R1T mixed: RMS {rms:.4}°, {mm:.4} mm, lag {lag:.4}°");
+    assert!(rms < 0.5, "RMS {rms}°");
+    assert!(mm < 0.05, "RMS height {mm} mm");
+    assert!(lag.abs() < 0.3, "phase lag {lag}° (clock misalignment)");
+}
+
+/// Guards the way out when the board disappears: the session ends as disconnected, the
+/// recording up to then is kept, loads and is marked incomplete, and the driver servo on
+/// the still-connected bus is left with its torque off.
+#[test]
+fn unplugging_the_sensor_board_keeps_the_recording_and_stops_the_servo() {
+    let rig_path = "rigs/sim-dynamixel-imu.toml";
+    let rig = RigConfig::load(&repo(rig_path)).unwrap();
+    let motion_path = repo("data/motions/cone-sweep.toml");
+    let motion = Motion::from_file(&motion_path).unwrap();
+    let board_faults = PlantConfig::from_faults(&["disconnect_at_s=3"]).unwrap();
+    let sim = spawn_with(&rig, motion, PlantConfig::default(), board_faults).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let rec_dir = tmp.path().join("rec");
+    let mut m = options(rig_path, sim.port_overrides(), &motion_path, &rec_dir, 4);
+    let outcome = measure(&mut m).unwrap();
+    assert!(
+        matches!(outcome.end, EndReason::Disconnected(_)),
+        "{}",
+        outcome.end
+    );
+    assert!(!outcome.complete);
+    let rec = Recording::load(&rec_dir).unwrap();
+    assert!(!rec.meta.complete);
+    assert!(rec.phase.len() > 500, "{} rows kept", rec.phase.len());
+    let driver = sim.bus().bus().driver().clone();
+    assert!(!driver.torque_enabled(), "driver torque still on");
+}
