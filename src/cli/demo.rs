@@ -2,8 +2,9 @@
 //!
 //! Synthesizes the example mechanism (or reuses the cached one under `out/demo/`, keyed by
 //! the motion file's SHA-256, the seed, the synthesis settings and the tool version), starts
-//! a simulated bench in-process on a pseudo-terminal (our firmware core behind the stepper
-//! bench, or the Protocol 2.0 Dynamixel bus), measures a few cycles through the real serial
+//! a simulated bench in-process on pseudo-terminals (our firmware core behind the stepper
+//! bench, or the Protocol 2.0 Dynamixel bus, with a firmware sensor board beside it for 1R1T
+//! and 3R), measures a few cycles through the real serial
 //! session, analyses the recording and prints where the mechanism and the report are, with
 //! the headline figures. Options choose another example, the bench and injected faults
 //! (`--fault backlash=2`). Every step is a library call; this file only orchestrates.
@@ -31,7 +32,9 @@ use crate::synth::{Mechanism, SynthOptions, SynthProgress};
 pub enum DemoBench {
     /// Our firmware core driving a stepper, an AS5600 on the follower (rigs/sim-stepper.toml).
     Stepper,
-    /// A Dynamixel driver servo and a torque-off follower servo (rigs/sim-dynamixel.toml).
+    /// A Dynamixel driver servo and a torque-off follower servo (rigs/sim-dynamixel.toml);
+    /// for 1R1T and 3R the follower sensors are on a firmware sensor board next to the bus
+    /// (rigs/sim-dynamixel-1r1t.toml, rigs/sim-dynamixel-imu.toml).
     Dynamixel,
 }
 
@@ -117,20 +120,20 @@ fn shipped(rel: &str) -> PathBuf {
 }
 
 /// The simulated bench's rig for a motion class: the stepper bench measures a 1R follower
-/// with an AS5600, 1R1T adds a linear encoder, 3R uses a BNO055; the Dynamixel bench has one
-/// follower servo, so only 1R. Refused before any synthesis, with what to use instead.
-fn rig_for(bench: DemoBench, class: MotionClass) -> anyhow::Result<&'static str> {
-    Ok(match (bench, class) {
+/// with an AS5600, 1R1T adds a linear encoder, 3R uses a BNO055. The Dynamixel bench reads
+/// a 1R follower with a torque-off servo; for 1R1T and 3R the same sensors as the stepper
+/// bench sit on a firmware sensor board next to the bus (a mixed rig).
+fn rig_for(bench: DemoBench, class: MotionClass) -> &'static str {
+    match (bench, class) {
         (DemoBench::Stepper, MotionClass::R1) => "rigs/sim-stepper.toml",
         (DemoBench::Stepper, MotionClass::R1T1) => "rigs/sim-stepper-1r1t.toml",
         (DemoBench::Stepper, MotionClass::R3) => "rigs/sim-stepper-imu.toml",
         (DemoBench::Dynamixel, MotionClass::R1) => "rigs/sim-dynamixel.toml",
-        (DemoBench::Dynamixel, c) => bail!(
-            "the simulated Dynamixel bench reads one follower angle (a torque-off servo), so it \
-             can only measure 1R mechanisms; this example is {c}: use `--bench stepper`, whose \
-             simulated firmware has a linear encoder (1R1T) or a BNO055 (3R)"
-        ),
-    })
+        // A torque-off servo reads one angle: 1R1T and 3R followers are read by our
+        // firmware on a sensor board next to the bus.
+        (DemoBench::Dynamixel, MotionClass::R1T1) => "rigs/sim-dynamixel-1r1t.toml",
+        (DemoBench::Dynamixel, MotionClass::R3) => "rigs/sim-dynamixel-imu.toml",
+    }
 }
 
 /// The synthesis settings of the demo.
@@ -238,7 +241,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         .with_context(|| format!("loading {}", motion_path.display()))?;
     let faults: Vec<String> = args.faults.iter().map(|f| fault_alias(f)).collect();
     let plant = PlantConfig::from_faults(&faults)?;
-    let rig_path = shipped(rig_for(args.bench, motion.class())?);
+    let rig_path = shipped(rig_for(args.bench, motion.class()));
     let rig = RigConfig::load(&rig_path)?;
 
     eprintln!("[1/4] mechanism for {} ({})", motion.name(), motion.class());
@@ -253,7 +256,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
 
     eprintln!("[2/4] starting the simulated {:?} bench", args.bench);
     let sim = Sim::spawn(args.bench, target, plant, &rig)?;
-    eprintln!("      device on {}", sim.path().display());
+    eprintln!("      device on {}", sim.ports().join(" "));
 
     eprintln!(
         "[3/4] measuring {} cycle(s){} at {} rpm",
@@ -283,7 +286,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
     let mut last = Instant::now();
     let mut opts = MeasureOptions {
         rig_path: rig_path.clone(),
-        ports: vec![sim.path().display().to_string()],
+        ports: sim.ports(),
         target: TargetSpec::Mechanism(mech_path.clone()),
         speed_rpm: args.speed,
         cycles: args.cycles,
@@ -335,10 +338,11 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
     Ok(crate::cli::analyze::exit_code(&summary))
 }
 
-/// A running simulated bench of either kind (stopped when dropped).
+/// A running simulated bench of any kind (stopped when dropped).
 enum Sim {
     Stepper(crate::rig::sim::stepper::SimHandle),
     Dynamixel(crate::rig::sim::dynamixel::SimDynamixelHandle),
+    Mixed(crate::rig::sim::mixed::SimMixedHandle),
 }
 
 impl Sim {
@@ -359,6 +363,9 @@ impl Sim {
                 };
                 Sim::Stepper(crate::rig::sim::stepper::spawn(opts)?)
             }
+            DemoBench::Dynamixel if rig.is_mixed() => {
+                Sim::Mixed(crate::rig::sim::mixed::spawn(rig, target, plant)?)
+            }
             DemoBench::Dynamixel => {
                 let law = crate::rig::sim::dynamixel::MotionTarget::new(target)?;
                 let mut opts = crate::rig::sim::dynamixel::SimDynamixelOptions::new(Arc::new(law));
@@ -368,10 +375,12 @@ impl Sim {
         })
     }
 
-    fn path(&self) -> &Path {
+    /// The `--port` values that point the rig at this bench.
+    fn ports(&self) -> Vec<String> {
         match self {
-            Sim::Stepper(h) => h.path(),
-            Sim::Dynamixel(h) => h.path(),
+            Sim::Stepper(h) => vec![h.path().display().to_string()],
+            Sim::Dynamixel(h) => vec![h.path().display().to_string()],
+            Sim::Mixed(h) => h.port_overrides(),
         }
     }
 }
@@ -381,12 +390,12 @@ mod tests {
     use super::*;
 
     /// Guards the demo's bench choice: every class gets a simulated rig that has its
-    /// sensors (and the file loads), and the Dynamixel bench refuses 1R1T and 3R up front,
-    /// naming the stepper bench instead.
+    /// sensors (and the file loads); the Dynamixel bench reads 1R1T and 3R followers
+    /// through a firmware sensor board (a mixed rig).
     #[test]
     fn demo_picks_a_rig_that_can_measure_the_class() {
         for class in [MotionClass::R1, MotionClass::R1T1, MotionClass::R3] {
-            let path = rig_for(DemoBench::Stepper, class).unwrap();
+            let path = rig_for(DemoBench::Stepper, class);
             let rig = RigConfig::load(&shipped(path)).unwrap();
             use crate::rig::config::SensorConfig as S;
             let has = |kind: &str| {
@@ -406,14 +415,16 @@ mod tests {
             }
         }
         assert_eq!(
-            rig_for(DemoBench::Dynamixel, MotionClass::R1).unwrap(),
+            rig_for(DemoBench::Dynamixel, MotionClass::R1),
             "rigs/sim-dynamixel.toml"
         );
         for class in [MotionClass::R1T1, MotionClass::R3] {
-            let e = rig_for(DemoBench::Dynamixel, class)
-                .unwrap_err()
-                .to_string();
-            assert!(e.contains("--bench stepper"), "{e}");
+            let path = rig_for(DemoBench::Dynamixel, class);
+            let rig = RigConfig::load(&shipped(path)).unwrap();
+            assert!(
+                rig.is_mixed(),
+                "{path}: a servo bench needs the sensor board"
+            );
         }
     }
 }

@@ -1,7 +1,7 @@
 //! `mpc-rig sim-device …`: serve a simulated bench on a pseudo-terminal until stopped.
 //!
 //! Prints the pseudo-terminal path on the first line of standard output (scripts and tests
-//! read it), then serves until Ctrl-C or a configured disconnect (`--fault
+//! read it; a mixed bench prints `NAME=PATH` per port), then serves until Ctrl-C or a configured disconnect (`--fault
 //! disconnect_at_s=…`). Only argument handling lives here; the simulators are
 //! [`crate::rig::sim`].
 
@@ -20,6 +20,7 @@ use crate::rig::config::RigConfig;
 use crate::rig::sim::dynamixel::{
     self, BusConfig, HardwareFault, MotionTarget, ServerEnd, SimDynamixelOptions,
 };
+use crate::rig::sim::mixed;
 use crate::rig::sim::plant::{PlantConfig, FAULT_KEYS};
 use crate::rig::sim::stepper::{self, Mechanics, SimStepperOptions};
 
@@ -39,6 +40,26 @@ pub enum SimDevice {
     /// A Dynamixel Protocol 2.0 bus: an XL430-W250 driver servo and a torque-off XL430
     /// follower servo whose present position obeys the plant model.
     Dynamixel(SimDynamixelArgs),
+    /// A mixed bench from a rig file with `[sensor_board]`: a Dynamixel bus whose driver
+    /// servo turns the mechanism and our firmware reading the follower on a second
+    /// pseudo-terminal. Prints `NAME=PATH NAME=PATH` (the rig's port names) on its first
+    /// line: pass each with `--port NAME=PATH`.
+    Mixed(SimMixedArgs),
+}
+
+/// Options of `sim-device mixed`.
+#[derive(Debug, Args)]
+pub struct SimMixedArgs {
+    #[command(flatten)]
+    pub target: TargetArgs,
+    /// The mixed rig (e.g. rigs/sim-dynamixel-imu.toml): driver servo ID and gear, the
+    /// board's sensors, the port names.
+    #[arg(long, value_name = "FILE")]
+    pub rig: PathBuf,
+    /// Plant imperfection or link fault, `key=value`, repeatable; link faults apply to
+    /// both pseudo-terminals (see `sim-device stepper --help` for the keys).
+    #[arg(long = "fault", value_name = "KEY=VALUE")]
+    pub faults: Vec<String>,
 }
 
 /// The target law: a mechanism or a motion file.
@@ -110,7 +131,38 @@ pub fn run(args: SimDeviceArgs) -> anyhow::Result<ExitCode> {
     match args.device {
         SimDevice::Stepper(a) => run_stepper(a),
         SimDevice::Dynamixel(a) => run_dynamixel(a),
+        SimDevice::Mixed(a) => run_mixed(a),
     }
+}
+
+fn run_mixed(a: SimMixedArgs) -> anyhow::Result<ExitCode> {
+    let motion = load_target(&a.target)?;
+    let plant = plant_from(&a.faults)?;
+    let rig = RigConfig::load(&a.rig)?;
+    let sim = mixed::spawn(&rig, motion, plant).context("starting the simulated mixed bench")?;
+    {
+        let mut out = std::io::stdout().lock();
+        writeln!(out, "{}", sim.port_overrides().join(" "))?;
+        out.flush()?;
+    }
+    eprintln!(
+        "simulated mixed bench `{}`: {}; Ctrl-C stops",
+        rig.name,
+        sim.ports()
+            .iter()
+            .map(|(n, p)| format!("{n} on {}", p.display()))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
+        .context("installing the Ctrl-C handler")?;
+    while !stop.load(Ordering::Relaxed) && sim.is_running() {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    eprintln!("stopped");
+    Ok(ExitCode::SUCCESS)
 }
 
 fn plant_from(faults: &[String]) -> anyhow::Result<PlantConfig> {

@@ -11,6 +11,14 @@ use crate::rig::recording::RecordingError;
 use crate::rig::sim::plant::PlantError;
 
 /// Anything that can go wrong at the bench.
+/// [`RigError::WrongDevice`] on a port where our firmware was expected.
+pub const NOT_OUR_FIRMWARE: &str =
+    "does not speak the mpc-rig firmware protocol (is it a Dynamixel bus or another device?)";
+
+/// [`RigError::WrongDevice`] on a port where the rig's Dynamixel servos were expected.
+pub const NOT_THE_SERVOS: &str =
+    "is not the Dynamixel bus the rig describes (is it our firmware board or another device?)";
+
 #[derive(Debug, thiserror::Error)]
 pub enum RigError {
     /// The rig configuration is invalid.
@@ -44,11 +52,14 @@ pub enum RigError {
         /// What failed.
         message: String,
     },
-    /// Something answered on the port, but not our firmware.
-    #[error("{path}: the device on this port does not speak the mpc-rig firmware protocol ({detail}); is this the right port (`mpc-rig ports`), or is it a Dynamixel bus or another device?")]
+    /// The device on the port is not the one the rig file puts there (our firmware, or
+    /// the Dynamixel servos it names).
+    #[error("{path}: the device on this port {expected} ({detail}); is this the right port (`mpc-rig ports`)?")]
     WrongDevice {
         /// The port path.
         path: PathBuf,
+        /// What was expected, as a predicate: [`NOT_OUR_FIRMWARE`] or [`NOT_THE_SERVOS`].
+        expected: &'static str,
         /// What was seen.
         detail: String,
     },

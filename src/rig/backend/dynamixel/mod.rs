@@ -346,6 +346,7 @@ impl DynamixelBench {
                     };
                     return Err(RigError::WrongDevice {
                         path: self.path.clone(),
+                        expected: crate::rig::error::NOT_THE_SERVOS,
                         detail: format!(
                             "no Dynamixel answered as the {role}, ID {id}, at {} baud ({e}); {found}. Check the servo power supply, the baud rate and the IDs in the rig file",
                             self.driver.baud
@@ -363,6 +364,7 @@ impl DynamixelBench {
             if role == "driver" && model != expected_model {
                 return Err(RigError::WrongDevice {
                     path: self.path.clone(),
+                    expected: crate::rig::error::NOT_THE_SERVOS,
                     detail: format!(
                         "ID {id} is a {} (model number {model}), but driver.model in the rig file is `{}` ({expected_model})",
                         models::model_name(model).unwrap_or("unknown model"),
@@ -373,6 +375,7 @@ impl DynamixelBench {
             if models::model_name(model).is_none() {
                 return Err(RigError::WrongDevice {
                     path: self.path.clone(),
+                    expected: crate::rig::error::NOT_THE_SERVOS,
                     detail: format!(
                         "ID {id} ({role}) reports model number {model}, not an X-series servo with the control table this backend uses"
                     ),

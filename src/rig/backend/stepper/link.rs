@@ -175,6 +175,7 @@ pub fn handshake(
                             }),
                             other => Err(RigError::WrongDevice {
                                 path: path.to_path_buf(),
+                                expected: crate::rig::error::NOT_OUR_FIRMWARE,
                                 detail: format!(
                                     "it answered Hello with {} instead of its device info",
                                     other.name()
@@ -214,6 +215,7 @@ pub fn handshake(
     } else if good_frames == 0 {
         Err(RigError::WrongDevice {
             path: path.to_path_buf(),
+            expected: crate::rig::error::NOT_OUR_FIRMWARE,
             detail: format!(
                 "{raw_bytes} bytes arrived but none formed a valid frame ({bad_frames} rejected); first bytes: {}",
                 hex(&first_bytes)
@@ -222,6 +224,7 @@ pub fn handshake(
     } else {
         Err(RigError::WrongDevice {
             path: path.to_path_buf(),
+            expected: crate::rig::error::NOT_OUR_FIRMWARE,
             detail: format!("{good_frames} frames arrived but none answered Hello"),
         })
     }
