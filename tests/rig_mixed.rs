@@ -12,32 +12,49 @@ use mpc_rig::analysis::{analyze_and_report, ReportOptions};
 use mpc_rig::motion::Motion;
 use mpc_rig::rig::config::RigConfig;
 use mpc_rig::rig::recording::{flags, Recording};
-use mpc_rig::rig::session::{measure, EndReason, MeasureOptions, TargetSpec};
-use mpc_rig::rig::sim::mixed::{spawn, spawn_with};
+use mpc_rig::rig::session::{measure, EndReason, MeasureOptions, MeasureOutcome, TargetSpec};
+use mpc_rig::rig::sim::mixed::{spawn_with, SimMixedHandle};
 use mpc_rig::rig::sim::plant::PlantConfig;
 
 fn repo(p: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(p)
 }
 
-fn options(
-    rig: &str,
-    ports: Vec<String>,
-    motion: &Path,
-    out: &Path,
-    cycles: u32,
-) -> MeasureOptions {
-    MeasureOptions {
-        rig_path: repo(rig),
-        ports,
-        target: TargetSpec::Motion(motion.to_path_buf()),
+/// One session on a freshly spawned simulated mixed bench (the board with `board_faults`),
+/// at 30 rpm after one settle cycle; the bench is kept for inspection.
+struct Run {
+    outcome: MeasureOutcome,
+    rec_dir: PathBuf,
+    sim: SimMixedHandle,
+    _tmp: tempfile::TempDir,
+}
+
+fn run_session(rig_path: &str, motion: &str, board_faults: &[&str], cycles: u32) -> Run {
+    let rig = RigConfig::load(&repo(rig_path)).unwrap();
+    let motion_path = repo(motion);
+    let target = Motion::from_file(&motion_path).unwrap();
+    let board = PlantConfig::from_faults(board_faults).unwrap();
+    let sim = spawn_with(&rig, target, PlantConfig::default(), board).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let rec_dir = tmp.path().join("rec");
+    let mut m = MeasureOptions {
+        rig_path: repo(rig_path),
+        ports: sim.port_overrides(),
+        target: TargetSpec::Motion(motion_path),
         speed_rpm: 30.0,
         cycles,
         settle_cycles: 1,
         reverse: false,
-        out_dir: Some(out.to_path_buf()),
+        out_dir: Some(rec_dir.clone()),
         cancel: Arc::new(AtomicBool::new(false)),
         progress: None,
+    };
+    let outcome = measure(&mut m).unwrap();
+    Run {
+        outcome,
+        rec_dir,
+        sim,
+        _tmp: tmp,
     }
 }
 
@@ -49,25 +66,18 @@ fn options(
 /// driver per ms, so under 1.7 ms).
 #[test]
 fn mixed_bench_measures_a_3r_follower_turned_by_a_servo() {
-    let rig_path = "rigs/sim-dynamixel-imu.toml";
-    let rig = RigConfig::load(&repo(rig_path)).unwrap();
-    let motion_path = repo("data/motions/cone-sweep.toml");
-    let motion = Motion::from_file(&motion_path).unwrap();
-    let sim = spawn(&rig, motion, PlantConfig::default()).unwrap();
-    let tmp = tempfile::tempdir().unwrap();
-    let rec_dir = tmp.path().join("rec");
-    let mut m = options(rig_path, sim.port_overrides(), &motion_path, &rec_dir, 2);
-    let outcome = measure(&mut m).unwrap();
-    drop(sim);
-    assert!(outcome.complete, "{}", outcome.end);
-    let rec = Recording::load(&rec_dir).unwrap();
-    assert!(
-        rec.meta.device.backend.starts_with("mixed"),
-        "{:?}",
-        rec.meta.device
+    let run = run_session(
+        "rigs/sim-dynamixel-imu.toml",
+        "data/motions/cone-sweep.toml",
+        &[],
+        2,
     );
-    assert_eq!(rec.meta.device.ports.len(), 2);
-    assert!(rec.meta.device.extra.contains_key("bus"));
+    assert!(run.outcome.complete, "{}", run.outcome.end);
+    let rec = Recording::load(&run.rec_dir).unwrap();
+    let device = &rec.meta.device;
+    assert!(device.backend.starts_with("mixed"), "{device:?}");
+    assert_eq!(device.ports.len(), 2);
+    assert!(device.extra.contains_key("bus"));
     assert_eq!(rec.meta.counts.gaps, 0, "{:?}", rec.meta.counts);
     // 3 turns at 30 rpm = 6 s at 500 Hz ≈ 3000 rows (fewer on a loaded machine).
     assert!(rec.phase.len() > 2000, "{} rows", rec.phase.len());
@@ -77,7 +87,7 @@ fn mixed_bench_measures_a_3r_follower_turned_by_a_servo() {
         .filter(|&&f| f & flags::DRIVER_HELD != 0)
         .count();
     assert!(held * 100 < rec.flags.len(), "{held} held rows");
-    let s = analyze_and_report(&rec_dir, &ReportOptions::default()).unwrap();
+    let s = analyze_and_report(&run.rec_dir, &ReportOptions::default()).unwrap();
     let rms = s.headline.rms_error_deg.unwrap();
     let lag = s.headline.phase_lag_deg;
     eprintln!(
@@ -90,21 +100,18 @@ fn mixed_bench_measures_a_3r_follower_turned_by_a_servo() {
 }
 
 /// Guards the 1R1T servo bench: the AS5600 and the linear encoder on the board, the driver
-/// angle from the bus, rotation and height both within tolerance of the target.
+/// angle from the bus, rotation and height both within tolerance of the target, and no
+/// clock misalignment showing as phase lag.
 #[test]
 fn mixed_bench_measures_a_1r1t_follower_turned_by_a_servo() {
-    let rig_path = "rigs/sim-dynamixel-1r1t.toml";
-    let rig = RigConfig::load(&repo(rig_path)).unwrap();
-    let motion_path = repo("data/motions/screw-bob.toml");
-    let motion = Motion::from_file(&motion_path).unwrap();
-    let sim = spawn(&rig, motion, PlantConfig::default()).unwrap();
-    let tmp = tempfile::tempdir().unwrap();
-    let rec_dir = tmp.path().join("rec");
-    let mut m = options(rig_path, sim.port_overrides(), &motion_path, &rec_dir, 1);
-    let outcome = measure(&mut m).unwrap();
-    drop(sim);
-    assert!(outcome.complete, "{}", outcome.end);
-    let s = analyze_and_report(&rec_dir, &ReportOptions::default()).unwrap();
+    let run = run_session(
+        "rigs/sim-dynamixel-1r1t.toml",
+        "data/motions/screw-bob.toml",
+        &[],
+        1,
+    );
+    assert!(run.outcome.complete, "{}", run.outcome.end);
+    let s = analyze_and_report(&run.rec_dir, &ReportOptions::default()).unwrap();
     let rms = s.headline.rms_error_deg.unwrap();
     let mm = s.headline.rms_error_mm.unwrap();
     let lag = s.headline.phase_lag_deg;
@@ -119,26 +126,22 @@ fn mixed_bench_measures_a_1r1t_follower_turned_by_a_servo() {
 /// the still-connected bus is left with its torque off.
 #[test]
 fn unplugging_the_sensor_board_keeps_the_recording_and_stops_the_servo() {
-    let rig_path = "rigs/sim-dynamixel-imu.toml";
-    let rig = RigConfig::load(&repo(rig_path)).unwrap();
-    let motion_path = repo("data/motions/cone-sweep.toml");
-    let motion = Motion::from_file(&motion_path).unwrap();
-    let board_faults = PlantConfig::from_faults(&["disconnect_at_s=3"]).unwrap();
-    let sim = spawn_with(&rig, motion, PlantConfig::default(), board_faults).unwrap();
-    let tmp = tempfile::tempdir().unwrap();
-    let rec_dir = tmp.path().join("rec");
-    let mut m = options(rig_path, sim.port_overrides(), &motion_path, &rec_dir, 4);
-    let outcome = measure(&mut m).unwrap();
-    assert!(
-        matches!(outcome.end, EndReason::Disconnected(_)),
-        "{}",
-        outcome.end
+    let run = run_session(
+        "rigs/sim-dynamixel-imu.toml",
+        "data/motions/cone-sweep.toml",
+        &["disconnect_at_s=3"],
+        4,
     );
-    assert!(!outcome.complete);
-    let rec = Recording::load(&rec_dir).unwrap();
+    assert!(
+        matches!(run.outcome.end, EndReason::Disconnected(_)),
+        "{}",
+        run.outcome.end
+    );
+    assert!(!run.outcome.complete);
+    let rec = Recording::load(&run.rec_dir).unwrap();
     assert!(!rec.meta.complete);
     assert!(rec.phase.len() > 500, "{} rows kept", rec.phase.len());
-    let driver = sim.bus().bus().driver().clone();
+    let driver = run.sim.bus().bus().driver().clone();
     assert!(!driver.torque_enabled(), "driver torque still on");
 }
 

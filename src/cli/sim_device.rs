@@ -154,15 +154,21 @@ fn run_mixed(a: SimMixedArgs) -> anyhow::Result<ExitCode> {
             .collect::<Vec<_>>()
             .join(", ")
     );
+    serve_until_ctrl_c(|| sim.is_running())?;
+    eprintln!("stopped");
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Block until Ctrl-C or until the simulator stops serving by itself.
+fn serve_until_ctrl_c(running: impl Fn() -> bool) -> anyhow::Result<()> {
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
     ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
         .context("installing the Ctrl-C handler")?;
-    while !stop.load(Ordering::Relaxed) && sim.is_running() {
+    while !stop.load(Ordering::Relaxed) && running() {
         std::thread::sleep(Duration::from_millis(50));
     }
-    eprintln!("stopped");
-    Ok(ExitCode::SUCCESS)
+    Ok(())
 }
 
 fn plant_from(faults: &[String]) -> anyhow::Result<PlantConfig> {
@@ -197,13 +203,7 @@ fn run_stepper(a: SimStepperArgs) -> anyhow::Result<ExitCode> {
         sim.path().display(),
         stepper::SIM_BOARD_NAME
     );
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
-    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
-        .context("installing the Ctrl-C handler")?;
-    while !stop.load(Ordering::Relaxed) && sim.is_running() {
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    serve_until_ctrl_c(|| sim.is_running())?;
     let status = if sim.is_running() {
         sim.stop()?
     } else {
@@ -266,13 +266,7 @@ fn run_dynamixel(a: SimDynamixelArgs) -> anyhow::Result<ExitCode> {
         a.driver_id,
         a.follower_id
     );
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
-    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
-        .context("installing the Ctrl-C handler")?;
-    while !stop.load(Ordering::Relaxed) && sim.is_running() {
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    serve_until_ctrl_c(|| sim.is_running())?;
     match sim.stop() {
         ServerEnd::Disconnected => {
             eprintln!("simulated unplug (disconnect_at_s): pseudo-terminal closed")
