@@ -5,7 +5,11 @@
 //!    firmware core, in its own `mpc-rig sim-device` process) → pseudo-terminal → stepper
 //!    backend — at 1 kHz sampling, with gaps and missing samples (target: 1 kHz, zero loss);
 //! 3. host CPU time per 1000 samples for that stream (this process only: backend I/O
-//!    thread and the consumer).
+//!    thread and the consumer);
+//! 4. the same for a mixed bench (`sim-device mixed`, rigs/sim-dynamixel-1r1t.toml: a
+//!    Dynamixel bus at the factory baud turning the driver, the firmware board sampling at
+//!    1 kHz): merged rows per second, rows whose driver angle had to be held rather than
+//!    interpolated, board samples dropped for want of a driver angle, and host CPU.
 //!
 //! Run with `cargo bench --bench link`. `LINK_BENCH_SECONDS` sets the streaming time
 //! (default 10 s).
@@ -15,6 +19,7 @@ use std::path::Path;
 use std::process::{Command as Process, Stdio};
 use std::time::{Duration, Instant};
 
+use mpc_rig::rig::backend::mixed::MixedBench;
 use mpc_rig::rig::backend::stepper::StepperBench;
 use mpc_rig::rig::backend::{Driver, SampleStream};
 use mpc_rig::rig::config::RigConfig;
@@ -23,6 +28,97 @@ use mpc_wire::{encode_frame_vec, Decoder, Report, Sample, SampleBatch, SampleFla
 fn main() {
     decoder_throughput();
     end_to_end();
+    mixed_end_to_end();
+}
+
+fn bench_seconds() -> f64 {
+    std::env::var("LINK_BENCH_SECONDS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(10.0)
+}
+
+/// Start `mpc-rig sim-device ARGS…` and return it with its first line of output.
+fn simulator(args: &[&str]) -> (std::process::Child, String) {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut cmd = Process::new(env!("CARGO_BIN_EXE_mpc-rig"));
+    cmd.arg("sim-device").args(args).current_dir(root);
+    let mut child = cmd
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start mpc-rig sim-device");
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().expect("stdout"))
+        .read_line(&mut line)
+        .expect("simulator prints its ports");
+    (child, line.trim().to_string())
+}
+
+/// Stream from `bench` for `secs` after a one-second warm-up; returns (samples, wall s,
+/// CPU s).
+fn steady_stream(bench: &mut dyn SampleStream, secs: f64) -> (u64, f64, f64) {
+    let mut buf = Vec::new();
+    let warm = Instant::now();
+    while warm.elapsed() < Duration::from_secs(1) {
+        buf.clear();
+        bench
+            .poll_samples(Duration::from_millis(20), &mut buf)
+            .expect("stream");
+    }
+    let cpu0 = process_cpu_s();
+    let t0 = Instant::now();
+    let mut n = 0u64;
+    while t0.elapsed().as_secs_f64() < secs {
+        buf.clear();
+        bench
+            .poll_samples(Duration::from_millis(20), &mut buf)
+            .expect("stream");
+        n += buf.len() as u64;
+    }
+    (n, t0.elapsed().as_secs_f64(), process_cpu_s() - cpu0)
+}
+
+fn mixed_end_to_end() {
+    let secs = bench_seconds();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let (mut child, ports) = simulator(&[
+        "mixed",
+        "--rig",
+        "rigs/sim-dynamixel-1r1t.toml",
+        "--motion",
+        "data/motions/screw-bob.toml",
+    ]);
+    let mut rig = RigConfig::load(&root.join("rigs/sim-dynamixel-1r1t.toml")).expect("rig");
+    let overrides: Vec<String> = ports.split_whitespace().map(str::to_string).collect();
+    rig.apply_port_overrides(&overrides).expect("ports");
+    let mut bench = MixedBench::open(&rig).expect("open both devices");
+    bench.zero().expect("zero");
+    bench.enable().expect("enable");
+    bench.start_stream(1000.0).expect("stream");
+    bench.run_at(30.0).expect("run");
+    let c0 = bench.counts();
+    let (n, wall, cpu) = steady_stream(&mut bench, secs);
+    let c1 = bench.counts();
+    let info = bench.device_info();
+    bench.shutdown().expect("shutdown");
+    let _ = child.kill();
+    let _ = child.wait();
+    let merge = &info.extra["merge"];
+    println!(
+        "mixed: {n} rows in {wall:.2} s = {:.1} rows/s; held driver angle in {} rows, {} board samples without one; gaps {}, missing samples {}, crc errors {}",
+        n as f64 / wall,
+        merge["rows_with_held_driver_angle"],
+        merge["board_samples_without_driver_angle"],
+        c1.gaps - c0.gaps,
+        c1.missing_samples - c0.missing_samples,
+        c1.crc_errors - c0.crc_errors
+    );
+    println!(
+        "mixed host CPU: {cpu:.2} s for {n} rows = {:.2} ms per 1000 rows ({:.1} % of one core)",
+        cpu * 1e6 / (n as f64).max(1.0),
+        cpu / wall * 100.0
+    );
 }
 
 fn decoder_throughput() {
@@ -85,25 +181,11 @@ fn process_cpu_s() -> f64 {
 }
 
 fn end_to_end() {
-    let secs: f64 = std::env::var("LINK_BENCH_SECONDS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(10.0);
+    let secs = bench_seconds();
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let mut child = Process::new(env!("CARGO_BIN_EXE_mpc-rig"))
-        .args(["sim-device", "stepper", "--motion"])
-        .arg(root.join("data/motions/half-turn-2to1.toml"))
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("start mpc-rig sim-device stepper");
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().expect("stdout"))
-        .read_line(&mut line)
-        .expect("simulator prints its path");
+    let (mut child, path) = simulator(&["stepper", "--motion", "data/motions/half-turn-2to1.toml"]);
     let mut rig = RigConfig::load(&root.join("rigs/sim-stepper.toml")).expect("rig");
-    rig.apply_port_overrides(&[line.trim().to_string()])
-        .expect("port");
+    rig.apply_port_overrides(&[path]).expect("port");
     let mut bench = StepperBench::open(&rig).expect("handshake with the simulator");
     bench.zero().expect("zero");
     bench.enable().expect("enable");
