@@ -221,3 +221,26 @@ fn measure_cli_against_sim_device_mixed_and_swapped_ports() {
         "{text}"
     );
 }
+
+/// Guards a brief USB drop of the sensor board on a mixed bench: the board's link
+/// reconnects, the session still finishes complete, the reconnect is counted and marked on
+/// a row, and the bus's driver angle stays interpolated across it.
+#[test]
+fn a_brief_board_dropout_is_bridged() {
+    let run = run_session(
+        "rigs/sim-dynamixel-imu.toml",
+        "data/motions/cone-sweep.toml",
+        &["dropout_at_s=2.5", "dropout_s=0.3"],
+        2,
+    );
+    assert!(run.outcome.complete, "{}", run.outcome.end);
+    let rec = Recording::load(&run.rec_dir).unwrap();
+    assert!(rec.meta.counts.reconnects >= 1, "{:?}", rec.meta.counts);
+    assert!(rec.flags.iter().any(|&f| f & flags::RECONNECTED != 0));
+    let held = rec
+        .flags
+        .iter()
+        .filter(|&&f| f & flags::DRIVER_HELD != 0)
+        .count();
+    assert!(held * 100 < rec.flags.len(), "{held} held rows");
+}
