@@ -340,6 +340,13 @@ impl Chart {
                             .map_err(|e| e.to_string())?,
                     )
                 }
+                // Nothing to mark, nothing to name in the legend (e.g. keyframes of a
+                // mechanism's dense target, which has none).
+                Mark::Points(_)
+                    if !s.points.iter().any(|(x, y)| x.is_finite() && y.is_finite()) =>
+                {
+                    None
+                }
                 Mark::Points(r) => Some(
                     chart
                         .draw_series(
@@ -416,6 +423,22 @@ mod tests {
         assert!(std::fs::metadata(&png).unwrap().len() > 1000);
         let svg_text = std::fs::read_to_string(svg).unwrap();
         assert!(svg_text.contains("sine") && svg_text.contains("limit"));
+    }
+
+    /// Guards the legend: a point series with nothing to mark (a dense target's keyframes)
+    /// gets no legend entry, while a drawn one keeps its entry.
+    #[test]
+    fn empty_point_series_has_no_legend_entry() {
+        let dir = tempfile::tempdir().unwrap();
+        let line: Vec<(f64, f64)> = (0..10).map(|i| (f64::from(i), f64::from(i))).collect();
+        let chart = Chart::new("legend", "x", "y")
+            .with(Series::line("target path", line, 0))
+            .with(Series::points("keyframes", Vec::new(), 5, 1))
+            .with(Series::points("measured", vec![(1.0, 2.0)], 2, 2));
+        let [_, svg] = chart.write(&dir.path().join("l")).unwrap();
+        let svg_text = std::fs::read_to_string(svg).unwrap();
+        assert!(svg_text.contains("target path") && svg_text.contains("measured"));
+        assert!(!svg_text.contains("keyframes"));
     }
 
     /// Guards the error path: a chart without finite data is an error, not a panic.
