@@ -6,13 +6,16 @@
 //! map). A write transaction sets the register pointer with its first byte and writes the
 //! following bytes with auto-increment; a read returns bytes from the pointer on, also with
 //! auto-increment. Unknown device addresses are not acknowledged. The simulator sets the
-//! measured values ([`SensorBus::set_as5600_angle`], [`SensorBus::set_quaternion`]) before
-//! every firmware poll.
+//! measured values ([`SensorBus::set_as5600_angle`], [`SensorBus::set_quaternion`]) after
+//! every firmware poll and, through the bus's [`ReadHook`], just before every transaction,
+//! so a read sees the plant at that instant.
 
 use std::cell::RefCell;
 use std::rc::Rc;
 
 use embedded_hal::i2c::{ErrorKind, ErrorType, I2c, NoAcknowledgeSource, Operation};
+
+use super::pins::ReadHook;
 
 /// AS5600 7-bit address (fixed).
 pub const AS5600_ADDRESS: u8 = 0x36;
@@ -83,6 +86,7 @@ struct BusState {
 #[derive(Debug, Clone)]
 pub struct SensorBus {
     state: Rc<RefCell<BusState>>,
+    hook: ReadHook,
 }
 
 /// Error of the emulated bus.
@@ -115,7 +119,14 @@ impl SensorBus {
                 devices,
                 transactions: 0,
             })),
+            hook: ReadHook::default(),
         }
+    }
+
+    /// The same bus, refreshed through `hook` before every transaction.
+    pub fn with_read_hook(mut self, hook: ReadHook) -> SensorBus {
+        self.hook = hook;
+        self
     }
 
     /// Set the AS5600's angle in counts (wrapped to 0..4095).
@@ -180,6 +191,7 @@ impl I2c for SensorBus {
         address: u8,
         operations: &mut [Operation<'_>],
     ) -> Result<(), Self::Error> {
+        self.hook.fire();
         let mut st = self.state.borrow_mut();
         st.transactions += 1;
         let Some((_, chip, file)) = st.devices.iter_mut().find(|d| d.0 == address) else {

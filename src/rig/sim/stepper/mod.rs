@@ -5,7 +5,9 @@
 //! [`SUBSTEP_US`] of simulated time it hands the firmware the bytes the host wrote, polls
 //! it (the firmware pulses STEP/DIR/EN on [`pins`] and reads the sensors on [`i2c`]),
 //! turns the counted steps into the physical driver angle (minus missed steps), asks the
-//! [`Plant`] where the follower is, and updates the emulated sensor registers. Bytes the
+//! [`Plant`] where the follower is, and updates the emulated sensor registers; the same
+//! update runs just before each sensor read ([`pins::ReadHook`]), so a sample taken right
+//! after a step in the same poll reads the sensor after that step, as on hardware. Bytes the
 //! firmware sends pass through the link faults before reaching the host. At
 //! `disconnect_at_s` the pseudo-terminal is closed for good (an unplug); a drop-out closes
 //! it and opens a new one after `dropout_s`, re-pointing the stable link, while the
@@ -17,8 +19,10 @@
 pub mod i2c;
 pub mod pins;
 
+use std::cell::RefCell;
 use std::f64::consts::TAU;
 use std::path::{Path, PathBuf};
+use std::rc::Rc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -33,7 +37,7 @@ use crate::rig::sim::pty::{Pty, StableLink};
 use crate::rig::RigError;
 
 use i2c::SensorBus;
-use pins::{DriverChip, SimClock, SimQuadrature};
+use pins::{DriverChip, ReadHook, SimClock, SimQuadrature};
 
 /// Simulated time between firmware polls, µs. 100 µs keeps the sensor values the firmware
 /// reads within 100 µs of its step count (0.04° of driver at 60 rpm) at 10 000 polls per
@@ -427,10 +431,11 @@ fn run(
     let mech = opts.mechanics.clone();
     let clock = SimClock::default();
     let chip = DriverChip::new(true);
-    let bus_a = SensorBus::new(mech.as5600, mech.imu);
-    let bus_b = SensorBus::new(mech.as5600_b, false);
-    let quadrature = SimQuadrature::default();
-    let mut bench = Bench {
+    let hook = ReadHook::default();
+    let bus_a = SensorBus::new(mech.as5600, mech.imu).with_read_hook(hook.clone());
+    let bus_b = SensorBus::new(mech.as5600_b, false).with_read_hook(hook.clone());
+    let quadrature = SimQuadrature(Default::default(), hook.clone());
+    let bench = Rc::new(RefCell::new(Bench {
         plant: Plant::new(opts.target.clone(), opts.plant.clone()),
         mech: mech.clone(),
         chip: chip.clone(),
@@ -442,8 +447,18 @@ fn run(
         missed: 0,
         last_step_change_us: 0,
         external: opts.driver.clone().map(External::new),
-    };
-    bench.update(0);
+    }));
+    bench.borrow_mut().update(0);
+    {
+        // Sensors read what the plant is at the read's instant. Weak: the bench owns the
+        // buses that own the hook.
+        let (weak, clock) = (Rc::downgrade(&bench), clock.clone());
+        hook.set(Rc::new(move || {
+            if let Some(b) = weak.upgrade() {
+                b.borrow_mut().update(clock.get_us());
+            }
+        }));
+    }
     let mut fw = firmware::Firmware::new(&mech, clock.clone(), chip, bus_a, bus_b, quadrature)?;
     let mut pty = Some(pty);
     let mut rewrite = faults
@@ -486,7 +501,7 @@ fn run(
             }
         }
         // Advance simulated time.
-        if let Some(e) = bench.external.as_mut() {
+        if let Some(e) = bench.borrow_mut().external.as_mut() {
             e.begin_burst(target_us);
         }
         while sim_us + SUBSTEP_US <= target_us {
@@ -494,7 +509,7 @@ fn run(
             clock.set_us(sim_us);
             fw.poll(sim_us);
             st.polls += 1;
-            bench.update(sim_us);
+            bench.borrow_mut().update(sim_us);
         }
         // Device → host, through the faulty link.
         out.clear();
@@ -504,8 +519,9 @@ fn run(
                 out = rewrite_hello(dec, *version, &out);
             }
             wire.clear();
+            let mut link = bench.borrow_mut();
             for &b in &out {
-                match bench.plant.link_byte(b) {
+                match link.plant.link_byte(b) {
                     LinkByte::Pass(x) => wire.push(x),
                     LinkByte::Corrupted(x) => {
                         st.bytes_corrupted += 1;
@@ -514,6 +530,7 @@ fn run(
                     LinkByte::Dropped => st.bytes_dropped += 1,
                 }
             }
+            drop(link);
             if let Some(p) = pty.as_mut() {
                 st.bytes_out += p.write_lossy(&wire)? as u64;
             }
@@ -527,7 +544,7 @@ fn run(
                 if let Some(l) = &link {
                     l.remove();
                 }
-                publish(&status, &st, &bench, sim_us);
+                publish(&status, &st, &bench.borrow(), sim_us);
                 tracing::info!("simulated stepper bench unplugged at {t:.3} s");
                 return Ok(());
             }
@@ -555,7 +572,7 @@ fn run(
                 tracing::info!("simulated stepper bench back at {t:.3} s");
             }
         }
-        publish(&status, &st, &bench, sim_us);
+        publish(&status, &st, &bench.borrow(), sim_us);
     }
     Ok(())
 }
@@ -606,6 +623,7 @@ mod firmware {
 
     impl QuadratureCounter for SimQuadrature {
         fn count(&mut self) -> i32 {
+            self.1.fire();
             self.0.get()
         }
     }

@@ -159,9 +159,45 @@ impl DelayNs for NoDelay {
     fn delay_ns(&mut self, _ns: u32) {}
 }
 
-/// A quadrature counter the simulator sets from the plant.
+/// Called just before the firmware reads an emulated sensor, so that what it reads is the
+/// plant at that instant, including steps it pulsed earlier in the same poll. Without it a
+/// sample taken right after a step in the same 100 µs substep paired the new step count with
+/// the sensor value from before the step (one microstep of driver angle of error on a share
+/// of the samples). Empty until the simulator sets it; cheap to clone.
+#[derive(Clone, Default)]
+pub struct ReadHook(Rc<RefCell<Option<Refresh>>>);
+
+/// What a [`ReadHook`] runs.
+pub type Refresh = Rc<dyn Fn()>;
+
+impl std::fmt::Debug for ReadHook {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(if self.0.borrow().is_some() {
+            "ReadHook(set)"
+        } else {
+            "ReadHook(empty)"
+        })
+    }
+}
+
+impl ReadHook {
+    /// Install the refresh to run before each read.
+    pub fn set(&self, refresh: Refresh) {
+        *self.0.borrow_mut() = Some(refresh);
+    }
+
+    /// Run the refresh, if any (no borrow is held while it runs).
+    pub fn fire(&self) {
+        let refresh = self.0.borrow().clone();
+        if let Some(f) = refresh {
+            f();
+        }
+    }
+}
+
+/// A quadrature counter the simulator sets from the plant; reading it fires the hook.
 #[derive(Debug, Clone, Default)]
-pub struct SimQuadrature(pub Rc<Cell<i32>>);
+pub struct SimQuadrature(pub Rc<Cell<i32>>, pub ReadHook);
 
 #[cfg(test)]
 mod tests {
