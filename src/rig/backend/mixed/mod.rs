@@ -232,3 +232,36 @@ impl SampleStream for MixedBench {
         info
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    /// Guards the column layout of a mixed rig: recording columns follow the rig's sensor
+    /// order, each taken from the device that reads it at that device's own index (an IMU
+    /// spans four board values, a follower servo one bus value).
+    #[test]
+    fn columns_follow_rig_order_across_both_devices() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("rigs/sim-dynamixel-imu.toml");
+        let text = std::fs::read_to_string(path).unwrap();
+        let text = text.replace(
+            "[[sensors]]\nkind = \"imu\"",
+            "[[sensors]]\nkind = \"as5600\"\nname = \"rz\"\ndof = \"rz\"\n\n[[sensors]]\nkind = \"dynamixel\"\nname = \"servo\"\nport = \"dxl\"\nid = 2\n\n[[sensors]]\nkind = \"imu\"",
+        );
+        let rig = RigConfig::from_toml_str(&text, Path::new("t.toml")).unwrap();
+        assert_eq!(
+            column_sources(&rig),
+            [
+                Source::Board(0),
+                Source::Bus(0),
+                Source::Board(1),
+                Source::Board(2),
+                Source::Board(3),
+                Source::Board(4),
+            ]
+        );
+        assert_eq!(rig.part(true).sensor_columns().len(), 5);
+        assert_eq!(rig.part(false).sensor_columns().len(), 1);
+    }
+}
