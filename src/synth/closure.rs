@@ -33,9 +33,9 @@ pub const GAMMA0_DEG: f64 = 10.0;
 /// joint centre, the same torque-arm test our 1R and 1R1T robust closure applies. The
 /// conventions adopt the printed form, so it is the default; `Arm` is the stated purpose.
 /// Measured (seed 1): with `Tangent` and the 3R start loops of `candidate::initial_guess`,
-/// cone-sweep and helicopter close at K = 6, d_x = 6 (33 s each) and the other 3R examples
-/// of `data/motions` do not (circle-like starts closed none); with `Arm` every 3R example
-/// closes (cone-sweep at K = 7, d_x = 6).
+/// cone-sweep, figure-eight (K = 6), helicopter and paddle (K = 5) close at d_x = 6 in
+/// 28–34 s, pick-and-place and spherical-four-bar do not (circle-like starts closed none);
+/// with `Arm` every 3R example closes (K = 6–7, d_x = 6).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum NormalCone {
