@@ -76,8 +76,8 @@ pub struct DemoArgs {
     /// Synthesize again even when a cached mechanism exists.
     #[arg(long)]
     pub resynthesize: bool,
-    /// 3R only: bound on the contact normals (see `mpc-rig synth --help`); the 3R examples
-    /// close with `arm`.
+    /// 3R only: bound on the contact normals (see `mpc-rig synth --help`); every 3R example
+    /// closes with `arm`, four of six with the default.
     #[arg(long, value_enum, default_value_t = crate::cli::synth::ConeArg::Tangent)]
     pub normal_cone: crate::cli::synth::ConeArg,
     /// Tolerance on the RMS rotation error (degrees) for a pass/fail verdict.

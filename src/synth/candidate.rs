@@ -10,13 +10,18 @@
 //! **Initial guess.** For 1R and 1R1T we pick a contact path in frame R near the driver
 //! (azimuth ψ₀ ∈ ±50°, radius r₀ varying with waviness in radius and height) and pull it
 //! back into the follower frame, c² = R₂ᵀ(p − T₂): for a follower that turns, the contact
-//! then stays between the two axes as in a gear pair. For 3R the path is a circle-like
-//! curve directly in follower coordinates. Control points come from a linear least-squares
-//! fit to the path, radially rescaled so the length is mid-way between L₁ and L₂. The start
-//! normal is the circumferential direction ±ẑ×p̂ made perpendicular to T² (1R, 1R1T; the
-//! sign alternates between candidates so every band gets both torque directions) or
-//! n = T̂² × p̂ (3R: inside the 10° cone by construction; the exact conjugate normal
-//! T² × T¹ violates the cone and SLSQP diverged from it in a prototype).
+//! then stays between the two axes as in a gear pair. For 3R under the tangent cone (the
+//! default) the path is a loop around a seeded follower-local centre, traversed twice, lying
+//! in the plane span(p, w) that a conjugate normal inside the 10° cone leaves for the
+//! tangent ([`R3Loop`]); under the `arm` cone, which does not pin the tangent, it is a
+//! circle-like curve directly in follower coordinates. Control points come from a linear
+//! least-squares fit to the path, rescaled (radially, or the loop size) so the length is
+//! mid-way between L₁ and L₂. The start normal is the circumferential direction ±ẑ×p̂ made
+//! perpendicular to T² (1R, 1R1T; the sign alternates between candidates so every band gets
+//! both torque directions); for 3R the conjugate direction ±p̂ × w turned into the cone where
+//! it leaves it ([`r3_start_normal`], tangent cone) or T̂² × p̂ (arm cone). The exact
+//! conjugate normal T² × T¹ of a curve not made for the cone violates it, and SLSQP diverged
+//! from it in a prototype.
 
 use std::f64::consts::TAU;
 
@@ -125,6 +130,152 @@ fn curve_length(x: &[f64], n: usize) -> f64 {
         / n as f64
 }
 
+/// Range of the horizontal distance of a 3R loop's centre from the follower z axis, model
+/// units. Default 1.5–2.8: the loop (half-length up to ~2) then stays clear of the joint
+/// centre ([`super::energy::MIN_FOLLOWER_RADIUS`]) in most directions, and curves of length
+/// 4π–6π live at radius ~2–3 anyway.
+pub const R3_CENTRE_RADIUS: [f64; 2] = [1.5, 2.8];
+/// Range of the ratio of a 3R loop's minor to major semi-axis. Default 0.2–0.6: thin loops
+/// keep the tangent near the plane the cone allows; the minor axis is further capped so the
+/// loop stays inside its band.
+pub const R3_LOOP_MINOR: [f64; 2] = [0.2, 0.6];
+
+/// Largest |t̂.z| of a 3R start loop's turning points. Default sin 45°: well inside
+/// `energy::MAX_TANGENT_SLOPE` (sin 60°), so the {N, B} frame and the start normal's angle
+/// stay smooth there.
+pub const R3_START_SLOPE: f64 = std::f64::consts::FRAC_1_SQRT_2;
+
+/// Loops of a 3R start curve per period. Default 2: the normal's angle θ (10 control
+/// points) turns with the tangent once per loop and must follow it; with 2 or 3 loops
+/// (drawn at random) figure-eight's band 3 gave 5 of 30 usable candidates, with 2 always 8.
+pub const R3_LOOP_TURNS: f64 = 2.0;
+
+/// The 3R start curve: a loop around a fixed follower-local centre c₀, traversed
+/// [`R3_LOOP_TURNS`] times.
+///
+/// With the tangent cone (the default, paper Eq. 30 as printed), a conjugate normal is
+/// perpendicular to p, to T² and to the relative velocity w of the follower's material point
+/// against the driver's (w = T¹ − T²), so the curve's tangent T² must lie (within the cone)
+/// in the plane span(p, w), and ñ = p × n is pinned to ±w⊥p. A circle about the follower's z
+/// axis meets that only in the central band (the outer bands then failed), and its contact
+/// sweeps every azimuth, so ñ turns with it. The loop instead keeps the contact near c₀, where
+/// ±w⊥p has a definite direction (with z and x parts where c₀ has both y and z parts), and
+/// lies in span(ĉ₀, w⊥) pulled back into the follower frame, averaged over the period: its
+/// major axis h is the horizontal line of that plane (the band is thin), its minor axis v the
+/// in-plane perpendicular, turned down to [`R3_START_SLOPE`] and capped in length by the
+/// band. Axes that follow the plane sample by sample turn with the follower, and that turning
+/// cancelled the loop's horizontal motion at some turning points (vertical tangents in 27 of
+/// 30 starts of figure-eight's band 3). Seeded centres over all azimuths give the GA ñ that
+/// positively span R³.
+struct R3Loop {
+    centre: [f64; 3],
+    /// Major-axis direction (follower-local, horizontal).
+    h: [f64; 3],
+    /// Minor-axis direction (follower-local).
+    v: [f64; 3],
+    minor: f64,
+    half_band: f64,
+}
+
+/// Turn v within the vertical plane perpendicular to the horizontal h until |v.z| is at most
+/// [`R3_START_SLOPE`].
+fn cap_slope(v: V3<f64>, h: V3<f64>) -> V3<f64> {
+    if v.z.abs() <= R3_START_SLOPE {
+        return v;
+    }
+    let ez = V3::<f64>::cst([0.0, 0.0, 1.0]);
+    let g = ez.cross(h).unit();
+    let sg = if v.dot(g) < 0.0 { -1.0 } else { 1.0 };
+    g.scalec(sg * (1.0 - R3_START_SLOPE * R3_START_SLOPE).sqrt())
+        + ez.scalec(R3_START_SLOPE * v.z.signum())
+}
+
+impl R3Loop {
+    fn new(pb: &PairProblem, centre: [f64; 3], minor: f64, half_band: f64) -> Self {
+        let c0 = V3::<f64>::cst(centre);
+        let ep = c0.unit();
+        let mut prev: Option<(V3<f64>, V3<f64>)> = None;
+        let (mut hs, mut vs) = (V3::<f64>::cst([0.0; 3]), V3::<f64>::cst([0.0; 3]));
+        for pose in &pb.poses.samples {
+            let p = c0.rot(&pose.rot);
+            let w =
+                V3::<f64>::cst(pose.omega).cross(p) - V3::new(-p.y, p.x - pb.dx, 0.0).scalec(TAU);
+            let ew = (w - p.scalec(w.dot(p) / p.norm2())).rot_t(&pose.rot).unit();
+            let nrm = ep.cross(ew);
+            let zin = ep.scalec(ep.z) + ew.scalec(ew.z);
+            let mut h = if zin.norm() < 1e-3 {
+                ew
+            } else {
+                zin.cross(nrm).unit()
+            };
+            let mut v = cap_slope(nrm.cross(h), h);
+            if let Some((ph, pv)) = prev {
+                if h.dot(ph) < 0.0 {
+                    h = -h;
+                }
+                if v.dot(pv) < 0.0 {
+                    v = -v;
+                }
+            }
+            prev = Some((h, v));
+            hs = hs + h;
+            vs = vs + v;
+        }
+        let h = V3::new(hs.x, hs.y, 0.0).unit();
+        let v = cap_slope((vs - h.scalec(vs.dot(h))).unit(), h);
+        Self {
+            centre,
+            h: h.vals(),
+            v: v.vals(),
+            minor,
+            half_band,
+        }
+    }
+
+    /// Loop point with semi-major axis `a` at loop angle `w`.
+    fn at(&self, a: f64, w: f64) -> Vec<f64> {
+        let (h, v) = (self.h, self.v);
+        let b = (self.minor * a).min(0.8 * self.half_band / v[2].abs().max(1e-9));
+        (0..3)
+            .map(|d| self.centre[d] + a * w.cos() * h[d] + b * w.sin() * v[d])
+            .collect()
+    }
+}
+
+/// Fraction of the cone's bound |n·p̂| ≤ s that a 3R start normal may use. Default 0.8:
+/// the start is strictly inside the cone, so SLSQP begins feasible there.
+pub const R3_START_CONE_FRACTION: f64 = 0.8;
+
+/// 3R start normal: the conjugate direction ±p̂ × w (w = T¹ − T², perpendicular to p, to w
+/// and, when the curve's tangent lies in span(p, w), to T²) taken into the normal plane of
+/// T² (where the model's normals live) and, if that leaves the cone, turned within that plane
+/// towards T̂² × p̂ until |n·p̂| = [`R3_START_CONE_FRACTION`]·s.
+fn r3_start_normal(c: &model::Contact<f64>, sign: f64, s: f64) -> V3<f64> {
+    let t = c.t2.unit();
+    let ph = c.p.unit();
+    let want = ph.cross((c.t1 - c.t2).unit()).scalec(sign);
+    let want = want - t.scalec(want.dot(t));
+    let mut u = t.cross(ph);
+    if u.norm() < 1e-9 || want.norm() < 1e-9 {
+        return if u.norm() < 1e-9 {
+            want.unit()
+        } else {
+            u.unit().scalec(sign)
+        };
+    }
+    u = u.unit();
+    if want.dot(u) < 0.0 {
+        u = -u;
+    }
+    let q = t.cross(u);
+    let phi = want.dot(q).atan2(want.dot(u));
+    let lim = (R3_START_CONE_FRACTION * s / q.dot(ph).abs().max(1e-12))
+        .min(1.0)
+        .asin();
+    let phi = phi.clamp(-lim, lim);
+    u.scalec(phi.cos()) + q.scalec(phi.sin())
+}
+
 /// Build the initial design of candidate `index` in band `band`.
 pub fn initial_guess(pb: &PairProblem, seed: u64, band: usize, index: usize) -> Vec<f64> {
     let mut rng = ChaCha8Rng::seed_from_u64(
@@ -148,7 +299,21 @@ pub fn initial_guess(pb: &PairProblem, seed: u64, band: usize, index: usize) -> 
     let ecc = rng.random_range(0.0..0.15);
     let wob = rng.random_range(0.0..0.25);
     let sign = if index % 2 == 0 { 1.0 } else { -1.0 };
+    // 3R under the tangent cone: a loop around a follower-local centre, in the plane the
+    // cone allows (drawn after the common parameters, so 1R/1R1T and 3R with the arm cone
+    // keep their guesses).
+    let r3 = (pb.class == Class::R3 && pb.cone == closure::NormalCone::Tangent).then(|| {
+        let az0 = rng.random_range(0.0..TAU);
+        let rho0 = rng.random_range(R3_CENTRE_RADIUS[0]..R3_CENTRE_RADIUS[1]);
+        let minor = rng.random_range(R3_LOOP_MINOR[0]..R3_LOOP_MINOR[1]);
+        R3Loop::new(pb, [rho0 * az0.cos(), rho0 * az0.sin(), zc], minor, zh)
+    });
     let path = |scale: f64| -> Vec<Vec<f64>> {
+        if let Some(l) = &r3 {
+            return (0..n)
+                .map(|i| l.at(scale, R3_LOOP_TURNS * TAU * i as f64 / n as f64 + ph1))
+                .collect();
+        }
         (0..n)
             .map(|i| {
                 let t = i as f64 / n as f64;
@@ -174,7 +339,7 @@ pub fn initial_guess(pb: &PairProblem, seed: u64, band: usize, index: usize) -> 
             .collect()
     };
     let target_len = 0.5 * (LENGTH_BOUNDS[0] + LENGTH_BOUNDS[1]);
-    let mut scale = 2.0;
+    let mut scale = if r3.is_some() { 1.0 } else { 2.0 };
     let mut x = vec![0.0; NV];
     for _ in 0..4 {
         let cps = fit_spline(CURVE_CPS, &path(scale));
@@ -190,12 +355,17 @@ pub fn initial_guess(pb: &PairProblem, seed: u64, band: usize, index: usize) -> 
     }
     // Start normals: for 1R/1R1T the exact conjugate normal ±T² × T¹ (continuous sign,
     // overall sign chosen so that the mean torque has the candidate's sign); where T¹ ∥ T²
-    // the previous normal is kept (projected). For 3R, T̂² × p̂ (inside the cone).
+    // the previous normal is kept (projected). For 3R, `r3_start_normal` (tangent cone) or
+    // T̂² × p̂ (arm cone), both inside the cone.
     let contacts: Vec<_> = poses
         .iter()
         .map(|pose| model::contact_f64(&x, pose, pb.dx))
         .collect();
     let wants: Vec<[f64; 3]> = match pb.class {
+        Class::R3 if r3.is_some() => contacts
+            .iter()
+            .map(|c| r3_start_normal(c, sign, pb.cone.max_abs_dot()).vals())
+            .collect(),
         Class::R3 => contacts
             .iter()
             .map(|c| {
@@ -397,6 +567,48 @@ pub(crate) mod tests {
                 .unwrap_or(W_ROBUST),
             cone: closure::NormalCone::Tangent,
         }
+    }
+
+    /// Guards the 3R start normal: unit, in the normal plane of T² (where the model's normals
+    /// live), inside the tangent cone with margin, and equal to the conjugate direction
+    /// ±p̂ × w when that is inside the cone.
+    #[test]
+    fn r3_start_normal_is_conjugate_within_the_cone() {
+        let s = closure::NormalCone::Tangent.max_abs_dot();
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let mut r = || {
+            V3::<f64>::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            )
+        };
+        let mut inside = 0;
+        for _ in 0..500 {
+            let (p, t2, w) = (r().scalec(3.0), r(), r().scalec(5.0));
+            let c = model::Contact {
+                p,
+                c2: p,
+                c1: p,
+                n: p,
+                t2,
+                t1: t2 + w,
+                c2d: t2,
+                c1d: t2,
+                kappa: p,
+            };
+            let n = r3_start_normal(&c, -1.0, s);
+            assert!((n.norm() - 1.0).abs() < 1e-9);
+            assert!(n.dot(t2.unit()).abs() < 1e-9);
+            assert!(n.dot(p.unit()).abs() <= R3_START_CONE_FRACTION * s + 1e-9);
+            let conj = p.unit().cross(w.unit()).scalec(-1.0);
+            let conj = (conj - t2.unit().scalec(conj.dot(t2.unit()))).unit();
+            if conj.dot(p.unit()).abs() < R3_START_CONE_FRACTION * s {
+                inside += 1;
+                assert!((n - conj).norm() < 1e-9);
+            }
+        }
+        assert!(inside > 10);
     }
 
     /// Exploration aid (ignored): solve a few 1R candidates and print what happened.

@@ -32,9 +32,10 @@ pub const GAMMA0_DEG: f64 = 10.0;
 /// |n × p̂| ≥ sin γ₀, i.e. |n·p̂| ≤ cos γ₀: no normal within γ₀ of the line through the
 /// joint centre, the same torque-arm test our 1R and 1R1T robust closure applies. The
 /// conventions adopt the printed form, so it is the default; `Arm` is the stated purpose.
-/// Measured (seed 1): with `Tangent` no 3R example of `data/motions` closed (cone-sweep best
-/// E_valiTime 0.52); with `Arm`, cone-sweep closed at K = 6, d_x = 6 in 32 s and
-/// figure-eight at K = 7, d_x = 6 in 39 s.
+/// Measured (seed 1): with `Tangent` and the 3R start loops of `candidate::initial_guess`,
+/// cone-sweep, figure-eight (K = 6), helicopter and paddle (K = 5) close at d_x = 6 in
+/// 28–34 s, pick-and-place and spherical-four-bar do not (circle-like starts closed none);
+/// with `Arm` every 3R example closes (K = 6–7, d_x = 6).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum NormalCone {

@@ -11,6 +11,8 @@ pub mod closure;
 pub mod dual;
 pub mod energy;
 pub mod error;
+#[cfg(test)]
+mod explore_r3;
 pub mod ga;
 pub mod mechanism;
 pub mod model;
