@@ -55,9 +55,45 @@ fn simulator(args: &[&str]) -> (std::process::Child, String) {
     (child, line.trim().to_string())
 }
 
-/// Stream from `bench` for `secs` after a one-second warm-up; returns (samples, wall s,
-/// CPU s).
-fn steady_stream(bench: &mut dyn SampleStream, secs: f64) -> (u64, f64, f64) {
+/// What a steady streaming window gave.
+struct Steady {
+    /// Samples (rows) delivered.
+    n: u64,
+    /// Wall-clock seconds of the window.
+    wall: f64,
+    /// Host CPU seconds of this process in the window.
+    cpu: f64,
+    /// Device-clock span of the samples, seconds.
+    dev_span: f64,
+    /// Gaps, missing samples and CRC errors counted in the window.
+    gaps: u64,
+    missing: u64,
+    crc: u64,
+}
+
+impl Steady {
+    /// The link-loss figures.
+    fn losses(&self) -> String {
+        format!(
+            "gaps {}, missing samples {}, crc errors {}",
+            self.gaps, self.missing, self.crc
+        )
+    }
+
+    /// The host CPU line.
+    fn cpu_line(&self, label: &str, unit: &str) -> String {
+        format!(
+            "{label}: {:.2} s for {} {unit} = {:.2} ms per 1000 {unit} ({:.1} % of one core)",
+            self.cpu,
+            self.n,
+            self.cpu * 1e6 / (self.n as f64).max(1.0),
+            self.cpu / self.wall * 100.0
+        )
+    }
+}
+
+/// Stream from `bench` for `secs` after a one-second warm-up (the driver's ramp).
+fn steady_stream(bench: &mut dyn SampleStream, secs: f64) -> Steady {
     let mut buf = Vec::new();
     let warm = Instant::now();
     while warm.elapsed() < Duration::from_secs(1) {
@@ -66,17 +102,32 @@ fn steady_stream(bench: &mut dyn SampleStream, secs: f64) -> (u64, f64, f64) {
             .poll_samples(Duration::from_millis(20), &mut buf)
             .expect("stream");
     }
+    let c0 = bench.counts();
     let cpu0 = process_cpu_s();
     let t0 = Instant::now();
     let mut n = 0u64;
+    let (mut first_dev, mut last_dev) = (None, 0);
     while t0.elapsed().as_secs_f64() < secs {
         buf.clear();
         bench
             .poll_samples(Duration::from_millis(20), &mut buf)
             .expect("stream");
+        for s in &buf {
+            first_dev.get_or_insert(s.device_time_us);
+            last_dev = s.device_time_us;
+        }
         n += buf.len() as u64;
     }
-    (n, t0.elapsed().as_secs_f64(), process_cpu_s() - cpu0)
+    let c1 = bench.counts();
+    Steady {
+        n,
+        wall: t0.elapsed().as_secs_f64(),
+        cpu: process_cpu_s() - cpu0,
+        dev_span: (last_dev - first_dev.unwrap_or(last_dev)) as f64 / 1e6,
+        gaps: c1.gaps - c0.gaps,
+        missing: c1.missing_samples - c0.missing_samples,
+        crc: c1.crc_errors - c0.crc_errors,
+    }
 }
 
 fn mixed_end_to_end() {
@@ -97,28 +148,22 @@ fn mixed_end_to_end() {
     bench.enable().expect("enable");
     bench.start_stream(1000.0).expect("stream");
     bench.run_at(30.0).expect("run");
-    let c0 = bench.counts();
-    let (n, wall, cpu) = steady_stream(&mut bench, secs);
-    let c1 = bench.counts();
+    let w = steady_stream(&mut bench, secs);
     let info = bench.device_info();
     bench.shutdown().expect("shutdown");
     let _ = child.kill();
     let _ = child.wait();
     let merge = &info.extra["merge"];
     println!(
-        "mixed: {n} rows in {wall:.2} s = {:.1} rows/s; held driver angle in {} rows, {} board samples without one; gaps {}, missing samples {}, crc errors {}",
-        n as f64 / wall,
+        "mixed: {} rows in {:.2} s = {:.1} rows/s; held driver angle in {} rows, {} board samples without one; {}",
+        w.n,
+        w.wall,
+        w.n as f64 / w.wall,
         merge["rows_with_held_driver_angle"],
         merge["board_samples_without_driver_angle"],
-        c1.gaps - c0.gaps,
-        c1.missing_samples - c0.missing_samples,
-        c1.crc_errors - c0.crc_errors
+        w.losses()
     );
-    println!(
-        "mixed host CPU: {cpu:.2} s for {n} rows = {:.2} ms per 1000 rows ({:.1} % of one core)",
-        cpu * 1e6 / (n as f64).max(1.0),
-        cpu / wall * 100.0
-    );
+    println!("{}", w.cpu_line("mixed host CPU", "rows"));
 }
 
 fn decoder_throughput() {
@@ -191,50 +236,18 @@ fn end_to_end() {
     bench.enable().expect("enable");
     bench.start_stream(1000.0).expect("stream");
     bench.run_at(60.0).expect("run");
-    // Let the ramp finish, then measure a steady window.
-    let mut buf = Vec::new();
-    let warm = Instant::now();
-    while warm.elapsed() < Duration::from_secs(1) {
-        buf.clear();
-        bench
-            .poll_samples(Duration::from_millis(20), &mut buf)
-            .expect("stream");
-    }
-    let c0 = bench.counts();
-    let cpu0 = process_cpu_s();
-    let t0 = Instant::now();
-    let mut n = 0u64;
-    let mut first_dev = None;
-    let mut last_dev = 0;
-    while t0.elapsed().as_secs_f64() < secs {
-        buf.clear();
-        bench
-            .poll_samples(Duration::from_millis(20), &mut buf)
-            .expect("stream");
-        for s in &buf {
-            first_dev.get_or_insert(s.device_time_us);
-            last_dev = s.device_time_us;
-        }
-        n += buf.len() as u64;
-    }
-    let wall = t0.elapsed().as_secs_f64();
-    let cpu = process_cpu_s() - cpu0;
-    let c1 = bench.counts();
+    let w = steady_stream(&mut bench, secs);
     bench.shutdown().expect("shutdown");
     let _ = child.kill();
     let _ = child.wait();
-    let dev_span = (last_dev - first_dev.unwrap_or(last_dev)) as f64 / 1e6;
     println!(
-        "link: {n} samples in {wall:.2} s wall = {:.1} samples/s (device clock span {dev_span:.2} s = {:.1} samples/s of device time); gaps {}, missing samples {}, crc errors {}",
-        n as f64 / wall,
-        n as f64 / dev_span.max(1e-9),
-        c1.gaps - c0.gaps,
-        c1.missing_samples - c0.missing_samples,
-        c1.crc_errors - c0.crc_errors
+        "link: {} samples in {:.2} s wall = {:.1} samples/s (device clock span {:.2} s = {:.1} samples/s of device time); {}",
+        w.n,
+        w.wall,
+        w.n as f64 / w.wall,
+        w.dev_span,
+        w.n as f64 / w.dev_span.max(1e-9),
+        w.losses()
     );
-    println!(
-        "host CPU: {cpu:.2} s for {n} samples = {:.2} ms per 1000 samples ({:.1} % of one core)",
-        cpu * 1e6 / (n as f64).max(1.0),
-        cpu / wall * 100.0
-    );
+    println!("{}", w.cpu_line("host CPU", "samples"));
 }
