@@ -13,13 +13,13 @@
 //! then stays between the two axes as in a gear pair. For 3R under the tangent cone (the
 //! default) the path is a loop around a seeded follower-local centre, traversed twice, lying
 //! in the plane span(p, w) that a conjugate normal inside the 10° cone leaves for the
-//! tangent ([`R3Loop`]); under the `arm` cone, which does not pin the tangent, it is a
+//! tangent (`R3Loop`); under the `arm` cone, which does not pin the tangent, it is a
 //! circle-like curve directly in follower coordinates. Control points come from a linear
 //! least-squares fit to the path, rescaled (radially, or the loop size) so the length is
 //! mid-way between L₁ and L₂. The start normal is the circumferential direction ±ẑ×p̂ made
 //! perpendicular to T² (1R, 1R1T; the sign alternates between candidates so every band gets
 //! both torque directions); for 3R the conjugate direction ±p̂ × w turned into the cone where
-//! it leaves it ([`r3_start_normal`], tangent cone) or T̂² × p̂ (arm cone). The exact
+//! it leaves it (`r3_start_normal`, tangent cone) or T̂² × p̂ (arm cone). The exact
 //! conjugate normal T² × T¹ of a curve not made for the cone violates it, and SLSQP diverged
 //! from it in a prototype.
 
