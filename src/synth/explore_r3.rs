@@ -11,21 +11,11 @@
 //! --ignored --nocapture` (env: MOTION, DX, K, M; MECH for the diagnosis).
 #![cfg(test)]
 
-use super::closure::{self, Class};
+use super::closure::{self, cross, dot, Class};
 use super::pose::PoseTrack;
 use rand::{Rng, SeedableRng};
 use std::sync::Arc;
 
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
 fn unit(a: [f64; 3]) -> [f64; 3] {
     let l = dot(a, a).sqrt().max(1e-300);
     [a[0] / l, a[1] / l, a[2] / l]
@@ -45,12 +35,21 @@ pub fn w_perp(p: [f64; 3], omega: [f64; 3], dx: f64) -> [f64; 3] {
     unit([w[0] - d * p[0], w[1] - d * p[1], w[2] - d * p[2]])
 }
 
-fn track(name: &str) -> Arc<PoseTrack> {
+/// Environment setting `key` parsed, or `default` when unset or unparsable.
+fn env_or<T: std::str::FromStr>(key: &str, default: T) -> T {
+    std::env::var(key)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
+/// The pose track of example `name` at `samples` samples per period.
+fn track(name: &str, samples: usize) -> Arc<PoseTrack> {
     let m = crate::motion::Motion::from_file(std::path::Path::new(&format!(
         "data/motions/{name}.toml"
     )))
     .unwrap();
-    Arc::new(PoseTrack::from_motion(&m, 120))
+    Arc::new(PoseTrack::from_motion(&m, samples))
 }
 
 /// Oracle: K contacts fixed at follower-local points (one per band height), with
@@ -59,16 +58,10 @@ fn track(name: &str) -> Arc<PoseTrack> {
 #[test]
 #[ignore]
 fn oracle_fixed_points() {
-    let name = std::env::var("MOTION").unwrap_or("cone-sweep".into());
-    let dx: f64 = std::env::var("DX")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(6.0);
-    let k: usize = std::env::var("K")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(6);
-    let tr = track(&name);
+    let name = env_or("MOTION", String::from("cone-sweep"));
+    let dx: f64 = env_or("DX", 6.0);
+    let k: usize = env_or("K", 6);
+    let tr = track(&name, 120);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
     let mut best = (f64::INFINITY, Vec::new());
     for _ in 0..20000 {
@@ -123,7 +116,7 @@ fn diagnose_mechanism() {
     let path = std::env::var("MECH").unwrap();
     let text = std::fs::read_to_string(&path).unwrap();
     let m: super::Mechanism = serde_json::from_str(&text).unwrap();
-    let name = std::env::var("MOTION").unwrap_or("cone-sweep".into());
+    let name = env_or("MOTION", String::from("cone-sweep"));
     let mo = crate::motion::Motion::from_file(std::path::Path::new(&format!(
         "data/motions/{name}.toml"
     )))
@@ -177,20 +170,11 @@ fn diagnose_mechanism() {
 #[test]
 #[ignore]
 fn oracle_initial_guesses() {
-    let name = std::env::var("MOTION").unwrap_or("cone-sweep".into());
-    let dx: f64 = std::env::var("DX")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(6.0);
-    let k: usize = std::env::var("K")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(6);
-    let m: usize = std::env::var("M")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(30);
-    let tr = track(&name);
+    let name = env_or("MOTION", String::from("cone-sweep"));
+    let dx: f64 = env_or("DX", 6.0);
+    let k: usize = env_or("K", 6);
+    let m: usize = env_or("M", 30);
+    let tr = track(&name, 120);
     type View = (Vec<Option<[f64; 3]>>, Vec<bool>);
     let mut all: Vec<Vec<View>> = Vec::new();
     for b in 0..k {
@@ -252,24 +236,11 @@ fn oracle_initial_guesses() {
 #[test]
 #[ignore]
 fn solve_band_outcomes() {
-    let name = std::env::var("MOTION").unwrap_or("cone-sweep".into());
-    let dx: f64 = std::env::var("DX")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(6.0);
-    let b: usize = std::env::var("BAND")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(3);
-    let m: usize = std::env::var("M")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(16);
-    let m2 = crate::motion::Motion::from_file(std::path::Path::new(&format!(
-        "data/motions/{name}.toml"
-    )))
-    .unwrap();
-    let tr = Arc::new(PoseTrack::from_motion(&m2, 360));
+    let name = env_or("MOTION", String::from("cone-sweep"));
+    let dx: f64 = env_or("DX", 6.0);
+    let b: usize = env_or("BAND", 3);
+    let m: usize = env_or("M", 16);
+    let tr = track(&name, 360);
     let pb = super::search::band_problem(Class::R3, &tr, dx, b, closure::NormalCone::Tangent);
     let mut ok = 0;
     for i in 0..m {
