@@ -58,9 +58,30 @@ fn run_session(rig_path: &str, motion: &str, board_faults: &[&str], cycles: u32)
     }
 }
 
+/// Rows whose driver angle was held (not interpolated).
+fn held_rows(rec: &Recording) -> usize {
+    rec.flags
+        .iter()
+        .filter(|&&f| f & flags::DRIVER_HELD != 0)
+        .count()
+}
+
+/// Analyse a finished run of an ideal plant and check it against the target: RMS rotation
+/// error under 0.5°, and a phase lag under 0.3° of driver (the plant has none, so any lag
+/// is the error of aligning the two device clocks).
+fn analyse_ideal(run: &Run, label: &str) -> mpc_rig::analysis::Summary {
+    let s = analyze_and_report(&run.rec_dir, &ReportOptions::default()).unwrap();
+    let rms = s.headline.rms_error_deg.unwrap();
+    let lag = s.headline.phase_lag_deg;
+    eprintln!("{label}: RMS {rms:.4}°, lag {lag:.4}°");
+    assert!(rms < 0.5, "RMS {rms}°");
+    assert!(lag.abs() < 0.3, "phase lag {lag}° (clock misalignment)");
+    s
+}
+
 /// Guards the 3R servo bench: a Dynamixel-driven, IMU-measured session records a row for
-/// every board sample (no gap in the board's timeline), every measured row carries an interpolated (not held) driver
-/// angle, the sidecar names both devices, and the analysis of an ideal plant finds the
+/// every board sample (no gap in the board's timeline), every measured row carries an
+/// interpolated (not held) driver angle, the sidecar names both devices, and the analysis of an ideal plant finds the
 /// follower within 0.5° RMS of the target with a phase lag under 0.3° of driver: the plant
 /// has none, so that is the error of aligning the two device clocks (30 rpm: 0.18° of
 /// driver per ms, so under 1.7 ms).
@@ -85,22 +106,9 @@ fn mixed_bench_measures_a_3r_follower_turned_by_a_servo() {
     assert!(steps.iter().all(|&d| d == 2000), "{:?}", rec.meta.counts);
     // 3 turns at 30 rpm = 6 s at 500 Hz ≈ 3000 rows (fewer on a loaded machine).
     assert!(rec.phase.len() > 2000, "{} rows", rec.phase.len());
-    let held = rec
-        .flags
-        .iter()
-        .filter(|&&f| f & flags::DRIVER_HELD != 0)
-        .count();
+    let held = held_rows(&rec);
     assert!(held * 100 < rec.flags.len(), "{held} held rows");
-    let s = analyze_and_report(&run.rec_dir, &ReportOptions::default()).unwrap();
-    let rms = s.headline.rms_error_deg.unwrap();
-    let lag = s.headline.phase_lag_deg;
-    eprintln!(
-        "3R mixed: RMS {rms:.4}°, lag {lag:.4}°, held {held} of {}",
-        rec.flags.len()
-    );
-    assert!(rms < 0.5, "RMS {rms}°");
-    // The plant has no lag: what the analysis finds is the clock alignment's error.
-    assert!(lag.abs() < 0.3, "phase lag {lag}° (clock misalignment)");
+    analyse_ideal(&run, "3R mixed");
 }
 
 /// Guards the 1R1T servo bench: the AS5600 and the linear encoder on the board, the driver
@@ -115,14 +123,9 @@ fn mixed_bench_measures_a_1r1t_follower_turned_by_a_servo() {
         1,
     );
     assert!(run.outcome.complete, "{}", run.outcome.end);
-    let s = analyze_and_report(&run.rec_dir, &ReportOptions::default()).unwrap();
-    let rms = s.headline.rms_error_deg.unwrap();
+    let s = analyse_ideal(&run, "1R1T mixed");
     let mm = s.headline.rms_error_mm.unwrap();
-    let lag = s.headline.phase_lag_deg;
-    eprintln!("1R1T mixed: RMS {rms:.4}°, {mm:.4} mm, lag {lag:.4}°");
-    assert!(rms < 0.5, "RMS {rms}°");
     assert!(mm < 0.05, "RMS height {mm} mm");
-    assert!(lag.abs() < 0.3, "phase lag {lag}° (clock misalignment)");
 }
 
 /// Guards the way out when the board disappears: the session ends as disconnected, the
@@ -241,10 +244,6 @@ fn a_brief_board_dropout_is_bridged() {
     let rec = Recording::load(&run.rec_dir).unwrap();
     assert!(rec.meta.counts.reconnects >= 1, "{:?}", rec.meta.counts);
     assert!(rec.flags.iter().any(|&f| f & flags::RECONNECTED != 0));
-    let held = rec
-        .flags
-        .iter()
-        .filter(|&&f| f & flags::DRIVER_HELD != 0)
-        .count();
+    let held = held_rows(&rec);
     assert!(held * 100 < rec.flags.len(), "{held} held rows");
 }
