@@ -2,9 +2,11 @@
 //! line of stdout, a bus a host can talk to, clear errors for bad arguments, and the
 //! configured unplug.
 
-use std::io::{BufRead, BufReader};
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
+
+mod support;
+use support::SimChild;
 
 /// Repeat a transaction that timed out (up to 5 attempts): on a busy machine the simulator
 /// thread may get the CPU later than `dynamixel2`'s fixed 34 ms reply timeout.
@@ -35,34 +37,11 @@ fn motion() -> String {
     )
 }
 
-struct Served {
-    child: Child,
-    path: String,
-}
-
-impl Drop for Served {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-fn serve(extra: &[&str]) -> Served {
-    let mut child = bin()
-        .args(["sim-device", "dynamixel", "--motion", &motion()])
-        .args(extra)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("mpc-rig runs");
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .expect("first line");
-    Served {
-        child,
-        path: line.trim().to_string(),
-    }
+fn serve(extra: &[&str]) -> SimChild {
+    let motion = motion();
+    let mut args = vec!["sim-device", "dynamixel", "--motion", motion.as_str()];
+    args.extend_from_slice(extra);
+    SimChild::spawn(args)
 }
 
 /// Guards the user-facing contract: the first stdout line is a pseudo-terminal path and a
@@ -71,11 +50,11 @@ fn serve(extra: &[&str]) -> Served {
 fn prints_pty_path_and_serves_the_bus() {
     let served = serve(&[]);
     assert!(
-        served.path.starts_with("/dev/"),
+        served.first_line.starts_with("/dev/"),
         "first line: {}",
-        served.path
+        served.first_line
     );
-    let mut bus = dynamixel2::Bus::open(&served.path, 57_600).expect("opens");
+    let mut bus = dynamixel2::Bus::open(&served.first_line, 57_600).expect("opens");
     assert_eq!(retry!(bus.ping(1)).unwrap().data.model, 1060);
     assert_eq!(retry!(bus.ping(2)).unwrap().data.model, 1060);
 }
@@ -92,7 +71,7 @@ fn custom_ids_and_configured_disconnect() {
         "--fault",
         "disconnect_at_s=0.8",
     ]);
-    let mut bus = dynamixel2::Bus::open(&served.path, 1_000_000).expect("opens at any baud");
+    let mut bus = dynamixel2::Bus::open(&served.first_line, 1_000_000).expect("opens at any baud");
     assert_eq!(retry!(bus.ping(5)).unwrap().data.model, 1060);
     assert!(retry!(bus.ping(1)).is_err());
     let t0 = Instant::now();

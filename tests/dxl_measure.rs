@@ -4,9 +4,8 @@
 //! link faults injected (recording survives, gaps counted, motor ends stopped), and an
 //! unplug mid-run (recording kept and marked incomplete, clear message, exit code `EXIT_DISCONNECTED` = 5).
 
-use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
@@ -15,6 +14,9 @@ use mpc_rig::rig::recording::{Phase, Recording};
 use mpc_rig::rig::session::{self, EndReason, MeasureOptions, TargetSpec};
 use mpc_rig::rig::sim::dynamixel::{spawn, MotionTarget, SimDynamixelOptions};
 use mpc_rig::rig::sim::plant::PlantConfig;
+
+mod support;
+use support::SimChild;
 
 fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -32,39 +34,17 @@ fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_mpc-rig"))
 }
 
-/// A `sim-device dynamixel` child process, killed on drop.
-struct SimProcess {
-    child: Child,
-    path: String,
-}
-
-impl Drop for SimProcess {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-fn sim_process(faults: &[&str]) -> SimProcess {
-    let mut cmd = bin();
-    cmd.args(["sim-device", "dynamixel", "--motion"])
-        .arg(motion_file());
+fn sim_process(faults: &[&str]) -> SimChild {
+    let mut args = vec![
+        "sim-device".into(),
+        "dynamixel".into(),
+        "--motion".into(),
+        motion_file().into_os_string(),
+    ];
     for f in faults {
-        cmd.args(["--fault", f]);
+        args.extend(["--fault".into(), (*f).into()]);
     }
-    let mut child = cmd
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("mpc-rig runs");
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .expect("first line");
-    SimProcess {
-        child,
-        path: line.trim().to_string(),
-    }
+    SimChild::spawn::<_, std::ffi::OsString>(args)
 }
 
 /// Guards the lab user's command end to end: a forward and reverse session records every
@@ -78,7 +58,7 @@ fn measure_cli_records_forward_and_reverse_and_analyses() {
     let result = bin()
         .args(["measure", "--rig"])
         .arg(rig_file())
-        .args(["--port", &sim.path, "--motion"])
+        .args(["--port", &sim.first_line, "--motion"])
         .arg(motion_file())
         .args([
             "--speed",
@@ -222,7 +202,7 @@ fn unplug_mid_run_keeps_the_recording_and_exits_disconnected() {
     let result = bin()
         .args(["measure", "--rig"])
         .arg(rig_file())
-        .args(["--port", &sim.path, "--motion"])
+        .args(["--port", &sim.first_line, "--motion"])
         .arg(motion_file())
         .args([
             "--speed",

@@ -2,9 +2,11 @@
 //! (path on the first stdout line), `mpc-rig measure` against it, and the exit codes and
 //! messages of an unplug and a version mismatch.
 
-use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
+
+mod support;
+use support::SimChild;
 
 fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_mpc-rig")
@@ -14,49 +16,28 @@ fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
 }
 
-/// A simulator child process, killed (by its own pid) when dropped.
-struct Sim {
-    child: Child,
-    path: String,
-}
-
-impl Sim {
-    fn start(faults: &[&str]) -> Sim {
-        let mut cmd = Command::new(bin());
-        cmd.args(["sim-device", "stepper", "--motion"])
-            .arg(root().join("data/motions/half-turn-2to1.toml"));
-        for f in faults {
-            cmd.args(["--fault", f]);
-        }
-        let mut child = cmd
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap();
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap())
-            .read_line(&mut line)
-            .unwrap();
-        Sim {
-            child,
-            path: line.trim().to_string(),
-        }
+/// `sim-device stepper` for half-turn-2to1 with `faults` (killed when dropped).
+fn start_sim(faults: &[&str]) -> SimChild {
+    let mut args = vec![
+        "sim-device".into(),
+        "stepper".into(),
+        "--motion".into(),
+        root()
+            .join("data/motions/half-turn-2to1.toml")
+            .into_os_string(),
+    ];
+    for f in faults {
+        args.extend(["--fault".into(), (*f).into()]);
     }
+    SimChild::spawn::<_, std::ffi::OsString>(args)
 }
 
-impl Drop for Sim {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-fn measure(sim: &Sim, out: &Path) -> std::process::Output {
+fn measure(sim: &SimChild, out: &Path) -> std::process::Output {
     Command::new(bin())
         .arg("measure")
         .arg("--rig")
         .arg(root().join("rigs/sim-stepper.toml"))
-        .args(["--port", &sim.path])
+        .args(["--port", &sim.first_line])
         .arg("--motion")
         .arg(root().join("data/motions/half-turn-2to1.toml"))
         .args(["--speed", "90", "--cycles", "3", "--no-analysis", "-o"])
@@ -68,9 +49,13 @@ fn measure(sim: &Sim, out: &Path) -> std::process::Output {
 /// Guards: the simulator prints a usable pseudo-terminal path on its first line.
 #[test]
 fn sim_device_prints_pty_path_first() {
-    let sim = Sim::start(&[]);
-    assert!(sim.path.starts_with("/dev/pts/"), "{}", sim.path);
-    assert!(Path::new(&sim.path).exists());
+    let sim = start_sim(&[]);
+    assert!(
+        sim.first_line.starts_with("/dev/pts/"),
+        "{}",
+        sim.first_line
+    );
+    assert!(Path::new(&sim.first_line).exists());
 }
 
 /// Guards: an unplug mid-run (the simulator closes its end for good) ends `measure` with
@@ -80,7 +65,7 @@ fn sim_device_prints_pty_path_first() {
 fn measure_reports_unplug_with_exit_code_and_kept_recording() {
     let dir = tempfile::tempdir().unwrap();
     let rec = dir.path().join("rec");
-    let sim = Sim::start(&["disconnect_at_s=1.5"]);
+    let sim = start_sim(&["disconnect_at_s=1.5"]);
     let out = measure(&sim, &rec);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(5), "{stderr}");
@@ -95,7 +80,7 @@ fn measure_reports_unplug_with_exit_code_and_kept_recording() {
 #[test]
 fn measure_reports_version_mismatch() {
     let dir = tempfile::tempdir().unwrap();
-    let sim = Sim::start(&["protocol_version=7"]);
+    let sim = start_sim(&["protocol_version=7"]);
     let out = measure(&sim, &dir.path().join("rec"));
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{stderr}");

@@ -16,6 +16,9 @@ use mpc_rig::rig::session::{measure, EndReason, MeasureOptions, MeasureOutcome, 
 use mpc_rig::rig::sim::mixed::{spawn_with, SimMixedHandle};
 use mpc_rig::rig::sim::plant::PlantConfig;
 
+mod support;
+use support::SimChild;
+
 fn repo(p: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(p)
 }
@@ -152,19 +155,6 @@ fn unplugging_the_sensor_board_keeps_the_recording_and_stops_the_servo() {
     assert!(!driver.torque_enabled(), "driver torque still on");
 }
 
-/// A `sim-device mixed` child process, killed on drop.
-struct SimProcess {
-    child: std::process::Child,
-    ports: Vec<String>,
-}
-
-impl Drop for SimProcess {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
 fn bin() -> std::process::Command {
     std::process::Command::new(env!("CARGO_BIN_EXE_mpc-rig"))
 }
@@ -175,27 +165,22 @@ fn bin() -> std::process::Command {
 /// the port does not hold the servos the rig describes.
 #[test]
 fn measure_cli_against_sim_device_mixed_and_swapped_ports() {
-    use std::io::{BufRead, BufReader};
     let motion = repo("data/motions/figure-eight.toml");
-    let mut child = bin()
-        .args(["sim-device", "mixed", "--rig"])
-        .arg(repo("rigs/sim-dynamixel-imu.toml"))
-        .arg("--motion")
-        .arg(&motion)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    let sim = SimProcess {
-        child,
-        ports: line.split_whitespace().map(str::to_string).collect(),
-    };
-    assert_eq!(sim.ports.len(), 2, "{line}");
-    assert!(sim.ports[0].starts_with("dxl=") && sim.ports[1].starts_with("board="));
+    let sim = SimChild::spawn([
+        "sim-device".into(),
+        "mixed".into(),
+        "--rig".into(),
+        repo("rigs/sim-dynamixel-imu.toml").into_os_string(),
+        "--motion".into(),
+        motion.clone().into_os_string(),
+    ]);
+    let ports: Vec<String> = sim
+        .first_line
+        .split_whitespace()
+        .map(str::to_string)
+        .collect();
+    assert_eq!(ports.len(), 2, "{}", sim.first_line);
+    assert!(ports[0].starts_with("dxl=") && ports[1].starts_with("board="));
     let tmp = tempfile::tempdir().unwrap();
     let run = |ports: &[String], dir: &Path| {
         let mut cmd = bin();
@@ -211,14 +196,14 @@ fn measure_cli_against_sim_device_mixed_and_swapped_ports() {
             .output()
             .unwrap()
     };
-    let out = run(&sim.ports, &tmp.path().join("rec"));
+    let out = run(&ports, &tmp.path().join("rec"));
     let text =
         String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{text}");
     assert!(text.contains("RMS"), "{text}");
     let swapped: Vec<String> = vec![
-        format!("dxl={}", sim.ports[1].trim_start_matches("board=")),
-        format!("board={}", sim.ports[0].trim_start_matches("dxl=")),
+        format!("dxl={}", ports[1].trim_start_matches("board=")),
+        format!("board={}", ports[0].trim_start_matches("dxl=")),
     ];
     let out = run(&swapped, &tmp.path().join("rec2"));
     let text = String::from_utf8_lossy(&out.stderr);
