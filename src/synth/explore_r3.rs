@@ -241,19 +241,33 @@ fn solve_band_outcomes() {
     let b: usize = env_or("BAND", 3);
     let m: usize = env_or("M", 16);
     let tr = track(&name, 360);
-    let pb = super::search::band_problem(Class::R3, &tr, dx, b, closure::NormalCone::Tangent);
+    let n = tr.len();
     let mut ok = 0;
     for i in 0..m {
+        let mut pb =
+            super::search::band_problem(Class::R3, &tr, dx, b, closure::NormalCone::Tangent);
+        pb.vary = Some((i * n / m) % n);
         let x0 = super::candidate::initial_guess(&pb, 1, b, i);
         let e0 = pb.evaluate(&x0);
+        // Where the start normal is furthest out of the tangent plane of the sphere.
+        let (worst_t, worst_dot) = tr
+            .samples
+            .iter()
+            .map(|pose| {
+                let c = super::model::contact_f64(&x0, pose, dx);
+                (pose.t, dot(c.n.vals(), unit(c.p.vals())).abs())
+            })
+            .fold((0.0, 0.0), |a, v| if v.1 > a.1 { v } else { a });
         let c = super::candidate::solve(&pb, super::optimizer::default_minimizer(), 1, b, i, 400);
         ok += c.valid as usize;
         eprintln!(
-            "  -> start cons {:?} valid {} {:?}",
+            "  {i}: start max|n.p| {worst_dot:.3} at t {worst_t:.3}, cons {:?} -> {:?} evals {} valid {} {:?}",
             e0.cons_exact
                 .iter()
                 .map(|v| format!("{v:.2}"))
                 .collect::<Vec<_>>(),
+            c.status,
+            c.evals,
             c.valid,
             c.reason
         );
