@@ -566,6 +566,7 @@ pub(crate) mod tests {
                 .and_then(|v| v.parse().ok())
                 .unwrap_or(W_ROBUST),
             cone: closure::NormalCone::Tangent,
+            focus: None,
         }
     }
 

@@ -5,13 +5,20 @@
 //! parallel with rayon) and B (GA). It does not evaluate energies or hulls itself.
 //!
 //! **Loop order.** d_x is the outer loop (from small to large, [`DX_GRID`]) and K the inner
-//! one (from the minimum dof + 1 up to [`MAX_EXTRA_K`] more). Bands are laid out so that K
+//! one (from the minimum dof + 1 up to [`max_extra_k`] more). Bands are laid out so that K
 //! bands are a prefix of K + 1 bands (band k is centred at s(k)·([`BAND_HEIGHT`] +
 //! [`BAND_GAP`]) with s = 0, +1, −1, +2, −2, …), so growing K only solves candidates for the
 //! new band and the GA reuses the others. The first (d_x, K) whose GA winner meets the
 //! paper's criteria (E_valiTime = 1, E_maxDist ≤ −ε) **and** robust closure at every
 //! sample is accepted; every candidate in it already has a conjugation residual ≤ 1° at 4×
 //! the sample density.
+//!
+//! **Gap-filling bands (1R).** Once the GA's combination at some K holds robust closure at
+//! [`FOCUS_MIN_ROBUST`] of the samples or more, the next band's candidates are asked (by
+//! E_focus, see [`W_FOCUS`](super::energy::W_FOCUS)) for a robust torque of the sign the
+//! combination lacks, at the samples where it lacks it (see `focus_of`). An ordinary band
+//! adds contacts wherever its random starts happen to drive; quarter-turn-dwell's remaining
+//! gaps sit inside its fast steps, where few random contacts have a torque arm.
 //!
 //! **Determinism.** Every candidate is seeded from (seed, band, index) and solved
 //! independently; the GA evaluates fitness in parallel but collects results in population
@@ -44,11 +51,34 @@ pub const BAND_GAP: f64 = 0.5;
 /// no K ≤ 5 reached robust closure at d_x = 5 (150 candidates spent for nothing) while
 /// d_x = 6 succeeded at K = 4, so the search starts at the paper's value.
 pub const DX_GRID: [f64; 3] = [6.0, 7.5, 9.0];
-/// How many K beyond the minimum to try. Default 3 (1R: 2..5, 1R1T: 3..6, 3R: 4..7); the
-/// paper's results used at most minimum + 2.
+/// How many K beyond the minimum to try for 1R1T and 3R. Default 3 (1R1T: 3..6, 3R: 4..7);
+/// the paper's results used at most minimum + 2.
 pub const MAX_EXTRA_K: usize = 3;
+/// How many K beyond the minimum to try for 1R. Default 8 (K = 2..10): 1R bands are cheap
+/// (about 5 s each here) and robust closure of an indexing motion with dwells
+/// (quarter-turn-dwell) needed K = 9–10, with gap-filling bands, while half-turn-2to1 stops
+/// at K = 4.
+pub const MAX_EXTRA_K_1R: usize = 8;
+
+/// How many K beyond the minimum the search tries for `class`.
+pub fn max_extra_k(class: Class) -> usize {
+    if class == Class::R1 {
+        MAX_EXTRA_K_1R
+    } else {
+        MAX_EXTRA_K
+    }
+}
 /// Candidates per band (the paper's M). Default 30 (supplementary notes).
 pub const CANDIDATES: usize = 30;
+/// Widening of a gap-filling band's focus (see `focus_of`), as a share of the period on
+/// each side of a gap. Default 0.01 (3.6 samples of 360): the arm must build up before the
+/// gap, not at its edge.
+pub const FOCUS_WIDEN: f64 = 0.01;
+/// Robust closure (share of samples) the previous combination must reach before the next 1R
+/// band becomes a gap-filling band. Default 0.5: below it the gaps are too wide for the one
+/// candidate a band contributes; aiming every band at the gaps (threshold 0) left 0–1 of 30
+/// candidates usable in quarter-turn-dwell's bands 3 and 4.
+pub const FOCUS_MIN_ROBUST: f64 = 0.5;
 
 /// Options of [`synthesize`](super::synthesize).
 #[derive(Clone, Debug)]
@@ -199,7 +229,7 @@ fn search(
     let minimizer = default_minimizer();
     let k_list: Vec<usize> = match opts.k {
         Some(k) => vec![k],
-        None => (class.min_k()..=class.min_k() + MAX_EXTRA_K).collect(),
+        None => (class.min_k()..=class.min_k() + max_extra_k(class)).collect(),
     };
     let dx_list: Vec<f64> = match opts.dx {
         Some(d) => vec![d],
@@ -227,6 +257,7 @@ fn search(
     'dx: for &dx in &dx_list {
         dx_tried.push(dx);
         let mut bands: Vec<Vec<Candidate>> = Vec::new();
+        let mut last_chosen: Option<(Vec<Candidate>, f64)> = None;
         for &k in &k_list {
             if !k_tried.contains(&k) {
                 k_tried.push(k);
@@ -235,7 +266,22 @@ fn search(
             progress.attempt_started(k, dx, new * opts.candidates);
             while bands.len() < k {
                 let b = bands.len();
-                let cands = solve_band(class, &poses, dx, b, opts, minimizer, progress);
+                // 1R: a band added after a combination that nearly holds robust closure is
+                // aimed at its gaps.
+                let focus = last_chosen
+                    .as_ref()
+                    .filter(|(_, r)| class == Class::R1 && *r >= FOCUS_MIN_ROBUST)
+                    .and_then(|(c, _)| focus_of(c, poses.len()));
+                let cands = solve_band(
+                    class,
+                    &poses,
+                    dx,
+                    b,
+                    opts,
+                    minimizer,
+                    progress,
+                    focus.as_ref(),
+                );
                 if cancelled(opts) {
                     break 'dx;
                 }
@@ -296,6 +342,7 @@ fn search(
                 .enumerate()
                 .map(|(b, &g)| valid[b][g].clone())
                 .collect();
+            last_chosen = Some((chosen.clone(), res.fitness.robust_vali_time));
             let summary = pool.summary(&res.genome);
             let accepted = summary.accepted();
             let a = Attempt {
@@ -411,9 +458,60 @@ pub fn band_problem(
         w_closure: W_CLOSURE,
         w_robust: W_ROBUST,
         cone,
+        focus: None,
     }
 }
 
+/// Per-sample torque signs that a gap-filling 1R band is asked for (see
+/// [`W_FOCUS`](super::energy::W_FOCUS)): the
+/// samples where the chosen candidates lack a robust contact of one sign, widened by
+/// [`FOCUS_WIDEN`] of the period on each side. Where both signs are missing, even-indexed
+/// candidates are asked for + and odd-indexed for −. Returns the (even, odd) arrays, or
+/// `None` when nothing is missing.
+fn focus_of(chosen: &[Candidate], n: usize) -> Option<(Vec<f64>, Vec<f64>)> {
+    let has = |i: usize, s: f64| {
+        chosen.iter().any(|c| {
+            c.robust.get(i).copied().unwrap_or(false)
+                && c.ntilde
+                    .get(i)
+                    .copied()
+                    .flatten()
+                    .is_some_and(|v| v[0] * s > 0.0)
+        })
+    };
+    let lack: Vec<(bool, bool)> = (0..n).map(|i| (!has(i, 1.0), !has(i, -1.0))).collect();
+    if lack.iter().all(|&(p, m)| !p && !m) {
+        return None;
+    }
+    let w = ((FOCUS_WIDEN * n as f64).round() as usize).min(n / 2);
+    let widened = |i: usize| -> (bool, bool) {
+        (0..=2 * w).fold((false, false), |acc, d| {
+            let j = (i + n + d - w) % n;
+            (acc.0 || lack[j].0, acc.1 || lack[j].1)
+        })
+    };
+    let (mut even, mut odd) = (vec![0.0; n], vec![0.0; n]);
+    for i in 0..n {
+        match widened(i) {
+            (true, true) => {
+                even[i] = 1.0;
+                odd[i] = -1.0;
+            }
+            (true, false) => {
+                even[i] = 1.0;
+                odd[i] = 1.0;
+            }
+            (false, true) => {
+                even[i] = -1.0;
+                odd[i] = -1.0;
+            }
+            (false, false) => {}
+        }
+    }
+    Some((even, odd))
+}
+
+#[allow(clippy::too_many_arguments)]
 fn solve_band(
     class: Class,
     poses: &Arc<PoseTrack>,
@@ -422,7 +520,9 @@ fn solve_band(
     opts: &SynthOptions,
     minimizer: &dyn Minimizer,
     progress: &dyn SynthProgress,
+    focus: Option<&(Vec<f64>, Vec<f64>)>,
 ) -> Vec<Candidate> {
+    let focus = focus.map(|(e, o)| (Arc::new(e.clone()), Arc::new(o.clone())));
     let n = poses.len();
     let m = opts.candidates;
     (0..m)
@@ -431,6 +531,9 @@ fn solve_band(
             let mut pb = band_problem(class, poses, dx, b, opts.cone);
             if class != Class::R1 {
                 pb.vary = Some((i * n / m) % n);
+            }
+            if let Some((e, o)) = &focus {
+                pb.focus = Some(if i % 2 == 0 { e.clone() } else { o.clone() });
             }
             let c = if cancelled(opts) {
                 Candidate {
@@ -660,6 +763,61 @@ mod tests {
         o.dx = Some(-1.0);
         let e = synthesize_track(Class::R1, track, "t", &o, &NoProgress).unwrap_err();
         assert!(e.to_string().contains("--dx"), "{e}");
+    }
+
+    /// A 1R candidate for `focus_of` tests: per sample, ñ sign (+1/−1) and robustness.
+    fn contact_1r(signs: &[(f64, bool)]) -> Candidate {
+        Candidate {
+            band: 0,
+            index: 0,
+            x: Vec::new(),
+            f: 0.0,
+            status: crate::synth::optimizer::SolveStatus::Converged,
+            valid: true,
+            reason: None,
+            residual_deg: 0.0,
+            ntilde: signs.iter().map(|&(s, _)| Some([s, 0.0, 0.0])).collect(),
+            robust: signs.iter().map(|&(_, r)| r).collect(),
+            evals: 0,
+        }
+    }
+
+    /// Guards the gap-filling focus: a band is asked for + where no chosen contact drives
+    /// robustly in +, for − where none drives in −, for either sign by candidate parity where
+    /// both are missing, widened by `FOCUS_WIDEN` of the period; nothing is asked when
+    /// robust closure holds everywhere.
+    #[test]
+    fn gap_filling_focus_asks_for_the_missing_sign() {
+        let n = 200;
+        let w = (FOCUS_WIDEN * n as f64).round() as usize;
+        assert_eq!(w, 2);
+        // Contact a: robust + everywhere except 50..60; contact b: robust − everywhere except
+        // 55..70 (non-robust + there).
+        let a: Vec<_> = (0..n).map(|i| (1.0, !(50..60).contains(&i))).collect();
+        let b: Vec<_> = (0..n)
+            .map(|i| {
+                if (55..70).contains(&i) {
+                    (1.0, false)
+                } else {
+                    (-1.0, true)
+                }
+            })
+            .collect();
+        let (even, odd) = focus_of(&[contact_1r(&a), contact_1r(&b)], n).expect("gaps");
+        for i in 0..n {
+            let lack_p = (50 - w..60 + w).contains(&i);
+            let lack_m = (55 - w..70 + w).contains(&i);
+            let (e, o) = match (lack_p, lack_m) {
+                (true, true) => (1.0, -1.0),
+                (true, false) => (1.0, 1.0),
+                (false, true) => (-1.0, -1.0),
+                (false, false) => (0.0, 0.0),
+            };
+            assert_eq!((even[i], odd[i]), (e, o), "sample {i}");
+        }
+        let full: Vec<_> = (0..n).map(|_| (1.0, true)).collect();
+        let neg: Vec<_> = (0..n).map(|_| (-1.0, true)).collect();
+        assert!(focus_of(&[contact_1r(&full), contact_1r(&neg)], n).is_none());
     }
 
     /// Guards the band layout: bands are disjoint, equal height, and K bands are a prefix of
