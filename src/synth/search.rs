@@ -8,7 +8,9 @@
 //! one (from the minimum dof + 1 up to [`max_extra_k`] more). Bands are laid out so that K
 //! bands are a prefix of K + 1 bands (band k is centred at s(k)·([`BAND_HEIGHT`] +
 //! [`BAND_GAP`]) with s = 0, +1, −1, +2, −2, …), so growing K only solves candidates for the
-//! new band and the GA reuses the others. The first (d_x, K) whose GA winner meets the
+//! new band and the GA reuses the others. K counts curve pairs: a band in which no candidate
+//! passes the checks is left empty (a gap in the stack) and the next one laid out, up to
+//! K + [`MAX_EMPTY_BANDS`] bands. The first (d_x, K) whose GA winner meets the
 //! paper's criteria (E_valiTime = 1, E_maxDist ≤ −ε) **and** robust closure at every
 //! sample is accepted; every candidate in it already has a conjugation residual ≤ 1° at 4×
 //! the sample density.
@@ -70,6 +72,12 @@ pub fn max_extra_k(class: Class) -> usize {
 }
 /// Candidates per band (the paper's M). Default 30 (supplementary notes).
 pub const CANDIDATES: usize = 30;
+/// How many bands beyond K may be laid out when some are left empty (no candidate passed
+/// the checks), so that K still counts curve pairs. Default 2: spherical-four-bar's band 5
+/// had no usable candidate at d_x = 7.5 and 9, which used to end the search at that d_x
+/// although band 6 had 9; skipping it, the default search accepts it at K = 6, d_x = 7.5.
+pub const MAX_EMPTY_BANDS: usize = 2;
+
 /// Widening of a gap-filling band's focus (see `focus_of`), as a share of the period on
 /// each side of a gap. Default 0.01 (3.6 samples of 360): the arm must build up before the
 /// gap, not at its edge.
@@ -264,7 +272,10 @@ fn search(
             }
             let new = k.saturating_sub(bands.len());
             progress.attempt_started(k, dx, new * opts.candidates);
-            while bands.len() < k {
+            // K counts curve pairs: a band without a usable candidate is left empty (a gap
+            // in the stack) and the next one is laid out instead, up to K + MAX_EMPTY_BANDS
+            // bands.
+            while usable_bands(&bands) < k && bands.len() < k + MAX_EMPTY_BANDS {
                 let b = bands.len();
                 // 1R: a band added after a combination that nearly holds robust closure is
                 // aimed at its gaps.
@@ -296,12 +307,8 @@ fn search(
                 }
                 bands.push(cands);
             }
-            let valid: Vec<Vec<&Candidate>> = bands[..k]
-                .iter()
-                .map(|b| b.iter().filter(|c| c.valid).collect())
-                .collect();
-            let counts: Vec<usize> = valid.iter().map(|v| v.len()).collect();
-            if counts.contains(&0) {
+            let (valid, counts) = used_bands(&bands, k);
+            if valid.len() < k {
                 let a = Attempt {
                     k,
                     dx,
@@ -509,6 +516,34 @@ fn focus_of(chosen: &[Candidate], n: usize) -> Option<(Vec<f64>, Vec<f64>)> {
         }
     }
     Some((even, odd))
+}
+
+/// The usable candidates of the first `k` bands that have any (fewer when there are not
+/// enough), and the usable counts of every band laid out up to the last one used (0 for a
+/// band left empty), as shown in the attempt's summary.
+fn used_bands(bands: &[Vec<Candidate>], k: usize) -> (Vec<Vec<&Candidate>>, Vec<usize>) {
+    let all: Vec<Vec<&Candidate>> = bands
+        .iter()
+        .map(|b| b.iter().filter(|c| c.valid).collect())
+        .collect();
+    let mut shown = 0;
+    let mut valid = Vec::new();
+    for (i, v) in all.iter().enumerate() {
+        if valid.len() == k {
+            break;
+        }
+        shown = i + 1;
+        if !v.is_empty() {
+            valid.push(v.clone());
+        }
+    }
+    let counts = all[..shown].iter().map(|v| v.len()).collect();
+    (valid, counts)
+}
+
+/// Bands with at least one usable candidate.
+fn usable_bands(bands: &[Vec<Candidate>]) -> usize {
+    bands.iter().filter(|b| b.iter().any(|c| c.valid)).count()
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -780,6 +815,30 @@ mod tests {
             robust: signs.iter().map(|&(_, r)| r).collect(),
             evals: 0,
         }
+    }
+
+    /// Guards the skipping of empty bands: K counts bands with usable candidates, an empty
+    /// band is passed over (and shown as 0), and too few usable bands are reported as such.
+    #[test]
+    fn empty_bands_are_skipped_and_k_counts_curve_pairs() {
+        let band = |usable: usize| -> Vec<Candidate> {
+            (0..3)
+                .map(|i| {
+                    let mut c = contact_1r(&[(1.0, true)]);
+                    c.valid = i < usable;
+                    c
+                })
+                .collect()
+        };
+        let bands = vec![band(2), band(0), band(3), band(1)];
+        let lens = |v: &Vec<Vec<&Candidate>>| v.iter().map(|b| b.len()).collect::<Vec<_>>();
+        let (v, counts) = used_bands(&bands, 2);
+        assert_eq!((lens(&v), counts), (vec![2, 3], vec![2, 0, 3]));
+        let (v, counts) = used_bands(&bands, 3);
+        assert_eq!((lens(&v), counts), (vec![2, 3, 1], vec![2, 0, 3, 1]));
+        let (v, counts) = used_bands(&bands, 4);
+        assert_eq!((lens(&v), counts), (vec![2, 3, 1], vec![2, 0, 3, 1]));
+        assert_eq!(usable_bands(&bands), 3);
     }
 
     /// Guards the gap-filling focus: a band is asked for + where no chosen contact drives
