@@ -270,7 +270,7 @@ fn search(
             if !k_tried.contains(&k) {
                 k_tried.push(k);
             }
-            let new = k.saturating_sub(bands.len());
+            let new = k.saturating_sub(usable_bands(&bands));
             progress.attempt_started(k, dx, new * opts.candidates);
             // K counts curve pairs: a band without a usable candidate is left empty (a gap
             // in the stack) and the next one is laid out instead, up to K + MAX_EMPTY_BANDS
@@ -470,12 +470,11 @@ pub fn band_problem(
 }
 
 /// Per-sample torque signs that a gap-filling 1R band is asked for (see
-/// [`W_FOCUS`](super::energy::W_FOCUS)): the
-/// samples where the chosen candidates lack a robust contact of one sign, widened by
-/// [`FOCUS_WIDEN`] of the period on each side. Where both signs are missing, even-indexed
+/// [`W_FOCUS`](super::energy::W_FOCUS)): the samples where the chosen candidates lack a
+/// robust contact of one sign, widened by [`FOCUS_WIDEN`] of the period on each side. Where both signs are missing, even-indexed
 /// candidates are asked for + and odd-indexed for −. Returns the (even, odd) arrays, or
 /// `None` when nothing is missing.
-fn focus_of(chosen: &[Candidate], n: usize) -> Option<(Vec<f64>, Vec<f64>)> {
+fn focus_of(chosen: &[Candidate], n: usize) -> Option<Focus> {
     let has = |i: usize, s: f64| {
         chosen.iter().any(|c| {
             c.robust.get(i).copied().unwrap_or(false)
@@ -515,8 +514,11 @@ fn focus_of(chosen: &[Candidate], n: usize) -> Option<(Vec<f64>, Vec<f64>)> {
             (false, false) => {}
         }
     }
-    Some((even, odd))
+    Some((Arc::new(even), Arc::new(odd)))
 }
+
+/// A gap-filling band's per-sample torque signs for its even- and odd-indexed candidates.
+type Focus = (Arc<Vec<f64>>, Arc<Vec<f64>>);
 
 /// The usable candidates of the first `k` bands that have any (fewer when there are not
 /// enough), and the usable counts of every band laid out up to the last one used (0 for a
@@ -555,9 +557,8 @@ fn solve_band(
     opts: &SynthOptions,
     minimizer: &dyn Minimizer,
     progress: &dyn SynthProgress,
-    focus: Option<&(Vec<f64>, Vec<f64>)>,
+    focus: Option<&Focus>,
 ) -> Vec<Candidate> {
-    let focus = focus.map(|(e, o)| (Arc::new(e.clone()), Arc::new(o.clone())));
     let n = poses.len();
     let m = opts.candidates;
     (0..m)
@@ -567,7 +568,7 @@ fn solve_band(
             if class != Class::R1 {
                 pb.vary = Some((i * n / m) % n);
             }
-            if let Some((e, o)) = &focus {
+            if let Some((e, o)) = focus {
                 pb.focus = Some(if i % 2 == 0 { e.clone() } else { o.clone() });
             }
             let c = if cancelled(opts) {
