@@ -509,6 +509,42 @@ mod tests {
         }
     }
 
+    /// Guards E_focus's value: asking a 1R candidate for torque sign s at a set of samples
+    /// adds exactly W_FOCUS·Σ max(0, a₀ − s·aᵢ)² / N over those samples (aᵢ the torque arm
+    /// per unit radius of the contact), and nothing where no sign is asked.
+    #[test]
+    fn focus_energy_penalizes_only_a_missing_arm_of_the_asked_sign() {
+        let (pb, x) = problem(Class::R1);
+        let n = pb.poses.len();
+        let f0 = pb.evaluate(&x).f;
+        let arms: Vec<f64> = pb
+            .poses
+            .samples
+            .iter()
+            .map(|pose| {
+                let c = model::contact_f64(&x, pose, pb.dx);
+                let (p, nn) = (c.p.vals(), c.n.vals());
+                (nn[1] * p[0] - nn[0] * p[1]) / (p[0] * p[0] + p[1] * p[1]).sqrt()
+            })
+            .collect();
+        for sign in [1.0, -1.0] {
+            // Every third sample asked for `sign`, the others for nothing.
+            let focus: Vec<f64> = (0..n)
+                .map(|i| if i % 3 == 0 { sign } else { 0.0 })
+                .collect();
+            let want: f64 = (0..n)
+                .filter(|i| i % 3 == 0)
+                .map(|i| (ROBUST_ARM - sign * arms[i]).max(0.0).powi(2) * W_FOCUS)
+                .sum::<f64>()
+                / n as f64;
+            let mut fp = pb.clone();
+            fp.focus = Some(Arc::new(focus));
+            let got = fp.evaluate(&x).f - f0;
+            assert!(want > 0.0, "the test design must miss the arm somewhere");
+            assert!((got - want).abs() < 1e-9 * (1.0 + want), "{got} vs {want}");
+        }
+    }
+
     /// Guards the KS aggregation: it never under-estimates the exact per-sample maximum.
     #[test]
     fn aggregated_constraints_bound_the_exact_maximum() {
