@@ -787,6 +787,38 @@ mod tests {
         assert_eq!(a.solve.attempts, b.solve.attempts);
     }
 
+    /// Guards determinism of the whole K loop for 1R, including gap-filling bands (aimed at
+    /// the previous combination's gaps) and the skipping of empty bands: one and two
+    /// threads give the same attempts and the same result, and the loop did reach a band
+    /// aimed at gaps (an attempt at robust closure ≥ `FOCUS_MIN_ROBUST` followed by another).
+    #[test]
+    fn k_loop_with_gap_filling_bands_is_deterministic() {
+        let track = half_turn_like(60);
+        let run = |threads| {
+            let opts = SynthOptions {
+                k: None,
+                ..small_opts(threads)
+            };
+            outcome(synthesize_track(
+                Class::R1,
+                track.clone(),
+                "t",
+                &opts,
+                &NoProgress,
+            ))
+        };
+        let (a, b) = (run(1), run(2));
+        assert_eq!(a.solve.attempts, b.solve.attempts);
+        assert_eq!(a.curve_pairs, b.curve_pairs);
+        assert_eq!(a.closure, b.closure);
+        let at = &a.solve.attempts;
+        assert!(
+            at.windows(2)
+                .any(|w| w[0].robust_vali_time >= FOCUS_MIN_ROBUST && w[1].k == w[0].k + 1),
+            "no gap-filling band was reached: {at:?}"
+        );
+    }
+
     /// Guards that bad requests are typed errors, not panics.
     #[test]
     fn bad_requests_are_rejected_with_a_message() {
