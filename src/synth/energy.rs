@@ -1,5 +1,6 @@
 //! The candidate problem of one curve pair: objective (paper Eqs. 19–23 plus the class's
-//! closure energy and E_vary) and constraints, with exact gradients by forward-mode AD.
+//! closure energy and E_vary; for 1R/1R1T our E_robust, and E_focus for a 1R candidate of a
+//! gap-filling band) and constraints, with exact gradients by forward-mode AD.
 //!
 //! Owns the weights, the constraint set and its aggregation, and the evaluation of a design
 //! vector (layout in `model::NV`). It does not run the optimizer (see `optimizer`) or pick
