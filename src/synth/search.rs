@@ -270,12 +270,18 @@ fn search(
             if !k_tried.contains(&k) {
                 k_tried.push(k);
             }
-            let new = k.saturating_sub(usable_bands(&bands));
-            progress.attempt_started(k, dx, new * opts.candidates);
+            let mut announced = k.saturating_sub(usable_bands(&bands));
+            progress.attempt_started(k, dx, announced * opts.candidates);
             // K counts curve pairs: a band without a usable candidate is left empty (a gap
             // in the stack) and the next one is laid out instead, up to K + MAX_EMPTY_BANDS
             // bands.
             while usable_bands(&bands) < k && bands.len() < k + MAX_EMPTY_BANDS {
+                if announced == 0 {
+                    // An empty band left a gap: announce the bands still to fill.
+                    announced = k - usable_bands(&bands);
+                    progress.attempt_started(k, dx, announced * opts.candidates);
+                }
+                announced -= 1;
                 let b = bands.len();
                 // 1R: a band added after a combination that nearly holds robust closure is
                 // aimed at its gaps.
