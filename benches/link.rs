@@ -14,15 +14,17 @@
 //! Run with `cargo bench --bench link`. `LINK_BENCH_SECONDS` sets the streaming time
 //! (default 10 s).
 
-use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::{Command as Process, Stdio};
 use std::time::{Duration, Instant};
 
 use mpc_rig::rig::backend::mixed::MixedBench;
 use mpc_rig::rig::backend::stepper::StepperBench;
 use mpc_rig::rig::backend::{Driver, SampleStream};
 use mpc_rig::rig::config::RigConfig;
+#[path = "../tests/support/mod.rs"]
+mod support;
+use support::SimChild;
+
 use mpc_wire::{encode_frame_vec, Decoder, Report, Sample, SampleBatch, SampleFlags, SensorSet};
 
 fn main() {
@@ -36,23 +38,6 @@ fn bench_seconds() -> f64 {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(10.0)
-}
-
-/// Start `mpc-rig sim-device ARGS…` and return it with its first line of output.
-fn simulator(args: &[&str]) -> (std::process::Child, String) {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let mut cmd = Process::new(env!("CARGO_BIN_EXE_mpc-rig"));
-    cmd.arg("sim-device").args(args).current_dir(root);
-    let mut child = cmd
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("start mpc-rig sim-device");
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().expect("stdout"))
-        .read_line(&mut line)
-        .expect("simulator prints its ports");
-    (child, line.trim().to_string())
 }
 
 /// What a steady streaming window gave.
@@ -133,7 +118,8 @@ fn steady_stream(bench: &mut dyn SampleStream, secs: f64) -> Steady {
 fn mixed_end_to_end() {
     let secs = bench_seconds();
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let (mut child, ports) = simulator(&[
+    let sim = SimChild::spawn([
+        "sim-device",
         "mixed",
         "--rig",
         "rigs/sim-dynamixel-1r1t.toml",
@@ -141,7 +127,11 @@ fn mixed_end_to_end() {
         "data/motions/screw-bob.toml",
     ]);
     let mut rig = RigConfig::load(&root.join("rigs/sim-dynamixel-1r1t.toml")).expect("rig");
-    let overrides: Vec<String> = ports.split_whitespace().map(str::to_string).collect();
+    let overrides: Vec<String> = sim
+        .first_line
+        .split_whitespace()
+        .map(str::to_string)
+        .collect();
     rig.apply_port_overrides(&overrides).expect("ports");
     let mut bench = MixedBench::open(&rig).expect("open both devices");
     bench.zero().expect("zero");
@@ -151,8 +141,7 @@ fn mixed_end_to_end() {
     let w = steady_stream(&mut bench, secs);
     let info = bench.device_info();
     bench.shutdown().expect("shutdown");
-    let _ = child.kill();
-    let _ = child.wait();
+    drop(sim);
     let merge = &info.extra["merge"];
     println!(
         "mixed: {} rows in {:.2} s = {:.1} rows/s; held driver angle in {} rows, {} board samples without one; {}",
@@ -228,9 +217,15 @@ fn process_cpu_s() -> f64 {
 fn end_to_end() {
     let secs = bench_seconds();
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let (mut child, path) = simulator(&["stepper", "--motion", "data/motions/half-turn-2to1.toml"]);
+    let sim = SimChild::spawn([
+        "sim-device",
+        "stepper",
+        "--motion",
+        "data/motions/half-turn-2to1.toml",
+    ]);
     let mut rig = RigConfig::load(&root.join("rigs/sim-stepper.toml")).expect("rig");
-    rig.apply_port_overrides(&[path]).expect("port");
+    rig.apply_port_overrides(std::slice::from_ref(&sim.first_line))
+        .expect("port");
     let mut bench = StepperBench::open(&rig).expect("handshake with the simulator");
     bench.zero().expect("zero");
     bench.enable().expect("enable");
@@ -238,8 +233,7 @@ fn end_to_end() {
     bench.run_at(60.0).expect("run");
     let w = steady_stream(&mut bench, secs);
     bench.shutdown().expect("shutdown");
-    let _ = child.kill();
-    let _ = child.wait();
+    drop(sim);
     println!(
         "link: {} samples in {:.2} s wall = {:.1} samples/s (device clock span {:.2} s = {:.1} samples/s of device time); {}",
         w.n,

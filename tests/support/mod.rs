@@ -1,5 +1,5 @@
 //! Helpers shared by the integration tests; each test crate that needs them says
-//! `mod support;`.
+//! `mod support;` (the link benchmark includes this file by `#[path]`).
 
 use std::ffi::OsStr;
 use std::io::{BufRead, BufReader};
