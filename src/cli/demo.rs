@@ -77,7 +77,7 @@ pub struct DemoArgs {
     #[arg(long)]
     pub resynthesize: bool,
     /// 3R only: bound on the contact normals (see `mpc-rig synth --help`); every 3R example
-    /// closes with `arm`, four of six with the default.
+    /// closes with `arm`, five of six (not pick-and-place) with the default.
     #[arg(long, value_enum, default_value_t = crate::cli::synth::ConeArg::Tangent)]
     pub normal_cone: crate::cli::synth::ConeArg,
     /// Tolerance on the RMS rotation error (degrees) for a pass/fail verdict.

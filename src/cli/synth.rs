@@ -55,7 +55,7 @@ pub struct SynthArgs {
     /// 3R only: bound on the contact normals. `tangent` is the paper's Eq. 30 as printed
     /// (|n·p̂| ≤ sin 10°, the conventions' default); `arm` is its stated purpose, "avoid
     /// n × p = 0" (|n·p̂| ≤ cos 10°), with which every 3R example closes (with `tangent`,
-    /// four of six do; see docs/synthesis.md).
+    /// five of six do, not pick-and-place; see docs/synthesis.md).
     #[arg(long, value_enum, default_value_t = ConeArg::Tangent)]
     pub normal_cone: ConeArg,
 }
