@@ -6,11 +6,15 @@
 //! vector (layout in `model::NV`). It does not run the optimizer (see `optimizer`) or pick
 //! initial guesses (see `candidate`).
 //!
-//! **Evaluation.** Every sample i depends on only 4 consecutive curve control points (and the
-//! smoothness term on sample i + 1 adds one more) and 4 angle control points, so each sample
-//! is evaluated with a 20-slot dual number over that local set and scattered into the
-//! 34-entry gradient. E_vary couples two samples half a period apart and uses a full
-//! 34-slot dual.
+//! **Evaluation.** Every sample i depends on the design only through its *jet*: c², ċ², c̈²
+//! (linear in 4 consecutive curve control points, by the basis weights) and θ (linear in 4
+//! angle control points). So each sample is evaluated with a 10-slot dual number over its
+//! jet, and the chain rule through the basis weights scatters that into the 34-entry
+//! gradient. The smoothness term couples sample i with i + 1 only through their unit
+//! tangents, which are evaluated once per sample on a 6-slot jet (c², ċ²). E_vary couples two
+//! samples half a period apart and uses a full 34-slot dual. (Before, each sample used a
+//! 20-slot dual over its local control points and re-evaluated the next sample's tangents:
+//! twice the work per sample; see `docs/synthesis.md`.)
 //!
 //! **Scale.** The objective is the paper's sum over samples (E_vary added once, as in the
 //! paper) divided by N: the weights keep the paper's ratios, and values of order 1–10 keep
@@ -25,6 +29,7 @@
 //! (KS ≥ max, so KS ≤ 0 implies every sample holds); the acceptance checks use the exact
 //! per-sample maxima.
 
+use super::bspline::Basis;
 use super::closure::{Class, NormalCone};
 use super::dual::{Dual, Scalar, V3};
 use super::model::{self, ANGLE_CPS, CURVE_CPS, NV};
@@ -89,8 +94,10 @@ pub const XY_BOX: f64 = 8.0;
 /// more freedom than any smooth normal needs.
 pub const THETA_BOX: f64 = 4.0 * std::f64::consts::PI;
 
-/// Local dual width for one sample.
-const DL: usize = 20;
+/// Dual width of a sample's jet: c², ċ², c̈² at the sample (slots 0–8) and θ (slot 9).
+const DJ: usize = 10;
+/// Dual width of a sample's tangent jet (E_smth): c², ċ² (slots 0–5).
+const DT: usize = 6;
 
 /// One candidate problem: a curve pair in a band for a given motion, class and d_x.
 #[derive(Clone, Debug)]
@@ -141,9 +148,16 @@ pub struct Evaluation {
     pub cons_exact: Vec<f64>,
 }
 
+/// The spline bases of one sample: follower curve and normal angle.
+struct SampleBasis {
+    curve: Basis,
+    angle: Basis,
+}
+
+/// Per-sample constraint values with their jet gradients, aggregated by a KS maximum.
 struct Ks {
     vals: Vec<f64>,
-    grads: Vec<(usize, usize, [f64; DL])>,
+    grads: Vec<[f64; DJ]>,
 }
 
 impl Ks {
@@ -153,31 +167,71 @@ impl Ks {
             grads: Vec::with_capacity(n),
         }
     }
-    fn push(&mut self, g: Dual<DL>, j0: usize, ja: usize) {
+    /// Sample i's value (samples are pushed in order).
+    fn push(&mut self, g: Dual<DJ>) {
         self.vals.push(g.v);
-        self.grads.push((j0, ja, g.g));
+        self.grads.push(g.g);
     }
-    fn finish(&self, rho: f64) -> (f64, Vec<f64>, f64) {
+    fn finish(&self, rho: f64, bases: &[SampleBasis]) -> (f64, Vec<f64>, f64) {
         let m = self.vals.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
         let w: Vec<f64> = self.vals.iter().map(|v| (rho * (v - m)).exp()).collect();
         let s: f64 = w.iter().sum();
         let mut grad = vec![0.0; NV];
-        for (wi, (j0, ja, g)) in w.iter().zip(&self.grads) {
-            scatter(&mut grad, *j0, *ja, g, wi / s);
+        for ((wi, g), b) in w.iter().zip(&self.grads).zip(bases) {
+            scatter_jet(&mut grad, b, g, wi / s);
         }
         (m + s.ln() / rho, grad, m)
     }
 }
 
-/// Add `scale × local gradient` into the global gradient.
-fn scatter(grad: &mut [f64], j0: usize, ja: usize, g: &[f64; DL], scale: f64) {
-    for s in 0..15 {
-        let cp = (j0 + s / 3) % CURVE_CPS;
-        grad[3 * cp + s % 3] += scale * g[s];
+/// Add `scale ×` a jet gradient (∂/∂c², ∂/∂ċ², ∂/∂c̈², ∂/∂θ at one sample) into the
+/// 34-entry gradient, by the chain rule through the sample's basis weights.
+fn scatter_jet(grad: &mut [f64], b: &SampleBasis, g: &[f64; DJ], scale: f64) {
+    let c = &b.curve;
+    for r in 0..4 {
+        let j = 3 * c.idx[r];
+        for a in 0..3 {
+            grad[j + a] += scale * (g[a] * c.w0[r] + g[3 + a] * c.w1[r] + g[6 + a] * c.w2[r]);
+        }
+        grad[3 * CURVE_CPS + b.angle.idx[r]] += scale * g[9] * b.angle.w0[r];
     }
-    for s in 0..4 {
-        grad[3 * CURVE_CPS + (ja + s) % ANGLE_CPS] += scale * g[15 + s];
+}
+
+/// As [`scatter_jet`] for a tangent jet (∂/∂c², ∂/∂ċ²).
+fn scatter_tangent_jet(grad: &mut [f64], b: &SampleBasis, g: &[f64; DT], scale: f64) {
+    let c = &b.curve;
+    for r in 0..4 {
+        let j = 3 * c.idx[r];
+        for a in 0..3 {
+            grad[j + a] += scale * (g[a] * c.w0[r] + g[3 + a] * c.w1[r]);
+        }
     }
+}
+
+/// c², ċ², c̈² at one sample as plain numbers.
+fn curve_jet_values(x: &[f64], b: &Basis) -> [V3<f64>; 3] {
+    let cp = |j: usize| V3::new(x[3 * j], x[3 * j + 1], x[3 * j + 2]);
+    model::curve_at::<f64>(b, &cp)
+}
+
+/// Seed a 3-vector as independent variables in slots `first..first + 3`.
+fn seed_v3<const D: usize>(v: V3<f64>, first: usize) -> V3<Dual<D>> {
+    V3::new(
+        Dual::var(v.x, first),
+        Dual::var(v.y, first + 1),
+        Dual::var(v.z, first + 2),
+    )
+}
+
+/// Gradient of Σₖ dₖ·uₖ over the slots of u (d constant): the chain rule of |a − b|².
+fn dot_grad<const D: usize>(d: [f64; 3], u: &V3<Dual<D>>) -> [f64; D] {
+    let mut g = [0.0; D];
+    for (k, c) in [u.x, u.y, u.z].iter().enumerate() {
+        for (gs, cs) in g.iter_mut().zip(c.g.iter()) {
+            *gs += d[k] * cs;
+        }
+    }
+    g
 }
 
 fn sq<S: Scalar>(v: V3<S>) -> S {
@@ -224,8 +278,51 @@ impl PairProblem {
     /// Evaluate objective, constraints and gradients.
     pub fn evaluate(&self, x: &[f64]) -> Evaluation {
         let n = self.poses.len();
+        let bases: Vec<SampleBasis> = self
+            .poses
+            .samples
+            .iter()
+            .map(|pose| SampleBasis {
+                curve: super::bspline::basis(CURVE_CPS, pose.t),
+                angle: super::bspline::basis(ANGLE_CPS, pose.t),
+            })
+            .collect();
         let mut f = 0.0;
         let mut grad = vec![0.0; NV];
+        // E_smth couples each sample with the next through the unit tangents t̂² = ċ²/|ċ²|
+        // and ĉ̇¹: evaluate those once per sample on its tangent jet (c², ċ²).
+        let units: Vec<[V3<Dual<DT>>; 2]> = self
+            .poses
+            .samples
+            .iter()
+            .zip(&bases)
+            .map(|(pose, b)| {
+                let c = curve_jet_values(x, &b.curve);
+                let jet = [seed_v3::<DT>(c[0], 0), seed_v3::<DT>(c[1], 3), V3::zero()];
+                let (_, _, c1d, _, _) = model::tangents(pose, self.dx, jet);
+                [jet[1].unit(), c1d.unit()]
+            })
+            .collect();
+        for i in 0..n {
+            let j = (i + 1) % n;
+            let mut e = 0.0;
+            let mut gi = [0.0; DT];
+            let mut gj = [0.0; DT];
+            for (ui, uj) in units[i].iter().zip(&units[j]) {
+                let d = (uj.vals(), ui.vals());
+                let d = [d.0[0] - d.1[0], d.0[1] - d.1[1], d.0[2] - d.1[2]];
+                e += d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+                for (a, b) in gi.iter_mut().zip(dot_grad(d, ui)) {
+                    *a -= 2.0 * b;
+                }
+                for (a, b) in gj.iter_mut().zip(dot_grad(d, uj)) {
+                    *a += 2.0 * b;
+                }
+            }
+            f += W_SMTH * e;
+            scatter_tangent_jet(&mut grad, &bases[i], &gi, W_SMTH);
+            scatter_tangent_jet(&mut grad, &bases[j], &gj, W_SMTH);
+        }
         let mut len = 0.0;
         let mut len_grad = vec![0.0; NV];
         let mut ks_rf = Ks::new(n);
@@ -233,51 +330,27 @@ impl PairProblem {
         let mut ks_sl = Ks::new(n);
         let mut ks_cone = Ks::new(n);
         let max_dot = self.cone.max_abs_dot();
-        for i in 0..n {
-            let pose = &self.poses.samples[i];
-            let next = &self.poses.samples[(i + 1) % n];
-            let bc = super::bspline::basis(CURVE_CPS, pose.t);
-            let bn = super::bspline::basis(CURVE_CPS, next.t);
-            let ba = super::bspline::basis(ANGLE_CPS, pose.t);
-            let j0 = bc.span % CURVE_CPS;
-            let ja = ba.span % ANGLE_CPS;
-            let cp = |g: usize| -> V3<Dual<DL>> {
-                let off = (g + CURVE_CPS - j0) % CURVE_CPS;
-                let mk = |a: usize| {
-                    let v = x[3 * g + a];
-                    if off < 5 {
-                        Dual::var(v, 3 * off + a)
-                    } else {
-                        Dual::cst(v)
-                    }
-                };
-                V3::new(mk(0), mk(1), mk(2))
-            };
-            let th = |g: usize| -> Dual<DL> {
-                let off = (g + ANGLE_CPS - ja) % ANGLE_CPS;
-                let v = x[3 * CURVE_CPS + g];
-                if off < 4 {
-                    Dual::var(v, 15 + off)
-                } else {
-                    Dual::cst(v)
-                }
-            };
-            let c2 = model::curve_at(&bc, &cp);
-            let theta = model::angle_at(&ba, &th);
-            let c = model::contact(pose, self.dx, c2, theta);
-            let c2n = model::curve_at(&bn, &cp);
-            let (_, _, c1d_next, _, _) = model::tangents(next, self.dx, c2n);
+        for (i, (pose, b)) in self.poses.samples.iter().zip(&bases).enumerate() {
+            // The sample's jet: everything below depends on the design only through it.
+            let c = curve_jet_values(x, &b.curve);
+            let jet = [
+                seed_v3::<DJ>(c[0], 0),
+                seed_v3::<DJ>(c[1], 3),
+                seed_v3::<DJ>(c[2], 6),
+            ];
+            let thf = |g: usize| x[3 * CURVE_CPS + g];
+            let theta = Dual::<DJ>::var(model::angle_at::<f64>(&b.angle, &thf), 9);
+            let c = model::contact(pose, self.dx, jet, theta);
             let t1h = c.t1.unit();
             let t2h = c.t2.unit();
-            let one = Dual::<DL>::cst(1.0);
+            let one = Dual::<DJ>::cst(1.0);
             let e_norm = {
                 let d = c.n.dot(t1h);
                 d * d
             };
             let e_tang = sq(t1h - t2h);
             let e_plan = sq(c.n - c.kappa);
-            let e_smth = sq(c2n[1].unit() - c.c2d.unit()) + sq(c1d_next.unit() - c.c1d.unit());
-            let mut e = e_norm * W_NORM + e_tang * W_TANG + e_plan * W_PLAN + e_smth * W_SMTH;
+            let mut e = e_norm * W_NORM + e_tang * W_TANG + e_plan * W_PLAN;
             let pxy = (c.p.x * c.p.x + c.p.y * c.p.y).sqrt();
             if matches!(self.class, Class::R1 | Class::R1T1) {
                 // (ẑ × p)/|ẑ × p| · n
@@ -300,27 +373,23 @@ impl PairProblem {
                 }
             }
             f += e.v;
-            scatter(&mut grad, j0, ja, &e.g, 1.0);
+            scatter_jet(&mut grad, b, &e.g, 1.0);
             let speed = c.c2d.norm();
             len += speed.v / n as f64;
-            scatter(&mut len_grad, j0, ja, &speed.g, 1.0 / n as f64);
+            scatter_jet(&mut len_grad, b, &speed.g, 1.0 / n as f64);
             let radius = if self.class == Class::R3 {
                 c.p.norm()
             } else {
                 pxy
             };
-            ks_rf.push(-radius + MIN_FOLLOWER_RADIUS, j0, ja);
+            ks_rf.push(-radius + MIN_FOLLOWER_RADIUS);
             let c1xy = (c.c1.x * c.c1.x + c.c1.y * c.c1.y).sqrt();
-            ks_rd.push(-c1xy + MIN_DRIVER_RADIUS, j0, ja);
+            ks_rd.push(-c1xy + MIN_DRIVER_RADIUS);
             let slope = c.c2d.z / speed;
-            ks_sl.push(
-                slope * slope - MAX_TANGENT_SLOPE * MAX_TANGENT_SLOPE,
-                j0,
-                ja,
-            );
+            ks_sl.push(slope * slope - MAX_TANGENT_SLOPE * MAX_TANGENT_SLOPE);
             if self.class == Class::R3 {
                 let d = c.n.dot(c.p) / c.p.norm();
-                ks_cone.push(d * d - one * (max_dot * max_dot), j0, ja);
+                ks_cone.push(d * d - one * (max_dot * max_dot));
             }
         }
         if let (Some(iv), true) = (self.vary, self.class != Class::R1) {
@@ -347,7 +416,7 @@ impl PairProblem {
         cons_grad.push(len_grad.iter().map(|g| g / l2).collect());
         cons_exact.push((len - l2) / l2);
         let mut agg = |ks: &Ks, rho: f64| {
-            let (v, g, m) = ks.finish(rho);
+            let (v, g, m) = ks.finish(rho, &bases);
             cons.push(v);
             cons_grad.push(g);
             cons_exact.push(m);
