@@ -31,7 +31,9 @@ pub struct SynthArgs {
     /// Random seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Number of curve pairs K (default: search from the minimum dof + 1).
+    /// Number of curve pairs K (default: search from the minimum dof + 1). Without it, 1R1T
+    /// goes on past the first K that closes until E_maxDist ≤ −0.24 (the paper's 1R1T
+    /// figure), or else takes the best that closed at that d_x.
     #[arg(long)]
     pub k: Option<usize>,
     /// Driver offset d_x in model units (default: search a grid).
@@ -110,7 +112,13 @@ impl SynthProgress for Bar {
             a.robust_vali_time,
             a.max_dist.min(99.0),
             a.valid_candidates,
-            if a.accepted { "  → accepted" } else { "" }
+            if a.accepted {
+                "  → accepted"
+            } else if a.closes {
+                "  → closes, short of the class's margin target (see --k)"
+            } else {
+                ""
+            }
         );
         if self.bar.is_hidden() {
             eprintln!("{line}");

@@ -158,7 +158,11 @@ pub struct Attempt {
     pub robust_vali_time: f64,
     /// Best E_maxDist.
     pub max_dist: f64,
-    /// Accepted.
+    /// Meets the acceptance criteria (paper and robust closure, every candidate's residual
+    /// ≤ 1°), whether or not the search went on for a larger closure margin.
+    #[serde(default)]
+    pub closes: bool,
+    /// The attempt the mechanism was taken from.
     pub accepted: bool,
 }
 
