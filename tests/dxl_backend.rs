@@ -215,6 +215,28 @@ fn lost_bus_is_reported_as_disconnected() {
     drop(bench);
 }
 
+/// Guards resynchronization after late replies: a 60 ms stall of the bus (replies held back,
+/// then delivered in order, as a USB adapter or a loaded machine can do) costs a few
+/// samples, not the link. Before the worker waited for the line to go quiet after a failed
+/// transaction, each sync read read the previous one's follower reply as its driver reply
+/// and the link was declared lost after 25 failures in a row ("invalid packet ID, expected
+/// 0x1, got 0x2"; seen once in CI under load).
+#[test]
+fn late_replies_after_a_stall_do_not_desynchronize_the_stream() {
+    let plant = PlantConfig::from_faults(&["stall_at_s=1.0", "stall_s=0.06"]).unwrap();
+    let sim = sim_with(plant);
+    let rig = rig(sim.path());
+    let mut bench = DynamixelBench::from_rig(&rig).unwrap();
+    bench.start_stream(100.0).unwrap();
+    let samples = collect(&mut bench, 2.5);
+    let counts = bench.counts();
+    assert!(counts.gaps >= 1, "the stall cost no sample: {counts:?}");
+    // 2.5 s at 100 Hz: all but the stall's few samples arrive, also after it.
+    assert!(samples.len() > 200, "{} samples, {counts:?}", samples.len());
+    let last = samples.last().unwrap().device_time_us;
+    assert!(last > 2_000_000, "stream stopped at {last} µs");
+}
+
 /// Guards the link-fault path: with corrupted and dropped bytes the stream keeps going,
 /// failures are counted as gaps/CRC errors and flagged on the next sample, nothing panics.
 #[test]

@@ -92,6 +92,11 @@ pub struct LinkFaults {
     pub dropout_s: f64,
     /// Protocol version the simulated firmware claims (to test version checks).
     pub protocol_version: Option<u16>,
+    /// Start of a stall (s): what the device sends is held back, as by a USB adapter or a
+    /// loaded machine, and arrives late and in order (Dynamixel bus).
+    pub stall_at_s: Option<f64>,
+    /// Length of the stall (s).
+    pub stall_s: f64,
 }
 
 /// Imperfections of a simulated bench.
@@ -168,6 +173,11 @@ pub const FAULT_KEYS: &[(&str, &str)] = &[
     ("dropout_at_s", "brief unplug starting at this time, s"),
     ("dropout_s", "length of the brief unplug, s (default 0.5)"),
     (
+        "stall_at_s",
+        "Dynamixel bus: replies held back from this time, s",
+    ),
+    ("stall_s", "length of the stall, s (default 0.06)"),
+    (
         "protocol_version",
         "protocol version the simulated device claims",
     ),
@@ -178,11 +188,17 @@ pub const FAULT_KEYS: &[(&str, &str)] = &[
 /// like a USB cable wiggled loose and back.
 pub const DEFAULT_DROPOUT_S: f64 = 0.5;
 
+/// Default length of a stall when only `stall_at_s` is given: 60 ms, longer than the host's
+/// reply timeout (34 ms plus the wire time), so at least one transaction times out while
+/// its replies are still on their way.
+pub const DEFAULT_STALL_S: f64 = 0.06;
+
 impl PlantConfig {
     /// Parse repeated `--fault key=value` options (see [`FAULT_KEYS`]).
     pub fn from_faults<S: AsRef<str>>(faults: &[S]) -> Result<PlantConfig, PlantError> {
         let mut cfg = PlantConfig::default();
         cfg.link.dropout_s = DEFAULT_DROPOUT_S;
+        cfg.link.stall_s = DEFAULT_STALL_S;
         for given in faults {
             cfg.apply(given.as_ref())?;
         }
@@ -258,6 +274,8 @@ impl PlantConfig {
             "disconnect_at_s" => self.link.disconnect_at_s = Some(nonneg()?),
             "dropout_at_s" => self.link.dropout_at_s = Some(nonneg()?),
             "dropout_s" => self.link.dropout_s = nonneg()?,
+            "stall_at_s" => self.link.stall_at_s = Some(nonneg()?),
+            "stall_s" => self.link.stall_s = nonneg()?,
             "protocol_version" => {
                 self.link.protocol_version = Some(
                     value
@@ -556,6 +574,11 @@ mod tests {
         assert_eq!(cfg.link.dropout_at_s, Some(2.0));
         assert_eq!(cfg.link.dropout_s, DEFAULT_DROPOUT_S);
         assert_eq!(cfg.link.protocol_version, Some(9));
+        let cfg = PlantConfig::from_faults(&["stall_at_s=1.5"]).unwrap();
+        assert_eq!(cfg.link.stall_at_s, Some(1.5));
+        assert_eq!(cfg.link.stall_s, DEFAULT_STALL_S);
+        let err = PlantConfig::from_faults(&["stall_s=-0.1"]).unwrap_err();
+        assert!(err.to_string().contains("stall_s"), "{err}");
     }
 
     /// Guards: missed steps happen at about the configured rate.

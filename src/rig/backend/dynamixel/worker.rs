@@ -149,6 +149,8 @@ pub fn describe(e: &TransferError) -> (bool, String) {
 struct Streamer {
     /// [`reply_latency`] of the driver.
     latency: Duration,
+    /// How long to let the line go quiet after a failed sync read (see [`quiet_time`]).
+    quiet: Duration,
     period: Duration,
     next_due: Instant,
     last_tick: Option<u16>,
@@ -190,6 +192,7 @@ pub fn run(
                     .map_or(FACTORY_RETURN_DELAY, |r| r.data);
                 stream = Some(Streamer {
                     latency: reply_latency(delay, setup.baud),
+                    quiet: quiet_time(reply_latency(delay, setup.baud), ids.len()),
                     period,
                     next_due: Instant::now(),
                     last_tick: None,
@@ -235,6 +238,21 @@ pub fn run(
     let _ = bus.write_u8(setup.driver_id, 64, 0);
 }
 
+/// Margin added to a sync read's reply time in [`quiet_time`]. Default 2 ms: a few
+/// scheduler ticks, and the order of a USB adapter's latency timer.
+pub const QUIET_MARGIN: Duration = Duration::from_millis(2);
+
+/// How long the worker waits after a failed sync read before the next one: the time all
+/// `replies` (each [`reply_latency`] long) take to cross the wire, plus [`QUIET_MARGIN`].
+/// The next instruction discards whatever arrived by then. Without the wait, a reply that
+/// came late (after a stall of the adapter or of a loaded machine) landed after that discard
+/// and was read as the next sync read's first reply; each sync read then read the previous
+/// one's follower reply as its driver reply, and the link was declared lost after
+/// [`LOST_AFTER_FAILURES`] failures ("invalid packet ID, expected 0x1, got 0x2").
+pub fn quiet_time(reply_latency: Duration, replies: usize) -> Duration {
+    reply_latency * replies as u32 + QUIET_MARGIN
+}
+
 /// One sync read; returns `Some(message)` when the link is to be considered lost.
 fn sample_once(
     bus: &mut DxlBus,
@@ -265,6 +283,10 @@ fn sample_once(
     });
     if let Err(e) = sent {
         failure = Some((false, format!("cannot send to the bus: {e}")));
+    }
+    if failure.is_some() || blocks.iter().any(Option::is_none) {
+        // Let late replies arrive before the next instruction discards the input.
+        std::thread::sleep(s.quiet);
     }
     let mut c = counts.lock().unwrap_or_else(|p| p.into_inner());
     if let Some((true, _)) = &failure {

@@ -177,6 +177,14 @@ impl Server {
                         wait += wire_time_s(r.bytes.len(), baud);
                     }
                     bus_time += Duration::from_secs_f64(wait);
+                    if let Some(at) = link.stall_at_s {
+                        // A stall: what would leave in the window leaves at its end.
+                        let end = start + Duration::from_secs_f64(at + link.stall_s);
+                        let due = bus_time.duration_since(start).as_secs_f64();
+                        if due >= at && bus_time < end {
+                            bus_time = end;
+                        }
+                    }
                     sleep_until(bus_time);
                     let bytes = self.apply_link_faults(r.bytes);
                     // A full pty buffer (nobody reading) loses the bytes, as on a real bus.
