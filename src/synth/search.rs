@@ -57,7 +57,7 @@ pub const DX_GRID: [f64; 3] = [6.0, 7.5, 9.0];
 /// the paper's results used at most minimum + 2.
 pub const MAX_EXTRA_K: usize = 3;
 /// How many K beyond the minimum to try for 1R. Default 8 (K = 2..10): 1R bands are cheap
-/// (about 5 s each here) and robust closure of an indexing motion with dwells
+/// (about 2 s each here) and robust closure of an indexing motion with dwells
 /// (quarter-turn-dwell) needed K = 9–10, with gap-filling bands, while half-turn-2to1 stops
 /// at K = 4.
 pub const MAX_EXTRA_K_1R: usize = 8;
