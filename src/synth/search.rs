@@ -13,7 +13,8 @@
 //! K + [`MAX_EMPTY_BANDS`] bands. The first (d_x, K) whose GA winner meets the
 //! paper's criteria (E_valiTime = 1, E_maxDist ≤ −ε) **and** robust closure at every
 //! sample is accepted; every candidate in it already has a conjugation residual ≤ 1° at 4×
-//! the sample density.
+//! the sample density. For 1R1T the winner must also reach the paper's margin
+//! ([`margin_target`]); failing that, the widest margin that closed at that d_x is taken.
 //!
 //! **Gap-filling bands (1R).** Once the GA's combination at some K holds robust closure at
 //! [`FOCUS_MIN_ROBUST`] of the samples or more, the next band's candidates are asked (by
