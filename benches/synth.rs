@@ -76,6 +76,15 @@ fn main() {
                     },
                 )
             }
+            Err(SynthError::Infeasible {
+                best: None,
+                message,
+            }) => {
+                // No combination was ever scored: say why (the message's first clause).
+                let why = message.split(':').next().unwrap_or(&message);
+                println!("{name:<22} not accepted, no GA run: {why} ({secs:.1} s)");
+                continue;
+            }
             Err(SynthError::Infeasible { best, .. }) => (best.map(|b| *b), "NOT ACCEPTED"),
             Err(e) => {
                 println!("{name:<22} error: {e} ({secs:.1} s)");
@@ -97,7 +106,7 @@ fn main() {
                 secs,
                 verdict
             ),
-            None => println!("{name:<22} no usable candidates ({secs:.1} s)"),
+            None => println!("{name:<22} no mechanism ({secs:.1} s)"),
         }
     }
 }

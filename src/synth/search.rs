@@ -440,8 +440,10 @@ fn search(
     if cancelled(opts) {
         return Err(SynthError::Cancelled { partial });
     }
-    let message = match &partial {
-        None => format!(
+    let few_bands = few_bands_message(class, opts, &attempts, &k_tried, &dx_tried);
+    let message = match (&partial, few_bands) {
+        (None, Some(m)) => m,
+        (None, _) => format!(
             "no usable candidates for class {} at any tried K {:?} and d_x {:?}: every candidate \
              failed its feasibility or 1° conjugation check. Try other --dx values or more \
              --samples; the motion may be too wild for curves of length 4π–6π.",
@@ -449,7 +451,7 @@ fn search(
             k_tried,
             dx_tried
         ),
-        Some(m) => {
+        (Some(m), _) => {
             let mut worst: Vec<(usize, f64)> = m
                 .closure
                 .dist
@@ -490,6 +492,42 @@ fn search(
         message,
         best: partial,
     })
+}
+
+/// Why no combination could be scored when some bands did have usable candidates: the
+/// attempt with the most such bands, its per-band counts and what to try. `None` when no
+/// band had any (then every candidate failed) or no attempt was made.
+fn few_bands_message(
+    class: Class,
+    opts: &SynthOptions,
+    attempts: &[Attempt],
+    k_tried: &[usize],
+    dx_tried: &[f64],
+) -> Option<String> {
+    let used = |a: &Attempt| a.valid_candidates.iter().filter(|&&c| c > 0).count();
+    let a = attempts.iter().max_by_key(|a| used(a))?;
+    if used(a) == 0 {
+        return None;
+    }
+    Some(format!(
+        "too few bands with usable candidates for class {}: K ≥ {} curve pairs need as many \
+         bands, but at most {} had any (d_x = {}: usable candidates per band {:?}, of {} \
+         each) at the tried K {:?} and d_x {:?}; the other bands' candidates all failed their \
+         feasibility or 1° conjugation check. Try other --dx values{}.",
+        class.label(),
+        class.min_k(),
+        used(a),
+        a.dx,
+        a.valid_candidates,
+        opts.candidates,
+        k_tried,
+        dx_tried,
+        if class == Class::R3 && opts.cone == NormalCone::Tangent {
+            " or --normal-cone arm (see docs/synthesis.md)"
+        } else {
+            " or more --candidates"
+        }
+    ))
 }
 
 /// The candidate problem of band `b`.
@@ -902,6 +940,44 @@ mod tests {
         // 1R and 3R keep the paper's criterion: the first attempt that closes is taken.
         assert_eq!(margin_target(Class::R1), closure::EPSILON);
         assert_eq!(margin_target(Class::R3), closure::EPSILON);
+    }
+
+    /// Guards the failure message when bands, not candidates, run out: it names how many
+    /// bands had usable candidates, the per-band counts of the best attempt and, for 3R under
+    /// the printed cone, the `arm` reading; with no usable band at all there is none (the
+    /// "every candidate failed" message applies).
+    #[test]
+    fn too_few_usable_bands_are_explained() {
+        let att = |k, dx, counts: Vec<usize>| Attempt {
+            k,
+            dx,
+            valid_candidates: counts,
+            vali_time: 0.0,
+            robust_vali_time: 0.0,
+            max_dist: closure::NO_INTERIOR_DIST,
+            closes: false,
+            accepted: false,
+        };
+        let opts = SynthOptions::default();
+        let attempts = vec![
+            att(4, 6.0, vec![5, 0, 0, 0, 0, 1]),
+            att(5, 6.0, vec![5, 0, 0, 0, 0, 1, 0]),
+            att(4, 7.5, vec![9, 0, 7, 2, 0, 0]),
+        ];
+        let (ks, dxs) = ([4, 5], [6.0, 7.5]);
+        let m = few_bands_message(Class::R3, &opts, &attempts, &ks, &dxs).unwrap();
+        assert!(m.contains("at most 3 had any"), "{m}");
+        assert!(
+            m.contains("d_x = 7.5: usable candidates per band [9, 0, 7, 2, 0, 0], of 30"),
+            "{m}"
+        );
+        assert!(m.contains("K [4, 5] and d_x [6.0, 7.5]"), "{m}");
+        assert!(m.contains("--normal-cone arm"), "{m}");
+        let m = few_bands_message(Class::R1T1, &opts, &attempts, &ks, &dxs).unwrap();
+        assert!(!m.contains("--normal-cone"), "{m}");
+        let none = vec![att(4, 6.0, vec![0, 0, 0, 0])];
+        assert!(few_bands_message(Class::R3, &opts, &none, &ks, &dxs).is_none());
+        assert!(few_bands_message(Class::R3, &opts, &[], &ks, &dxs).is_none());
     }
 
     /// Guards that bad requests are typed errors, not panics.
