@@ -231,8 +231,9 @@ fn late_replies_after_a_stall_do_not_desynchronize_the_stream() {
     let samples = collect(&mut bench, 2.5);
     let counts = bench.counts();
     assert!(counts.gaps >= 1, "the stall cost no sample: {counts:?}");
-    // 2.5 s at 100 Hz: all but the stall's few samples arrive, also after it.
-    assert!(samples.len() > 200, "{} samples, {counts:?}", samples.len());
+    // 2.5 s at 100 Hz is 250 samples; a lost link would end the stream (and `collect`)
+    // at about 1.3 s. The margin is for a loaded machine.
+    assert!(samples.len() > 150, "{} samples, {counts:?}", samples.len());
     let last = samples.last().unwrap().device_time_us;
     assert!(last > 2_000_000, "stream stopped at {last} µs");
 }
