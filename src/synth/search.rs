@@ -337,16 +337,7 @@ fn search(
             }
             let (valid, counts) = used_bands(&bands, k);
             if valid.len() < k {
-                let a = Attempt {
-                    k,
-                    dx,
-                    valid_candidates: counts,
-                    vali_time: 0.0,
-                    robust_vali_time: 0.0,
-                    max_dist: closure::NO_INTERIOR_DIST,
-                    closes: false,
-                    accepted: false,
-                };
+                let a = unscored_attempt(k, dx, counts);
                 progress.attempt_finished(&a);
                 attempts.push(a);
                 continue;
@@ -492,6 +483,20 @@ fn search(
         message,
         best: partial,
     })
+}
+
+/// The record of an attempt with fewer usable bands than K: no GA ran, nothing closes.
+fn unscored_attempt(k: usize, dx: f64, valid_candidates: Vec<usize>) -> Attempt {
+    Attempt {
+        k,
+        dx,
+        valid_candidates,
+        vali_time: 0.0,
+        robust_vali_time: 0.0,
+        max_dist: closure::NO_INTERIOR_DIST,
+        closes: false,
+        accepted: false,
+    }
 }
 
 /// Why no combination could be scored when some bands did have usable candidates: the
@@ -948,16 +953,7 @@ mod tests {
     /// "every candidate failed" message applies).
     #[test]
     fn too_few_usable_bands_are_explained() {
-        let att = |k, dx, counts: Vec<usize>| Attempt {
-            k,
-            dx,
-            valid_candidates: counts,
-            vali_time: 0.0,
-            robust_vali_time: 0.0,
-            max_dist: closure::NO_INTERIOR_DIST,
-            closes: false,
-            accepted: false,
-        };
+        let att = unscored_attempt;
         let opts = SynthOptions::default();
         let attempts = vec![
             att(4, 6.0, vec![5, 0, 0, 0, 0, 1]),
