@@ -184,26 +184,21 @@ impl Ks {
     }
 }
 
-/// Add `scale ×` a jet gradient (∂/∂c², ∂/∂ċ², ∂/∂c̈², ∂/∂θ at one sample) into the
-/// 34-entry gradient, by the chain rule through the sample's basis weights.
-fn scatter_jet(grad: &mut [f64], b: &SampleBasis, g: &[f64; DJ], scale: f64) {
+/// Add `scale ×` a jet gradient at one sample into the 34-entry gradient, by the chain rule
+/// through the sample's basis weights. Slots 3k..3k + 3 hold ∂/∂(k-th derivative of c²)
+/// for k = 0, 1 (and 2 in a full jet); a full jet's slot 9 holds ∂/∂θ. Works for both the
+/// full jet ([`DJ`]) and the tangent jet ([`DT`]).
+fn scatter_jet<const D: usize>(grad: &mut [f64], b: &SampleBasis, g: &[f64; D], scale: f64) {
     let c = &b.curve;
     for r in 0..4 {
+        let w = [c.w0[r], c.w1[r], c.w2[r]];
         let j = 3 * c.idx[r];
         for a in 0..3 {
-            grad[j + a] += scale * (g[a] * c.w0[r] + g[3 + a] * c.w1[r] + g[6 + a] * c.w2[r]);
+            let d: f64 = (0..D / 3).map(|k| g[3 * k + a] * w[k]).sum();
+            grad[j + a] += scale * d;
         }
-        grad[3 * CURVE_CPS + b.angle.idx[r]] += scale * g[9] * b.angle.w0[r];
-    }
-}
-
-/// As [`scatter_jet`] for a tangent jet (∂/∂c², ∂/∂ċ²).
-fn scatter_tangent_jet(grad: &mut [f64], b: &SampleBasis, g: &[f64; DT], scale: f64) {
-    let c = &b.curve;
-    for r in 0..4 {
-        let j = 3 * c.idx[r];
-        for a in 0..3 {
-            grad[j + a] += scale * (g[a] * c.w0[r] + g[3 + a] * c.w1[r]);
+        if D == DJ {
+            grad[3 * CURVE_CPS + b.angle.idx[r]] += scale * g[9] * b.angle.w0[r];
         }
     }
 }
@@ -287,6 +282,11 @@ impl PairProblem {
                 angle: super::bspline::basis(ANGLE_CPS, pose.t),
             })
             .collect();
+        // c², ċ², c̈² at every sample: the values both jets below are seeded with.
+        let curve: Vec<[V3<f64>; 3]> = bases
+            .iter()
+            .map(|b| curve_jet_values(x, &b.curve))
+            .collect();
         let mut f = 0.0;
         let mut grad = vec![0.0; NV];
         // E_smth couples each sample with the next through the unit tangents t̂² = ċ²/|ċ²|
@@ -295,9 +295,8 @@ impl PairProblem {
             .poses
             .samples
             .iter()
-            .zip(&bases)
-            .map(|(pose, b)| {
-                let c = curve_jet_values(x, &b.curve);
+            .zip(&curve)
+            .map(|(pose, c)| {
                 let jet = [seed_v3::<DT>(c[0], 0), seed_v3::<DT>(c[1], 3), V3::zero()];
                 let (_, _, c1d, _, _) = model::tangents(pose, self.dx, jet);
                 [jet[1].unit(), c1d.unit()]
@@ -309,8 +308,7 @@ impl PairProblem {
             let mut gi = [0.0; DT];
             let mut gj = [0.0; DT];
             for (ui, uj) in units[i].iter().zip(&units[j]) {
-                let d = (uj.vals(), ui.vals());
-                let d = [d.0[0] - d.1[0], d.0[1] - d.1[1], d.0[2] - d.1[2]];
+                let d = (V3::<f64>::cst(uj.vals()) - V3::cst(ui.vals())).vals();
                 e += d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
                 for (a, b) in gi.iter_mut().zip(dot_grad(d, ui)) {
                     *a -= 2.0 * b;
@@ -320,8 +318,8 @@ impl PairProblem {
                 }
             }
             f += W_SMTH * e;
-            scatter_tangent_jet(&mut grad, &bases[i], &gi, W_SMTH);
-            scatter_tangent_jet(&mut grad, &bases[j], &gj, W_SMTH);
+            scatter_jet(&mut grad, &bases[i], &gi, W_SMTH);
+            scatter_jet(&mut grad, &bases[j], &gj, W_SMTH);
         }
         let mut len = 0.0;
         let mut len_grad = vec![0.0; NV];
@@ -330,9 +328,15 @@ impl PairProblem {
         let mut ks_sl = Ks::new(n);
         let mut ks_cone = Ks::new(n);
         let max_dot = self.cone.max_abs_dot();
-        for (i, (pose, b)) in self.poses.samples.iter().zip(&bases).enumerate() {
+        for (i, ((pose, b), c)) in self
+            .poses
+            .samples
+            .iter()
+            .zip(&bases)
+            .zip(&curve)
+            .enumerate()
+        {
             // The sample's jet: everything below depends on the design only through it.
-            let c = curve_jet_values(x, &b.curve);
             let jet = [
                 seed_v3::<DJ>(c[0], 0),
                 seed_v3::<DJ>(c[1], 3),
