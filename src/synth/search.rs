@@ -287,7 +287,9 @@ fn search(
         // The best attempt at this d_x that closes but misses the margin target.
         let mut closed: Option<Best> = None;
         let mut bands: Vec<Vec<Candidate>> = Vec::new();
-        let mut last_chosen: Option<(Vec<Candidate>, f64)> = None;
+        // 1R: what the next band is asked for, once a combination nearly holds robust
+        // closure (gap-filling band).
+        let mut next_focus: Option<Focus> = None;
         for &k in &k_list {
             if !k_tried.contains(&k) {
                 k_tried.push(k);
@@ -305,12 +307,6 @@ fn search(
                 }
                 announced -= 1;
                 let b = bands.len();
-                // 1R: a band added after a combination that nearly holds robust closure is
-                // aimed at its gaps.
-                let focus = last_chosen
-                    .as_ref()
-                    .filter(|(_, r)| class == Class::R1 && *r >= FOCUS_MIN_ROBUST)
-                    .and_then(|(c, _)| focus_of(c, poses.len()));
                 let cands = solve_band(
                     class,
                     &poses,
@@ -319,7 +315,7 @@ fn search(
                     opts,
                     minimizer,
                     progress,
-                    focus.as_ref(),
+                    next_focus.as_ref(),
                 );
                 if cancelled(opts) {
                     break 'dx;
@@ -369,7 +365,9 @@ fn search(
                 .enumerate()
                 .map(|(b, &g)| valid[b][g].clone())
                 .collect();
-            last_chosen = Some((chosen.clone(), res.fitness.robust_vali_time));
+            next_focus = (class == Class::R1 && res.fitness.robust_vali_time >= FOCUS_MIN_ROBUST)
+                .then(|| focus_of(&chosen, poses.len()))
+                .flatten();
             let summary = pool.summary(&res.genome);
             let closes = summary.accepted();
             let accepted = closes && res.fitness.max_dist <= -margin_target(class);
@@ -558,9 +556,9 @@ pub fn band_problem(
 
 /// Per-sample torque signs that a gap-filling 1R band is asked for (see
 /// [`W_FOCUS`](super::energy::W_FOCUS)): the samples where the chosen candidates lack a
-/// robust contact of one sign, widened by [`FOCUS_WIDEN`] of the period on each side. Where both signs are missing, even-indexed
-/// candidates are asked for + and odd-indexed for −. Returns the (even, odd) arrays, or
-/// `None` when nothing is missing.
+/// robust contact of one sign, widened by [`FOCUS_WIDEN`] of the period on each side. Where
+/// both signs are missing, even-indexed candidates are asked for + and odd-indexed for −.
+/// Returns the (even, odd) arrays, or `None` when nothing is missing.
 fn focus_of(chosen: &[Candidate], n: usize) -> Option<Focus> {
     let has = |i: usize, s: f64| {
         chosen.iter().any(|c| {
