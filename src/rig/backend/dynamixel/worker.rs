@@ -149,8 +149,6 @@ pub fn describe(e: &TransferError) -> (bool, String) {
 struct Streamer {
     /// [`reply_latency`] of the driver.
     latency: Duration,
-    /// How long to let the line go quiet after a failed sync read (see [`quiet_time`]).
-    quiet: Duration,
     period: Duration,
     next_due: Instant,
     last_tick: Option<u16>,
@@ -192,7 +190,6 @@ pub fn run(
                     .map_or(FACTORY_RETURN_DELAY, |r| r.data);
                 stream = Some(Streamer {
                     latency: reply_latency(delay, setup.baud),
-                    quiet: quiet_time(reply_latency(delay, setup.baud), ids.len()),
                     period,
                     next_due: Instant::now(),
                     last_tick: None,
@@ -286,7 +283,7 @@ fn sample_once(
     }
     if failure.is_some() || blocks.iter().any(Option::is_none) {
         // Let late replies arrive before the next instruction discards the input.
-        std::thread::sleep(s.quiet);
+        std::thread::sleep(quiet_time(s.latency, ids.len()));
     }
     let mut c = counts.lock().unwrap_or_else(|p| p.into_inner());
     if let Some((true, _)) = &failure {
