@@ -14,7 +14,8 @@
 //! tangents, which are evaluated once per sample on a 6-slot jet (c², ċ²). E_vary couples two
 //! samples half a period apart and uses a full 34-slot dual. (Before, each sample used a
 //! 20-slot dual over its local control points and re-evaluated the next sample's tangents:
-//! twice the work per sample; see `docs/synthesis.md`.)
+//! twice the work per sample; see `docs/synthesis.md`.) The per-sample buffers and the
+//! spline bases at the sample times are kept per thread between evaluations (`Scratch`).
 //!
 //! **Scale.** The objective is the paper's sum over samples (E_vary added once, as in the
 //! paper) divided by N: the weights keep the paper's ratios, and values of order 1–10 keep
@@ -34,6 +35,7 @@ use super::closure::{Class, NormalCone};
 use super::dual::{Dual, Scalar, V3};
 use super::model::{self, ANGLE_CPS, CURVE_CPS, NV};
 use super::pose::PoseTrack;
+use std::cell::RefCell;
 use std::sync::Arc;
 
 /// Weight of E_smth: 50 (paper §5.1).
@@ -154,18 +156,68 @@ struct SampleBasis {
     angle: Basis,
 }
 
+/// The buffers of [`PairProblem::evaluate`], one set per thread, reused from one evaluation
+/// to the next.
+///
+/// Why: an evaluation needs about 360 KB of per-sample buffers (N = 360). Allocated and freed
+/// on every call, they made glibc's per-thread heaps grow past their trim threshold and give
+/// the memory back each time: `strace -c` counted 48 666 `madvise` calls in one
+/// `synth half-turn-2to1 --k 3` run, and the page faults that followed were 3.2 s of system
+/// time next to 17 s of user time. The bases depend only on the sample times, so they are
+/// kept until the times change.
+#[derive(Default)]
+struct Scratch {
+    /// Sample times the bases belong to.
+    times: Vec<f64>,
+    bases: Vec<SampleBasis>,
+    /// c², ċ², c̈² per sample.
+    curve: Vec<[V3<f64>; 3]>,
+    /// Unit tangents t̂², ĉ̇¹ per sample on the tangent jet (E_smth).
+    units: Vec<[V3<Dual<DT>>; 2]>,
+    /// Follower clearance, driver clearance, tangent steepness, cone.
+    ks: [Ks; 4],
+}
+
+impl Scratch {
+    /// Make the bases those of `poses`' sample times.
+    fn bases_for(&mut self, poses: &PoseTrack) {
+        let same = self.times.len() == poses.len()
+            && self
+                .times
+                .iter()
+                .zip(&poses.samples)
+                .all(|(t, p)| *t == p.t);
+        if same {
+            return;
+        }
+        self.times = poses.samples.iter().map(|p| p.t).collect();
+        self.bases = poses
+            .samples
+            .iter()
+            .map(|pose| SampleBasis {
+                curve: super::bspline::basis(CURVE_CPS, pose.t),
+                angle: super::bspline::basis(ANGLE_CPS, pose.t),
+            })
+            .collect();
+    }
+}
+
+thread_local! {
+    static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
+}
+
 /// Per-sample constraint values with their jet gradients, aggregated by a KS maximum.
+#[derive(Default)]
 struct Ks {
     vals: Vec<f64>,
     grads: Vec<[f64; DJ]>,
 }
 
 impl Ks {
-    fn new(n: usize) -> Self {
-        Self {
-            vals: Vec::with_capacity(n),
-            grads: Vec::with_capacity(n),
-        }
+    /// Empty, keeping the buffers for the next evaluation.
+    fn clear(&mut self) {
+        self.vals.clear();
+        self.grads.clear();
     }
     /// Sample i's value (samples are pushed in order).
     fn push(&mut self, g: Dual<DJ>) {
@@ -272,36 +324,40 @@ impl PairProblem {
 
     /// Evaluate objective, constraints and gradients.
     pub fn evaluate(&self, x: &[f64]) -> Evaluation {
+        SCRATCH.with(|s| self.evaluate_in(x, &mut s.borrow_mut()))
+    }
+
+    /// [`Self::evaluate`] with the thread's buffers.
+    fn evaluate_in(&self, x: &[f64], scratch: &mut Scratch) -> Evaluation {
         let n = self.poses.len();
-        let bases: Vec<SampleBasis> = self
-            .poses
-            .samples
-            .iter()
-            .map(|pose| SampleBasis {
-                curve: super::bspline::basis(CURVE_CPS, pose.t),
-                angle: super::bspline::basis(ANGLE_CPS, pose.t),
-            })
-            .collect();
+        scratch.bases_for(&self.poses);
+        let Scratch {
+            bases,
+            curve,
+            units,
+            ks: [ks_rf, ks_rd, ks_sl, ks_cone],
+            ..
+        } = scratch;
+        let bases = &bases[..];
         // c², ċ², c̈² at every sample: the values both jets below are seeded with.
-        let curve: Vec<[V3<f64>; 3]> = bases
-            .iter()
-            .map(|b| curve_jet_values(x, &b.curve))
-            .collect();
+        curve.clear();
+        curve.extend(bases.iter().map(|b| curve_jet_values(x, &b.curve)));
         let mut f = 0.0;
         let mut grad = vec![0.0; NV];
         // E_smth couples each sample with the next through the unit tangents t̂² = ċ²/|ċ²|
         // and ĉ̇¹: evaluate those once per sample on its tangent jet (c², ċ²).
-        let units: Vec<[V3<Dual<DT>>; 2]> = self
-            .poses
-            .samples
-            .iter()
-            .zip(&curve)
-            .map(|(pose, c)| {
-                let jet = [seed_v3::<DT>(c[0], 0), seed_v3::<DT>(c[1], 3), V3::zero()];
-                let (_, _, c1d, _, _) = model::tangents(pose, self.dx, jet);
-                [jet[1].unit(), c1d.unit()]
-            })
-            .collect();
+        units.clear();
+        units.extend(
+            self.poses
+                .samples
+                .iter()
+                .zip(curve.iter())
+                .map(|(pose, c)| {
+                    let jet = [seed_v3::<DT>(c[0], 0), seed_v3::<DT>(c[1], 3), V3::zero()];
+                    let (_, _, c1d, _, _) = model::tangents(pose, self.dx, jet);
+                    [jet[1].unit(), c1d.unit()]
+                }),
+        );
         for i in 0..n {
             let j = (i + 1) % n;
             let mut e = 0.0;
@@ -323,17 +379,16 @@ impl PairProblem {
         }
         let mut len = 0.0;
         let mut len_grad = vec![0.0; NV];
-        let mut ks_rf = Ks::new(n);
-        let mut ks_rd = Ks::new(n);
-        let mut ks_sl = Ks::new(n);
-        let mut ks_cone = Ks::new(n);
+        for ks in [&mut *ks_rf, &mut *ks_rd, &mut *ks_sl, &mut *ks_cone] {
+            ks.clear();
+        }
         let max_dot = self.cone.max_abs_dot();
         for (i, ((pose, b), c)) in self
             .poses
             .samples
             .iter()
-            .zip(&bases)
-            .zip(&curve)
+            .zip(bases)
+            .zip(curve.iter())
             .enumerate()
         {
             // The sample's jet: everything below depends on the design only through it.
@@ -420,16 +475,16 @@ impl PairProblem {
         cons_grad.push(len_grad.iter().map(|g| g / l2).collect());
         cons_exact.push((len - l2) / l2);
         let mut agg = |ks: &Ks, rho: f64| {
-            let (v, g, m) = ks.finish(rho, &bases);
+            let (v, g, m) = ks.finish(rho, bases);
             cons.push(v);
             cons_grad.push(g);
             cons_exact.push(m);
         };
-        agg(&ks_rf, KS_RHO_LENGTH);
-        agg(&ks_rd, KS_RHO_LENGTH);
-        agg(&ks_sl, KS_RHO_UNITLESS);
+        agg(ks_rf, KS_RHO_LENGTH);
+        agg(ks_rd, KS_RHO_LENGTH);
+        agg(ks_sl, KS_RHO_UNITLESS);
         if self.class == Class::R3 {
-            agg(&ks_cone, KS_RHO_UNITLESS);
+            agg(ks_cone, KS_RHO_UNITLESS);
         }
         Evaluation {
             f,
@@ -536,6 +591,52 @@ mod tests {
             },
             x,
         )
+    }
+
+    /// Guards the per-thread buffers of `evaluate`: problems of other classes, sample counts
+    /// and sample times, evaluated one after another on one thread, give bit for bit what a
+    /// fresh set of buffers gives, so nothing of one evaluation (bases, jets, per-sample
+    /// constraint values) leaks into the next.
+    #[test]
+    fn reused_buffers_give_the_same_evaluation_as_fresh_ones() {
+        let (r3, x3) = problem(Class::R3);
+        let (mut r1, x1) = problem(Class::R1);
+        r1.poses = Arc::new(PoseTrack::from_fn(50, r1.poses.at.clone()));
+        // Same count as `r3` (36) but times shifted by half a step: bases must be rebuilt.
+        let mut shifted = r3.clone();
+        let at = r3.poses.at.clone();
+        shifted.poses = Arc::new(PoseTrack {
+            samples: (0..36).map(|i| at((i as f64 + 0.5) / 36.0)).collect(),
+            at,
+        });
+        let cases = [
+            (&r3, &x3),
+            (&r1, &x1),
+            (&shifted, &x3),
+            (&r3, &x3),
+            (&r1, &x1),
+        ];
+        for (k, (pb, x)) in cases.into_iter().enumerate() {
+            let got = pb.evaluate(x);
+            let want = pb.evaluate_in(x, &mut Scratch::default());
+            assert_eq!(got.f.to_bits(), want.f.to_bits(), "case {k}: objective");
+            assert_eq!(got.grad, want.grad, "case {k}: gradient");
+            assert_eq!(got.cons, want.cons, "case {k}: constraints");
+            assert_eq!(
+                got.cons_grad, want.cons_grad,
+                "case {k}: constraint gradients"
+            );
+            assert_eq!(
+                got.cons_exact, want.cons_exact,
+                "case {k}: exact constraints"
+            );
+        }
+        let shifted_eval = shifted.evaluate(&x3);
+        assert_ne!(
+            shifted_eval.f,
+            r3.evaluate(&x3).f,
+            "the shifted times must change the evaluation, or this test proves nothing"
+        );
     }
 
     /// Guards the analytic (forward-mode) gradients of the objective and of every constraint
