@@ -12,7 +12,7 @@ use std::cell::RefCell;
 
 use super::energy::{Evaluation, PairProblem};
 
-/// Relative objective change at which SLSQP stops. Default 1e-7: the objective is a sum
+/// Relative objective change at which SLSQP stops. Default 1e-8: the objective is a sum
 /// over 360 samples of order 10–1000, so this is far below anything that changes the
 /// geometry visibly, and candidates converge within a few hundred evaluations.
 pub const FTOL_REL: f64 = 1e-8;
