@@ -238,6 +238,58 @@ fn late_replies_after_a_stall_do_not_desynchronize_the_stream() {
     assert!(last > 2_000_000, "stream stopped at {last} µs");
 }
 
+/// Guards a driver that reboots mid-run (a brown-out): its RAM settings are gone, the
+/// streamed block reads its own zeroed data, so the stream must end with a reason that says
+/// so instead of recording zeros as measurements; the samples before the reboot are kept,
+/// with a device clock that kept pace with the host's.
+#[test]
+fn a_driver_reboot_ends_the_stream_with_its_reason() {
+    let mut opts = SimDynamixelOptions::new(Arc::new(WobbleTurn { amplitude: 0.3 }));
+    opts.server.driver_reboots.push(1.5);
+    let sim = spawn(opts).expect("simulator starts");
+    let rig = rig(sim.path());
+    let mut bench = DynamixelBench::from_rig(&rig).unwrap();
+    bench.enable().unwrap();
+    bench.start_stream(100.0).unwrap();
+    bench.run_at(20.0).unwrap();
+    let start = Instant::now();
+    let mut out = Vec::new();
+    let err = loop {
+        match bench.poll_samples(Duration::from_millis(50), &mut out) {
+            Ok(()) => assert!(
+                start.elapsed() < Duration::from_secs(6),
+                "the reboot went unnoticed ({} samples)",
+                out.len()
+            ),
+            Err(e) => break e,
+        }
+    };
+    let elapsed = start.elapsed();
+    match &err {
+        RigError::Disconnected { message, .. } => {
+            assert!(message.contains("rebooted"), "{message}")
+        }
+        other => panic!("expected the reboot as the reason, got {other}"),
+    }
+    // Setup took some of the 1.5 s; at 100 Hz most of the rest was streamed.
+    assert!(out.len() > 50, "{} samples kept", out.len());
+    let last = out.last().unwrap();
+    assert!(
+        last.device_time_us < 1_600_000,
+        "a sample after the reboot was recorded (device time {} µs)",
+        last.device_time_us
+    );
+    assert!(
+        out.windows(2)
+            .all(|w| w[1].device_time_us > w[0].device_time_us),
+        "device time must increase"
+    );
+    assert!(
+        elapsed < Duration::from_secs(4),
+        "noticed after {elapsed:?}"
+    );
+}
+
 /// Guards the link-fault path: with corrupted and dropped bytes the stream keeps going,
 /// failures are counted as gaps/CRC errors and flagged on the next sample, nothing panics.
 #[test]

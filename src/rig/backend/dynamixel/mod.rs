@@ -15,6 +15,7 @@
 //! Does not own the session, the recording, or the rig file's schema.
 
 pub mod models;
+pub mod tick;
 pub mod worker;
 
 use std::collections::BTreeMap;

@@ -4,10 +4,11 @@
 //! Owns the [`dynamixel2::Bus`], runs jobs sent by the backend (one transaction each, in
 //! order), keeps the servos' bus watchdog fed with a heartbeat when idle, and while
 //! streaming performs one sync read per sample period of the indirect block every servo
-//! was set up with (realtime tick, present velocity, present position). It unwraps the
-//! driver's realtime tick into the device clock, counts failed transactions as gaps and
-//! CRC failures, declares the link lost after a run of failures, and turns the driver's
-//! torque off when the backend goes away (dropped, or the process unwinding).
+//! was set up with (realtime tick, present velocity, present position). It keeps the
+//! device clock (the driver's realtime tick unwrapped by `tick`), counts failed
+//! transactions as gaps and CRC failures, declares the link lost after a run of failures,
+//! and turns the driver's torque off when the backend goes away (dropped, or the process
+//! unwinding).
 //!
 //! It does not decide what to command (that is [`super::DynamixelBench`]).
 
@@ -18,6 +19,7 @@ use std::time::{Duration, Instant};
 
 use dynamixel2::{ReadError, TransferError};
 
+use super::tick::TickClock;
 use crate::rig::recording::{flags, Counts};
 
 /// The bus type the worker owns.
@@ -53,10 +55,6 @@ pub const STREAM_BLOCK_LEN: u16 = STREAM_SOURCES.len() as u16;
 /// 100 Hz a quarter second of silence — longer than any CRC burst of a noisy but working
 /// bus, shorter than the default 250 ms bus watchdog plus a margin would let a host drift.
 pub const LOST_AFTER_FAILURES: u32 = 25;
-
-/// Largest acceptable jump of the driver's Realtime Tick between samples before it counts
-/// as a reboot of the servo rather than time passing. Default 5 s.
-pub const MAX_TICK_STEP_MS: u64 = 5_000;
 
 /// One streamed reading of the bus.
 #[derive(Debug, Clone, PartialEq)]
@@ -151,8 +149,8 @@ struct Streamer {
     latency: Duration,
     period: Duration,
     next_due: Instant,
-    last_tick: Option<u16>,
-    time_ms: u64,
+    /// The driver's Realtime Tick, unwrapped.
+    clock: TickClock,
     last_followers: Vec<i32>,
     failures_in_a_row: u32,
     gap_pending: bool,
@@ -192,8 +190,7 @@ pub fn run(
                     latency: reply_latency(delay, setup.baud),
                     period,
                     next_due: Instant::now(),
-                    last_tick: None,
-                    time_ms: 0,
+                    clock: TickClock::new(),
                     last_followers: vec![0; setup.follower_ids.len()],
                     failures_in_a_row: 0,
                     gap_pending: false,
@@ -250,7 +247,8 @@ pub fn quiet_time(reply_latency: Duration, replies: usize) -> Duration {
     reply_latency * replies as u32 + QUIET_MARGIN
 }
 
-/// One sync read; returns `Some(message)` when the link is to be considered lost.
+/// One sync read; returns `Some(message)` when the stream must end: the link is lost, or
+/// the driver rebooted (see `tick`).
 fn sample_once(
     bus: &mut DxlBus,
     ids: &[u8],
@@ -308,13 +306,9 @@ fn sample_once(
     };
     s.failures_in_a_row = 0;
     let tick = u16::from_le_bytes([driver[0], driver[1]]);
-    if let Some(prev) = s.last_tick {
-        let step = u64::from(tick.wrapping_sub(prev) & 0x7FFF);
-        if step <= MAX_TICK_STEP_MS {
-            s.time_ms += step;
-        }
+    if let Err(restarted) = s.clock.advance(tick, s.last_success.elapsed()) {
+        return Some(restarted.to_string());
     }
-    s.last_tick = Some(tick);
     let mut sample_flags = 0;
     let mut resumed_after = None;
     if s.gap_pending {
@@ -340,7 +334,7 @@ fn sample_once(
     c.samples += 1;
     drop(c);
     let _ = events.send(Event::Sample(RawSample {
-        device_time_us: s.time_ms * 1000,
+        device_time_us: s.clock.time_ms() * 1000,
         driver_velocity: block_i32(driver, BLOCK_VELOCITY),
         driver_position: block_i32(driver, BLOCK_POSITION),
         followers,
