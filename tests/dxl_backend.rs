@@ -39,6 +39,29 @@ fn collect(bench: &mut DynamixelBench, seconds: f64) -> Vec<mpc_rig::rig::backen
     out
 }
 
+/// Enable, stream at 100 Hz, turn the driver at 20 rpm and poll until the stream ends:
+/// the error and the samples kept. Panics with `what` if nothing ends it within 6 s.
+fn run_until_the_stream_ends(
+    bench: &mut DynamixelBench,
+    what: &str,
+) -> (RigError, Vec<mpc_rig::rig::backend::Sample>, Duration) {
+    bench.enable().unwrap();
+    bench.start_stream(100.0).unwrap();
+    bench.run_at(20.0).unwrap();
+    let start = Instant::now();
+    let mut out = Vec::new();
+    loop {
+        match bench.poll_samples(Duration::from_millis(50), &mut out) {
+            Ok(()) => assert!(
+                start.elapsed() < Duration::from_secs(6),
+                "{what} not detected ({} samples)",
+                out.len()
+            ),
+            Err(e) => return (e, out, start.elapsed()),
+        }
+    }
+}
+
 /// Guards a whole run: the driver turns at the commanded speed, the streamed device time and
 /// driver angle advance consistently, the follower column is the target law
 /// θ = φ + 0.3·sin φ read through the calibration, and shutdown leaves torque off.
@@ -196,20 +219,7 @@ fn lost_bus_is_reported_as_disconnected() {
     let sim = sim_with(plant);
     let rig = rig(sim.path());
     let mut bench = DynamixelBench::from_rig(&rig).unwrap();
-    bench.enable().unwrap();
-    bench.start_stream(100.0).unwrap();
-    bench.run_at(20.0).unwrap();
-    let start = Instant::now();
-    let mut out = Vec::new();
-    let err = loop {
-        match bench.poll_samples(Duration::from_millis(50), &mut out) {
-            Ok(()) => assert!(
-                start.elapsed() < Duration::from_secs(6),
-                "disconnect not detected"
-            ),
-            Err(e) => break e,
-        }
-    };
+    let (err, out, _) = run_until_the_stream_ends(&mut bench, "the disconnect");
     assert!(matches!(err, RigError::Disconnected { .. }), "{err}");
     assert!(!out.is_empty(), "samples before the unplug are kept");
     drop(bench);
@@ -249,22 +259,7 @@ fn a_driver_reboot_ends_the_stream_with_its_reason() {
     let sim = spawn(opts).expect("simulator starts");
     let rig = rig(sim.path());
     let mut bench = DynamixelBench::from_rig(&rig).unwrap();
-    bench.enable().unwrap();
-    bench.start_stream(100.0).unwrap();
-    bench.run_at(20.0).unwrap();
-    let start = Instant::now();
-    let mut out = Vec::new();
-    let err = loop {
-        match bench.poll_samples(Duration::from_millis(50), &mut out) {
-            Ok(()) => assert!(
-                start.elapsed() < Duration::from_secs(6),
-                "the reboot went unnoticed ({} samples)",
-                out.len()
-            ),
-            Err(e) => break e,
-        }
-    };
-    let elapsed = start.elapsed();
+    let (err, out, elapsed) = run_until_the_stream_ends(&mut bench, "the reboot");
     match &err {
         RigError::Disconnected { message, .. } => {
             assert!(message.contains("rebooted"), "{message}")
