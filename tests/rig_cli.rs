@@ -59,8 +59,9 @@ fn sim_device_prints_pty_path_first() {
 }
 
 /// Guards: an unplug mid-run (the simulator closes its end for good) ends `measure` with
-/// exit code 5, a message saying the device disconnected and that the recording is kept,
-/// and an incomplete but readable recording.
+/// exit code 5, a message saying the device disconnected and that the recording is kept
+/// (each said once: it used to read "device disconnected (disconnected: PORT: …"), and an
+/// incomplete but readable recording.
 #[test]
 fn measure_reports_unplug_with_exit_code_and_kept_recording() {
     let dir = tempfile::tempdir().unwrap();
@@ -71,6 +72,12 @@ fn measure_reports_unplug_with_exit_code_and_kept_recording() {
     assert_eq!(out.status.code(), Some(5), "{stderr}");
     assert!(stderr.contains("device disconnected"), "{stderr}");
     assert!(stderr.contains("kept and marked incomplete"), "{stderr}");
+    let last = stderr
+        .lines()
+        .rfind(|l| l.starts_with("error:"))
+        .unwrap_or_else(|| panic!("no final error line: {stderr}"));
+    assert_eq!(last.matches("disconnected").count(), 1, "{last}");
+    assert_eq!(last.matches(sim.first_line.as_str()).count(), 1, "{last}");
     let r = mpc_rig::rig::recording::Recording::load(&rec).unwrap();
     assert!(!r.meta.complete && !r.is_empty());
 }

@@ -134,15 +134,18 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
     }
     let (code, what) = match &outcome.end {
         EndReason::Finished => return Ok(analysis_code),
-        EndReason::Cancelled => (EXIT_CANCELLED, "cancelled"),
-        EndReason::Disconnected(_) => (EXIT_DISCONNECTED, "device disconnected"),
-        EndReason::MaxRunTime | EndReason::Error(_) => (EXIT_INCOMPLETE, "run stopped early"),
+        EndReason::Cancelled => (EXIT_CANCELLED, "cancelled".to_string()),
+        // The end reason's own text starts with "disconnected": give its message once.
+        EndReason::Disconnected(m) => (EXIT_DISCONNECTED, format!("device disconnected ({m})")),
+        EndReason::MaxRunTime | EndReason::Error(_) => (
+            EXIT_INCOMPLETE,
+            format!("run stopped early ({})", outcome.end),
+        ),
     };
     Err(ExitStatusError {
         code,
         message: format!(
-            "{what} ({}); the recording in {} is kept and marked incomplete",
-            outcome.end,
+            "{what}; the recording in {} is kept and marked incomplete",
             outcome.dir.display()
         ),
     }

@@ -216,8 +216,7 @@ pub fn run(
                     s.next_due = now;
                 }
                 if let Some(message) = lost {
-                    let _ =
-                        events.send(Event::Lost(format!("{}: {message}", setup.path.display())));
+                    let _ = events.send(Event::Lost(message));
                     stream = None;
                 }
             }

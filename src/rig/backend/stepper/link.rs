@@ -630,8 +630,17 @@ impl IoThread {
     }
 
     fn fail(&mut self, st: &mut Loop, e: RigError) {
-        let message = e.to_string();
-        tracing::error!("{message}");
+        tracing::error!("{e}");
+        // What happened, without the port: every error built from it names the port itself
+        // (it read "PORT: device disconnected (PORT: device disconnected (…))" before).
+        let message = match &e {
+            RigError::Disconnected { message, .. } => message.clone(),
+            other => {
+                let full = other.to_string();
+                let port = format!("{}: ", self.path.display());
+                full.strip_prefix(&port).unwrap_or(&full).to_string()
+            }
+        };
         {
             let mut sh = self.shared.lock().unwrap_or_else(|p| p.into_inner());
             sh.fatal = Some(message.clone());
