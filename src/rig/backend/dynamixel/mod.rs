@@ -204,7 +204,6 @@ impl DynamixelBench {
             watchdog_counts * BUS_WATCHDOG_UNIT_MS / HEARTBEAT_FRACTION,
         ));
         let setup = WorkerSetup {
-            path: path.to_path_buf(),
             driver_id: driver.id,
             follower_ids: followers.iter().map(|f| f.id).collect(),
             heartbeat,

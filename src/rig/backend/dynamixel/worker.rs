@@ -12,7 +12,6 @@
 //!
 //! It does not decide what to command (that is [`super::DynamixelBench`]).
 
-use std::path::PathBuf;
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -106,8 +105,6 @@ pub enum Message {
 /// Static description of the bus the worker serves.
 #[derive(Debug, Clone)]
 pub struct WorkerSetup {
-    /// Port path (for messages).
-    pub path: PathBuf,
     /// Driver servo ID.
     pub driver_id: u8,
     /// Follower servo IDs, in sensor order.
