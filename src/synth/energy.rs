@@ -162,9 +162,10 @@ struct SampleBasis {
 /// Why: an evaluation needs about 360 KB of per-sample buffers (N = 360). Allocated and freed
 /// on every call, they made glibc's per-thread heaps grow past their trim threshold and give
 /// the memory back each time: `strace -c` counted 48 666 `madvise` calls in one
-/// `synth half-turn-2to1 --k 3` run, and the page faults that followed were 3.2 s of system
-/// time next to 17 s of user time. The bases depend only on the sample times, so they are
-/// kept until the times change.
+/// `synth half-turn-2to1 --k 3 --dx 6` run (19 with this scratch), and a `--k 4 --dx 6`
+/// run spent 3.2 s in the kernel next to 17.2 s of user time, mostly on the page faults
+/// that followed. The bases depend only on the sample times, so they are kept until the
+/// times change.
 #[derive(Default)]
 struct Scratch {
     /// Sample times the bases belong to.
