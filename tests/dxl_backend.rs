@@ -254,9 +254,7 @@ fn late_replies_after_a_stall_do_not_desynchronize_the_stream() {
 /// with a device clock that kept pace with the host's.
 #[test]
 fn a_driver_reboot_ends_the_stream_with_its_reason() {
-    let mut opts = SimDynamixelOptions::new(Arc::new(WobbleTurn { amplitude: 0.3 }));
-    opts.server.driver_reboots.push(1.5);
-    let sim = spawn(opts).expect("simulator starts");
+    let sim = sim_with(PlantConfig::from_faults(&["reboot_at_s=1.5"]).unwrap());
     let rig = rig(sim.path());
     let mut bench = DynamixelBench::from_rig(&rig).unwrap();
     let (err, out, elapsed) = run_until_the_stream_ends(&mut bench, "the reboot");

@@ -33,11 +33,23 @@ struct Run {
 }
 
 fn run_session(rig_path: &str, motion: &str, board_faults: &[&str], cycles: u32) -> Run {
+    run_session_with(rig_path, motion, &[], board_faults, cycles)
+}
+
+/// As [`run_session`], with faults on the Dynamixel bus too.
+fn run_session_with(
+    rig_path: &str,
+    motion: &str,
+    bus_faults: &[&str],
+    board_faults: &[&str],
+    cycles: u32,
+) -> Run {
     let rig = RigConfig::load(&repo(rig_path)).unwrap();
     let motion_path = repo(motion);
     let target = Motion::from_file(&motion_path).unwrap();
+    let bus = PlantConfig::from_faults(bus_faults).unwrap();
     let board = PlantConfig::from_faults(board_faults).unwrap();
-    let sim = spawn_with(&rig, target, PlantConfig::default(), board).unwrap();
+    let sim = spawn_with(&rig, target, bus, board).unwrap();
     let tmp = tempfile::tempdir().unwrap();
     let rec_dir = tmp.path().join("rec");
     let mut m = MeasureOptions {
@@ -217,6 +229,34 @@ fn measure_cli_against_sim_device_mixed_and_swapped_ports() {
 /// Guards a brief USB drop of the sensor board on a mixed bench: the board's link
 /// reconnects, the session still finishes complete, the reconnect is counted and marked on
 /// a row, and the bus's driver angle stays interpolated across it.
+/// Guards a driver servo that reboots mid-run on a mixed bench (a brown-out on the bus
+/// side): the run ends as a disconnection whose reason names the reboot, rather than going
+/// on with the servo's zeroed block as the driver angle; the rows before it are kept and
+/// the rebooted driver is left with torque off.
+#[test]
+fn a_driver_reboot_on_a_mixed_bench_ends_the_run_with_its_reason() {
+    let run = run_session_with(
+        "rigs/sim-dynamixel-imu.toml",
+        "data/motions/cone-sweep.toml",
+        &["reboot_at_s=3"],
+        &[],
+        4,
+    );
+    match &run.outcome.end {
+        EndReason::Disconnected(m) => assert!(m.contains("rebooted"), "{m}"),
+        other => panic!("expected the reboot as the end reason, got {other}"),
+    }
+    assert!(!run.outcome.complete);
+    let rec = Recording::load(&run.rec_dir).unwrap();
+    assert!(!rec.meta.complete);
+    assert!(rec.phase.len() > 300, "{} rows kept", rec.phase.len());
+    let driver = run.sim.bus().bus().driver().clone();
+    assert!(
+        !driver.torque_enabled(),
+        "driver torque on after the reboot"
+    );
+}
+
 #[test]
 fn a_brief_board_dropout_is_bridged() {
     let run = run_session(

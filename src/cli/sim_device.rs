@@ -103,10 +103,6 @@ pub struct SimDynamixelArgs {
     /// turns torque off, as the default Shutdown mask does on a real servo).
     #[arg(long, value_name = "S")]
     pub overload_at_s: Option<f64>,
-    /// Reboot the driver this many seconds after start, as after a brown-out (its RAM
-    /// settings return to factory defaults and its realtime tick restarts).
-    #[arg(long, value_name = "S")]
-    pub reboot_at_s: Option<f64>,
 }
 
 /// Options of `sim-device stepper`.
@@ -258,7 +254,6 @@ fn run_dynamixel(a: SimDynamixelArgs) -> anyhow::Result<ExitCode> {
             bits: dynamixel::control_table::hw_error::OVERLOAD,
         });
     }
-    opts.server.driver_reboots.extend(a.reboot_at_s);
     let sim = dynamixel::spawn(opts)?;
     {
         let mut out = std::io::stdout().lock();

@@ -97,6 +97,10 @@ pub struct LinkFaults {
     pub stall_at_s: Option<f64>,
     /// Length of the stall (s).
     pub stall_s: f64,
+    /// The Dynamixel driver servo reboots at this time (s), as after a brown-out: RAM back
+    /// at factory defaults (torque off, the streamed block's indirect addresses unmapped,
+    /// bus watchdog off), realtime tick restarting from 0.
+    pub reboot_at_s: Option<f64>,
 }
 
 /// Imperfections of a simulated bench.
@@ -177,6 +181,10 @@ pub const FAULT_KEYS: &[(&str, &str)] = &[
         "Dynamixel bus: replies held back from this time, s",
     ),
     ("stall_s", "length of the stall, s (default 0.06)"),
+    (
+        "reboot_at_s",
+        "Dynamixel bus: the driver reboots at this time, s (a brown-out)",
+    ),
     (
         "protocol_version",
         "protocol version the simulated device claims",
@@ -276,6 +284,7 @@ impl PlantConfig {
             "dropout_s" => self.link.dropout_s = nonneg()?,
             "stall_at_s" => self.link.stall_at_s = Some(nonneg()?),
             "stall_s" => self.link.stall_s = nonneg()?,
+            "reboot_at_s" => self.link.reboot_at_s = Some(nonneg()?),
             "protocol_version" => {
                 self.link.protocol_version = Some(
                     value
@@ -579,6 +588,10 @@ mod tests {
         assert_eq!(cfg.link.stall_s, DEFAULT_STALL_S);
         let err = PlantConfig::from_faults(&["stall_s=-0.1"]).unwrap_err();
         assert!(err.to_string().contains("stall_s"), "{err}");
+        let cfg = PlantConfig::from_faults(&["reboot_at_s=2.5"]).unwrap();
+        assert_eq!(cfg.link.reboot_at_s, Some(2.5));
+        let err = PlantConfig::from_faults(&["reboot_at_s=-1"]).unwrap_err();
+        assert!(err.to_string().contains("reboot_at_s"), "{err}");
     }
 
     /// Guards: missed steps happen at about the configured rate.

@@ -56,10 +56,6 @@ pub struct ServerOptions {
     pub pace_wire: bool,
     /// Hardware faults to inject.
     pub hardware_faults: Vec<HardwareFault>,
-    /// Seconds after start at which the driver servo reboots by itself, as after a
-    /// brown-out: RAM back at factory defaults (torque off, streamed block unmapped, bus
-    /// watchdog off), realtime tick restarting from 0.
-    pub driver_reboots: Vec<f64>,
 }
 
 impl Default for ServerOptions {
@@ -67,7 +63,6 @@ impl Default for ServerOptions {
         Self {
             pace_wire: true,
             hardware_faults: Vec::new(),
-            driver_reboots: Vec::new(),
         }
     }
 }
@@ -109,13 +104,12 @@ impl Server {
     fn run(mut self) -> ServerEnd {
         let start = self.start;
         let link: LinkFaults = lock(&self.plant).config().link.clone();
+        let mut reboot_at = link.reboot_at_s;
         let mut decoder = Decoder::new();
         let mut last_byte = Instant::now();
         let mut buf = [0u8; 4096];
         let mut pending_faults = self.options.hardware_faults.clone();
         pending_faults.sort_by(|a, b| a.at_s.total_cmp(&b.at_s));
-        let mut pending_reboots = self.options.driver_reboots.clone();
-        pending_reboots.sort_by(f64::total_cmp);
         let end = loop {
             if self.stop.load(Ordering::Relaxed) {
                 break ServerEnd::Stopped;
@@ -141,8 +135,9 @@ impl Server {
                     s.inject_hardware_error(f.bits);
                 }
             }
-            while pending_reboots.first().is_some_and(|at| *at <= t) {
-                pending_reboots.remove(0);
+            if reboot_at.is_some_and(|at| at <= t) {
+                // A brown-out: the driver reboots by itself.
+                reboot_at = None;
                 let mut bus = lock(&self.bus);
                 bus.advance(t);
                 let id = bus.driver().id();
