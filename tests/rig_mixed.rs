@@ -2,7 +2,8 @@
 //! Dynamixel bus turns the driver while our firmware on a second port reads the follower
 //! (an IMU for 3R, an AS5600 and a linear encoder for 1R1T). Guards the merge of two
 //! devices' streams into one recording, the analysis of it, and the way out when the
-//! sensor board is unplugged mid-run (recording kept, driver servo stopped).
+//! sensor board is unplugged or the driver servo reboots mid-run (recording kept, driver
+//! servo stopped).
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
