@@ -453,7 +453,7 @@ impl PairProblem {
             }
         }
         if let (Some(iv), true) = (self.vary, self.class != Class::R1) {
-            let (v, g) = self.e_vary(x, iv);
+            let (v, g) = self.e_vary(x, iv, bases);
             f += W_VARY * v;
             for (a, b) in grad.iter_mut().zip(g.iter()) {
                 *a += W_VARY * b;
@@ -497,25 +497,18 @@ impl PairProblem {
     }
 
     /// E_vary = ñ(t_v)·ñ(t_v + ½) with its gradient (full 34-slot dual).
-    fn e_vary(&self, x: &[f64], iv: usize) -> (f64, Vec<f64>) {
+    /// `bases` are those of the sample times (see [`Scratch`]).
+    fn e_vary(&self, x: &[f64], iv: usize, bases: &[SampleBasis]) -> (f64, Vec<f64>) {
         let n = self.poses.len();
-        let cp = |g: usize| -> V3<Dual<NV>> {
-            V3::new(
-                Dual::var(x[3 * g], 3 * g),
-                Dual::var(x[3 * g + 1], 3 * g + 1),
-                Dual::var(x[3 * g + 2], 3 * g + 2),
-            )
-        };
+        let cp = |g: usize| seed_v3::<NV>(V3::new(x[3 * g], x[3 * g + 1], x[3 * g + 2]), 3 * g);
         let th = |g: usize| Dual::<NV>::var(x[3 * CURVE_CPS + g], 3 * CURVE_CPS + g);
         let at = |i: usize| {
-            let pose = &self.poses.samples[i % n];
-            let bc = super::bspline::basis(CURVE_CPS, pose.t);
-            let ba = super::bspline::basis(ANGLE_CPS, pose.t);
+            let (pose, b) = (&self.poses.samples[i % n], &bases[i % n]);
             let c = model::contact(
                 pose,
                 self.dx,
-                model::curve_at(&bc, &cp),
-                model::angle_at(&ba, &th),
+                model::curve_at(&b.curve, &cp),
+                model::angle_at(&b.angle, &th),
             );
             self.ntilde(&c)
         };
