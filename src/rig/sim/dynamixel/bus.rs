@@ -149,6 +149,11 @@ impl Bus {
         &self.servos[0]
     }
 
+    /// The driver servo, mutable (fault injection).
+    pub fn driver_mut(&mut self) -> &mut Servo {
+        &mut self.servos[0]
+    }
+
     /// The follower servo, if any.
     pub fn follower(&self) -> Option<&Servo> {
         self.servos.get(1)

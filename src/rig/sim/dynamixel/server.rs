@@ -140,10 +140,7 @@ impl Server {
                 reboot_at = None;
                 let mut bus = lock(&self.bus);
                 bus.advance(t);
-                let id = bus.driver().id();
-                if let Some(s) = bus.servo_mut(id) {
-                    s.reboot(t);
-                }
+                bus.driver_mut().reboot(t);
             }
             let readable = {
                 let mut fds = [PollFd::new(self.master.as_fd(), PollFlags::POLLIN)];
