@@ -277,6 +277,18 @@ fn a_driver_reboot_ends_the_stream_with_its_reason() {
             .all(|w| w[1].device_time_us > w[0].device_time_us),
         "device time must increase"
     );
+    // Over the ~1.2 s streamed, within 0.2 s (the endpoints' host instants jitter on a
+    // loaded machine; nothing accumulates).
+    let first = &out[0];
+    let host_at = |s: &mpc_rig::rig::backend::Sample| {
+        s.host_instant.expect("bus samples carry a host instant")
+    };
+    let host_us = (host_at(last) - host_at(first)).as_micros() as i64;
+    let device_us = (last.device_time_us - first.device_time_us) as i64;
+    assert!(
+        (host_us - device_us).abs() < 200_000,
+        "device clock {device_us} µs against the host's {host_us} µs"
+    );
     assert!(
         elapsed < Duration::from_secs(4),
         "noticed after {elapsed:?}"
