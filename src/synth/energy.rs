@@ -21,6 +21,11 @@
 //! paper) divided by N: the weights keep the paper's ratios, and values of order 1–10 keep
 //! SLSQP's first quasi-Newton steps (identity Hessian) sensible.
 //!
+//! **Stages.** [`Stage::Full`] is the candidate problem above. [`Stage::Align`] is the 3R
+//! pre-solve under the tangent cone (see `candidate::align_start`): E_smth plus an alignment
+//! term that pulls the curve's tangent into span(p, w), where the conjugate normal lies in
+//! the cone; it has no normal, so no E_norm, E_tang, E_plan, E_vary or cone constraint.
+//!
 //! **Constraints** (all written g ≤ 0): curve length L₁ ≤ Length(c²) ≤ L₂; the height band
 //! by bounds on the control points' z (B-spline convex hull); minimum distance of the contact
 //! from the follower joint axis (1R/1R1T) or centre (3R) and of c¹ from the driver axis;
@@ -123,7 +128,30 @@ pub struct PairProblem {
     /// 1R only: per sample, the torque sign this candidate is asked to supply robustly
     /// (+1, −1, 0 for none); see [`W_FOCUS`]. `None` for an ordinary candidate.
     pub focus: Option<Arc<Vec<f64>>>,
+    /// Which objective: the candidate's, or the 3R curve-alignment pre-solve.
+    pub stage: Stage,
 }
+
+/// The objective a [`PairProblem`] evaluates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Stage {
+    /// The candidate problem (paper energies, closure terms, E_vary).
+    #[default]
+    Full,
+    /// 3R tangent cone, curve only: W_SMTH·E_smth + [`W_ALIGN`]·Σ q with
+    /// q = ((T̂² × ŵ)·p̂)² / (|T̂² × ŵ|² + δ²), the squared cosine between the conjugate normal
+    /// ±T² × w and the sphere's normal p̂: zero when the tangent lies in span(p, w). The cone
+    /// constraint is dropped (the normal angle is not used) and the others are kept.
+    Align,
+}
+
+/// Weight of the alignment term of [`Stage::Align`]. Default 100: a sample whose conjugate
+/// normal is 8° out of the tangent plane (q ≈ 0.019) then costs about 2, against E_smth's
+/// ~0.06 per sample (×50) on a fair curve, so alignment leads while E_smth keeps the curve
+/// fair.
+pub const W_ALIGN: f64 = 100.0;
+/// Regularization δ of the alignment term (where T² ∥ w any normal is conjugate). Default 0.05.
+pub const ALIGN_REG: f64 = 0.05;
 
 /// Names of the constraints, in evaluation order.
 pub const CONSTRAINT_NAMES: [&str; 6] = [
@@ -286,6 +314,15 @@ fn sq<S: Scalar>(v: V3<S>) -> S {
     v.norm2()
 }
 
+/// The alignment term of [`Stage::Align`] at one sample: q = ((T̂² × ŵ)·p̂)² / (|T̂² × ŵ|² +
+/// δ²), w = T¹ − T². The conjugate normal is ±T² × w, so q is (up to δ) its squared
+/// component along p̂, the quantity the tangent cone bounds by sin²γ₀.
+fn misalignment<S: Scalar>(p: V3<S>, t1: V3<S>, t2: V3<S>) -> S {
+    let u = t2.unit().cross((t1 - t2).unit());
+    let d = u.dot(p.unit());
+    d * d / (u.norm2() + S::cst(ALIGN_REG * ALIGN_REG))
+}
+
 impl PairProblem {
     /// Number of constraints for this class.
     pub fn n_constraints(&self) -> usize {
@@ -398,61 +435,44 @@ impl PairProblem {
                 seed_v3::<DJ>(c[1], 3),
                 seed_v3::<DJ>(c[2], 6),
             ];
-            let thf = |g: usize| x[3 * CURVE_CPS + g];
-            let theta = Dual::<DJ>::var(model::angle_at::<f64>(&b.angle, &thf), 9);
-            let c = model::contact(pose, self.dx, jet, theta);
-            let t1h = c.t1.unit();
-            let t2h = c.t2.unit();
-            let one = Dual::<DJ>::cst(1.0);
-            let e_norm = {
-                let d = c.n.dot(t1h);
-                d * d
-            };
-            let e_tang = sq(t1h - t2h);
-            let e_plan = sq(c.n - c.kappa);
-            let mut e = e_norm * W_NORM + e_tang * W_TANG + e_plan * W_PLAN;
-            let pxy = (c.p.x * c.p.x + c.p.y * c.p.y).sqrt();
-            if matches!(self.class, Class::R1 | Class::R1T1) {
-                // (ẑ × p)/|ẑ × p| · n
-                let circ = (c.n.y * c.p.x - c.n.x * c.p.y) / pxy;
-                let mut cl = -(circ * circ);
-                if self.class == Class::R1T1 {
-                    cl = cl - c.n.z * c.n.z;
-                }
-                e += cl * self.w_closure;
-                let arm = (circ * circ + ROBUST_SMOOTH * ROBUST_SMOOTH).sqrt();
-                if arm.v < ROBUST_ARM {
-                    let d = -arm + ROBUST_ARM;
-                    e += d * d * self.w_robust;
-                }
-                if let Some(sign) = self.focus.as_ref().map(|f| f[i]).filter(|s| *s != 0.0) {
-                    let d = -(circ * sign) + ROBUST_ARM;
-                    if d.v > 0.0 {
-                        e += d * d * W_FOCUS;
+            let (p, c1) = match self.stage {
+                Stage::Full => {
+                    let thf = |g: usize| x[3 * CURVE_CPS + g];
+                    let theta = Dual::<DJ>::var(model::angle_at::<f64>(&b.angle, &thf), 9);
+                    let c = model::contact(pose, self.dx, jet, theta);
+                    let e = self.sample_energy(i, &c);
+                    f += e.v;
+                    scatter_jet(&mut grad, b, &e.g, 1.0);
+                    if self.class == Class::R3 {
+                        let d = c.n.dot(c.p) / c.p.norm();
+                        ks_cone.push(d * d - max_dot * max_dot);
                     }
+                    (c.p, c.c1)
                 }
-            }
-            f += e.v;
-            scatter_jet(&mut grad, b, &e.g, 1.0);
-            let speed = c.c2d.norm();
+                Stage::Align => {
+                    let (p, c1, _, t1, t2) = model::tangents(pose, self.dx, jet);
+                    let q = misalignment(p, t1, t2);
+                    f += q.v * W_ALIGN;
+                    scatter_jet(&mut grad, b, &q.g, W_ALIGN);
+                    (p, c1)
+                }
+            };
+            let c2d = jet[1];
+            let speed = c2d.norm();
             len += speed.v / n as f64;
             scatter_jet(&mut len_grad, b, &speed.g, 1.0 / n as f64);
             let radius = if self.class == Class::R3 {
-                c.p.norm()
+                p.norm()
             } else {
-                pxy
+                (p.x * p.x + p.y * p.y).sqrt()
             };
             ks_rf.push(-radius + MIN_FOLLOWER_RADIUS);
-            let c1xy = (c.c1.x * c.c1.x + c.c1.y * c.c1.y).sqrt();
+            let c1xy = (c1.x * c1.x + c1.y * c1.y).sqrt();
             ks_rd.push(-c1xy + MIN_DRIVER_RADIUS);
-            let slope = c.c2d.z / speed;
+            let slope = c2d.z / speed;
             ks_sl.push(slope * slope - MAX_TANGENT_SLOPE * MAX_TANGENT_SLOPE);
-            if self.class == Class::R3 {
-                let d = c.n.dot(c.p) / c.p.norm();
-                ks_cone.push(d * d - one * (max_dot * max_dot));
-            }
         }
-        if let (Some(iv), true) = (self.vary, self.class != Class::R1) {
+        if let (Some(iv), true, Stage::Full) = (self.vary, self.class != Class::R1, self.stage) {
             let (v, g) = self.e_vary(x, iv, bases);
             f += W_VARY * v;
             for (a, b) in grad.iter_mut().zip(g.iter()) {
@@ -484,8 +504,15 @@ impl PairProblem {
         agg(ks_rf, KS_RHO_LENGTH);
         agg(ks_rd, KS_RHO_LENGTH);
         agg(ks_sl, KS_RHO_UNITLESS);
-        if self.class == Class::R3 {
-            agg(ks_cone, KS_RHO_UNITLESS);
+        match (self.class, self.stage) {
+            (Class::R3, Stage::Full) => agg(ks_cone, KS_RHO_UNITLESS),
+            // The alignment pre-solve has no normal: its cone constraint holds trivially.
+            (Class::R3, Stage::Align) => {
+                cons.push(-1.0);
+                cons_grad.push(vec![0.0; NV]);
+                cons_exact.push(-1.0);
+            }
+            _ => {}
         }
         Evaluation {
             f,
@@ -494,6 +521,42 @@ impl PairProblem {
             cons_grad,
             cons_exact,
         }
+    }
+
+    /// The candidate objective's terms at sample `i` (before the division by N): the paper's
+    /// E_norm, E_tang, E_plan and, for 1R/1R1T, E_closure, E_robust and E_focus.
+    fn sample_energy(&self, i: usize, c: &model::Contact<Dual<DJ>>) -> Dual<DJ> {
+        let t1h = c.t1.unit();
+        let t2h = c.t2.unit();
+        let e_norm = {
+            let d = c.n.dot(t1h);
+            d * d
+        };
+        let e_tang = sq(t1h - t2h);
+        let e_plan = sq(c.n - c.kappa);
+        let mut e = e_norm * W_NORM + e_tang * W_TANG + e_plan * W_PLAN;
+        if matches!(self.class, Class::R1 | Class::R1T1) {
+            let pxy = (c.p.x * c.p.x + c.p.y * c.p.y).sqrt();
+            // (ẑ × p)/|ẑ × p| · n
+            let circ = (c.n.y * c.p.x - c.n.x * c.p.y) / pxy;
+            let mut cl = -(circ * circ);
+            if self.class == Class::R1T1 {
+                cl = cl - c.n.z * c.n.z;
+            }
+            e += cl * self.w_closure;
+            let arm = (circ * circ + ROBUST_SMOOTH * ROBUST_SMOOTH).sqrt();
+            if arm.v < ROBUST_ARM {
+                let d = -arm + ROBUST_ARM;
+                e += d * d * self.w_robust;
+            }
+            if let Some(sign) = self.focus.as_ref().map(|f| f[i]).filter(|s| *s != 0.0) {
+                let d = -(circ * sign) + ROBUST_ARM;
+                if d.v > 0.0 {
+                    e += d * d * W_FOCUS;
+                }
+            }
+        }
+        e
     }
 
     /// E_vary = ñ(t_v)·ñ(t_v + ½) with its gradient (full 34-slot dual).
@@ -582,6 +645,7 @@ mod tests {
                 w_robust: W_ROBUST,
                 cone: NormalCone::Tangent,
                 focus: None,
+                stage: Stage::Full,
             },
             x,
         )
@@ -645,12 +709,17 @@ mod tests {
             pb.focus = Some(Arc::new((0..n).map(|i| [1.0, 0.0, -1.0][i % 3]).collect()));
             (pb, x)
         };
+        let aligning = || {
+            let (mut pb, x) = problem(Class::R3);
+            pb.stage = Stage::Align;
+            (pb, x)
+        };
         let problems = [Class::R1, Class::R1T1, Class::R3]
             .map(problem)
             .into_iter()
-            .chain([focused()]);
+            .chain([focused(), aligning()]);
         for (pb, x) in problems {
-            let class = pb.class;
+            let class = (pb.class, pb.stage);
             let ev = pb.evaluate(&x);
             let h = 1e-6;
             for k in 0..NV {

@@ -35,7 +35,7 @@ use rayon::prelude::*;
 
 use super::candidate::{self, Candidate, OVERSAMPLE};
 use super::closure::{self, Class, ClosureSummary, NormalCone};
-use super::energy::{PairProblem, LENGTH_BOUNDS, W_CLOSURE, W_ROBUST};
+use super::energy::{PairProblem, Stage, LENGTH_BOUNDS, W_CLOSURE, W_ROBUST};
 use super::error::SynthError;
 use super::ga::{self, Fitness, GaSettings, Pool};
 use super::mechanism::*;
@@ -551,6 +551,7 @@ pub fn band_problem(
         w_robust: W_ROBUST,
         cone,
         focus: None,
+        stage: Stage::Full,
     }
 }
 
