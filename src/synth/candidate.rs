@@ -476,6 +476,17 @@ fn start_angles(pb: &PairProblem, x: &mut [f64], sign: f64, r3_loop: bool) {
 /// median misalignment is about 1° after 150–180 evaluations.
 pub const ALIGN_MAX_EVAL: usize = 200;
 
+/// Evaluation cap of a 3R tangent-cone candidate's solve after [`align_start`], as a
+/// multiple of the usual cap (`optimizer::MAX_EVAL`, or `SynthOptions::max_eval`). Default
+/// 1.75 (700 evaluations). The aligned start's normal is often still outside the cone (its
+/// θ spline cannot follow the conjugate normal everywhere), and SLSQP needs more steps to
+/// bring it in: with 400, 115–132 of a K = 7 pick-and-place run's rejections were "cone
+/// violated" at the cap, and the example closed at seeds 1, 2, 3 and 5 only; with 700 it
+/// closed at all five, at d_x = 6. At K = 7, d_x = 6, seeds 1 and 4: 550 closed seed 1 only
+/// (28 s each), 700 both (33 s), 1000 both (36–42 s). (Before the pre-solve, 1000
+/// evaluations did not help.)
+pub const R3_TANGENT_EVAL_SCALE: f64 = 1.75;
+
 /// 3R under the tangent cone: move the start curve `x0` so its tangent lies in span(p, w)
 /// (`energy::Stage::Align`, the curve only), then set the start normal again on the moved
 /// curve. Returns the new start and the evaluations used.
@@ -528,13 +539,15 @@ pub fn solve(
 ) -> Candidate {
     let mut x0 = initial_guess(pb, seed, band, index);
     let mut evals = 0;
+    let mut cap = max_eval;
     if pb.class == Class::R3 && pb.cone == closure::NormalCone::Tangent {
         let sign = if index % 2 == 0 { 1.0 } else { -1.0 };
         let (xa, ea) = align_start(pb, minimizer, &x0, sign);
         x0 = xa;
         evals = ea;
+        cap = (max_eval as f64 * R3_TANGENT_EVAL_SCALE).round() as usize;
     }
-    let res = minimizer.minimize(pb, &x0, max_eval);
+    let res = minimizer.minimize(pb, &x0, cap);
     let x = res.x;
     let mut reason = None;
     let finite = x.iter().all(|v| v.is_finite()) && res.f.is_finite();
