@@ -127,7 +127,9 @@ pub struct SynthOptions {
     pub generations: usize,
     /// GA population.
     pub population: usize,
-    /// SLSQP evaluation cap per candidate.
+    /// SLSQP evaluation cap per candidate; a 3R candidate under the tangent cone gets
+    /// [`candidate::R3_TANGENT_EVAL_SCALE`] times as many, after its alignment pre-solve's
+    /// own [`candidate::ALIGN_MAX_EVAL`].
     pub max_eval: usize,
     /// Millimetres per model unit written into the file.
     pub scale_mm: f64,
