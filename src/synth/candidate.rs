@@ -278,6 +278,17 @@ fn r3_start_normal(c: &model::Contact<f64>, sign: f64, s: f64) -> V3<f64> {
     u.scalec(phi.cos()) + q.scalec(phi.sin())
 }
 
+/// Overall sign of candidate `index`'s start normal: + for even, − for odd indices, so every
+/// band offers both torque directions (1R, 1R1T) and both signs of ñ (3R). The initial guess
+/// and the 3R pre-solve, which sets the normal again, must agree on it.
+fn normal_sign(index: usize) -> f64 {
+    if index % 2 == 0 {
+        1.0
+    } else {
+        -1.0
+    }
+}
+
 /// Build the initial design of candidate `index` in band `band`.
 pub fn initial_guess(pb: &PairProblem, seed: u64, band: usize, index: usize) -> Vec<f64> {
     let mut rng = ChaCha8Rng::seed_from_u64(
@@ -300,7 +311,7 @@ pub fn initial_guess(pb: &PairProblem, seed: u64, band: usize, index: usize) -> 
     let ph1 = rng.random_range(0.0..TAU);
     let ecc = rng.random_range(0.0..0.15);
     let wob = rng.random_range(0.0..0.25);
-    let sign = if index % 2 == 0 { 1.0 } else { -1.0 };
+    let sign = normal_sign(index);
     // 3R under the tangent cone: a loop around a follower-local centre, in the plane the
     // cone allows (drawn after the common parameters, so 1R/1R1T and 3R with the arm cone
     // keep their guesses).
@@ -541,7 +552,7 @@ pub fn solve(
     let mut evals = 0;
     let mut cap = max_eval;
     if pb.class == Class::R3 && pb.cone == closure::NormalCone::Tangent {
-        let sign = if index % 2 == 0 { 1.0 } else { -1.0 };
+        let sign = normal_sign(index);
         let (xa, ea) = align_start(pb, minimizer, &x0, sign);
         x0 = xa;
         evals = ea;
@@ -728,7 +739,7 @@ pub(crate) mod tests {
         // the pre-solve then returns as it was; 11 of the first 12 align.)
         let mut sums = (0.0, 0.0);
         for index in 1..5 {
-            let sign = if index % 2 == 0 { 1.0 } else { -1.0 };
+            let sign = normal_sign(index);
             let x0 = initial_guess(&pb, 1, 1, index);
             let before = misalignments_deg(&pb, &x0);
             let (x, evals) = align_start(&pb, &SlsqpRs, &x0, sign);
