@@ -20,6 +20,7 @@
 //! - [`rig`]: bench configuration, serial links, backends, simulated devices, sessions and
 //!   recordings.
 //! - [`analysis`]: measured versus target poses, metrics, timing ratios, reports.
+//! - [`geometry`]: triangle meshes in mm, the watertightness check, scenes of moving parts.
 //! - [`plot`]: PNG/SVG charts with an embedded font, shared by every report.
 //! - [`cli`]: one file per subcommand; calls into the modules above.
 //!
@@ -27,6 +28,7 @@
 
 pub mod analysis;
 pub mod cli;
+pub mod geometry;
 pub mod motion;
 pub mod plot;
 pub mod rig;

@@ -1,0 +1,16 @@
+//! Solid geometry for printable parts: triangle meshes in millimetres, their checks, and the
+//! scenes that show parts moving.
+//!
+//! | module | owns |
+//! |---|---|
+//! | [`mesh`] | indexed triangle meshes, measures, the watertightness (edge) check |
+//! | [`scene`] | parts with poses over one period, for animation and renders |
+//!
+//! It does not know what a mechanism is: turning `mechanism.json` into parts is `build`'s
+//! job; this module gives it shapes, meshes and files.
+
+pub mod mesh;
+pub mod scene;
+
+pub use mesh::{Aabb, Mesh, MeshCheck};
+pub use scene::{Pose, Scene, ScenePart};
