@@ -37,6 +37,56 @@ pub struct Aabb {
 }
 
 impl Aabb {
+    /// The empty box (min +∞, max −∞): the identity of [`Aabb::union`].
+    pub const EMPTY: Aabb = Aabb {
+        min: [f64::INFINITY; 3],
+        max: [f64::NEG_INFINITY; 3],
+    };
+
+    /// The box from `min` to `max`.
+    pub fn new(min: [f64; 3], max: [f64; 3]) -> Aabb {
+        Aabb { min, max }
+    }
+
+    /// The smallest box holding both.
+    pub fn union(&self, o: &Aabb) -> Aabb {
+        let mut out = *self;
+        for k in 0..3 {
+            out.min[k] = out.min[k].min(o.min[k]);
+            out.max[k] = out.max[k].max(o.max[k]);
+        }
+        out
+    }
+
+    /// Grown by `r` on every side.
+    pub fn inflate(&self, r: f64) -> Aabb {
+        let mut out = *self;
+        for k in 0..3 {
+            out.min[k] -= r;
+            out.max[k] += r;
+        }
+        out
+    }
+
+    /// Euclidean distance from `p` to the box, 0 inside.
+    pub fn distance(&self, p: [f64; 3]) -> f64 {
+        let mut s = 0.0;
+        for k in 0..3 {
+            let d = (self.min[k] - p[k]).max(p[k] - self.max[k]).max(0.0);
+            s += d * d;
+        }
+        s.sqrt()
+    }
+
+    /// Centre.
+    pub fn center(&self) -> [f64; 3] {
+        [
+            0.5 * (self.min[0] + self.max[0]),
+            0.5 * (self.min[1] + self.max[1]),
+            0.5 * (self.min[2] + self.max[2]),
+        ]
+    }
+
     /// Extent along x, y, z.
     pub fn size(&self) -> [f64; 3] {
         [

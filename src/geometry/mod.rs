@@ -5,12 +5,18 @@
 //! |---|---|
 //! | [`mesh`] | indexed triangle meshes, measures, the watertightness (edge) check |
 //! | [`scene`] | parts with poses over one period, for animation and renders |
+//! | [`sdf`] | implicit solids (signed distance bounds), primitives, CSG |
+//! | [`sweep`] | sections swept along closed curves, the segment BVH |
+//! | [`mesher`] | implicit solid → closed 2-manifold mesh (marching tetrahedra, sparse blocks) |
 //!
 //! It does not know what a mechanism is: turning `mechanism.json` into parts is `build`'s
 //! job; this module gives it shapes, meshes and files.
 
 pub mod mesh;
+pub mod mesher;
 pub mod scene;
+pub mod sdf;
+pub mod sweep;
 
 pub use mesh::{Aabb, Mesh, MeshCheck};
 pub use scene::{Pose, Scene, ScenePart};

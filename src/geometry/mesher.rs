@@ -1,0 +1,537 @@
+//! From an implicit solid to a closed triangle mesh: marching tetrahedra on a sparse grid.
+//!
+//! Owns [`mesh_solid`]. The grid's cubes are cut into six tetrahedra along their main
+//! diagonal (the Kuhn triangulation, the same in every cube, so neighbouring cubes agree on
+//! their shared faces), and the surface is the zero set of the function interpolated
+//! linearly over each tetrahedron. That surface is a closed, consistently oriented
+//! 2-manifold by construction: each of its edges lies on a tetrahedron face shared by
+//! exactly two tetrahedra, the zero set on a triangle is a single segment, and no grid
+//! value is exactly zero (values are pushed off zero by [`ZERO_OFFSET`]). Faces are oriented
+//! from a table computed once on the reference cube.
+//!
+//! Only blocks of [`BLOCK`]³ cells near the surface are evaluated: a block is skipped when
+//! the value at its centre says the surface is farther than the block is wide (the
+//! function is a distance bound, `geometry::sdf`), and a block whose face has a sign change
+//! activates its neighbour, so skipping never opens a hole. It does not decide the
+//! resolution (callers pass the cell size) nor simplify the result.
+
+use std::collections::HashMap;
+use std::sync::OnceLock;
+
+use rayon::prelude::*;
+
+use super::mesh::{Aabb, Mesh};
+use super::sdf::Vec3;
+
+/// Cells per block edge. 8: blocks of 729 grid values keep per-block work well above
+/// rayon's overhead, and a block's centre test skips 512 cells at once.
+pub const BLOCK: usize = 8;
+
+/// Grid values closer to zero than this fraction of the cell size are moved to +this
+/// (outside), so no surface vertex sits on a grid point and no face degenerates; the shift
+/// (1e-3 of a cell) is far below any resolution a caller would ask for.
+pub const ZERO_OFFSET: f64 = 1e-3;
+
+/// How far beyond the block's half diagonal the centre value must be for the block to be
+/// skipped, as a factor: 1.25 leaves room for functions that are distance bounds only up
+/// to a few per cent (swept sections, blends).
+const SKIP_SAFETY: f64 = 1.25;
+
+/// Errors of meshing.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum MesherError {
+    /// The grid would be too large.
+    #[error("a {nx} × {ny} × {nz} grid at {h} mm cells is too large (at most {max} cells per axis): raise the cell size or check the part's size")]
+    GridTooLarge {
+        /// Cells along x.
+        nx: usize,
+        /// Cells along y.
+        ny: usize,
+        /// Cells along z.
+        nz: usize,
+        /// Cell size, mm.
+        h: f64,
+        /// Limit.
+        max: usize,
+    },
+    /// The function is negative on the grid's outer boundary (the bounds were too small).
+    #[error("the solid reaches the edge of its meshing box at ({x:.2}, {y:.2}, {z:.2}) mm: its bounds are wrong")]
+    OpenAtBoundary {
+        /// Where, mm.
+        x: f64,
+        /// Where, mm.
+        y: f64,
+        /// Where, mm.
+        z: f64,
+    },
+}
+
+/// Largest grid extent per axis, in cells: 2²⁰ keeps global indices within 60 bits.
+const MAX_CELLS_PER_AXIS: usize = 1 << 20;
+
+/// The six Kuhn tetrahedra of the unit cube as corner indices (bit 0 = +x, 1 = +y, 2 = +z),
+/// each a monotone path from corner 0 to corner 7.
+const TETS: [[u8; 4]; 6] = [
+    [0, 1, 3, 7],
+    [0, 1, 5, 7],
+    [0, 2, 3, 7],
+    [0, 2, 6, 7],
+    [0, 4, 5, 7],
+    [0, 4, 6, 7],
+];
+
+/// For each tetrahedron and inside-mask (bit i: tet vertex i inside), the triangles as
+/// triples of tet-local edges (a, b), oriented outward.
+type Table = Vec<Vec<[[u8; 2]; 3]>>;
+
+fn corner(c: u8) -> [f64; 3] {
+    [(c & 1) as f64, ((c >> 1) & 1) as f64, ((c >> 2) & 1) as f64]
+}
+
+fn table() -> &'static Table {
+    static T: OnceLock<Table> = OnceLock::new();
+    T.get_or_init(|| {
+        let mut out = Vec::with_capacity(6 * 16);
+        for tet in TETS {
+            for mask in 0u8..16 {
+                let inside: Vec<u8> = (0..4).filter(|i| mask >> i & 1 == 1).collect();
+                let outside: Vec<u8> = (0..4).filter(|i| mask >> i & 1 == 0).collect();
+                let mut tris: Vec<[[u8; 2]; 3]> = Vec::new();
+                match inside.len() {
+                    1 => {
+                        let a = inside[0];
+                        tris.push([[a, outside[0]], [a, outside[1]], [a, outside[2]]]);
+                    }
+                    3 => {
+                        let a = outside[0];
+                        tris.push([[inside[0], a], [inside[1], a], [inside[2], a]]);
+                    }
+                    2 => {
+                        let (a, b) = (inside[0], inside[1]);
+                        let (c, d) = (outside[0], outside[1]);
+                        tris.push([[a, c], [a, d], [b, d]]);
+                        tris.push([[a, c], [b, d], [b, c]]);
+                    }
+                    _ => {}
+                }
+                // Orient with the reference geometry: the normal points from the inside
+                // corners towards the outside ones.
+                let pos = |e: [u8; 2]| {
+                    let (p, q) = (corner(tet[e[0] as usize]), corner(tet[e[1] as usize]));
+                    Vec3::new(
+                        0.5 * (p[0] + q[0]),
+                        0.5 * (p[1] + q[1]),
+                        0.5 * (p[2] + q[2]),
+                    )
+                };
+                let mean = |set: &[u8]| {
+                    set.iter()
+                        .map(|&i| {
+                            let c = corner(tet[i as usize]);
+                            Vec3::new(c[0], c[1], c[2])
+                        })
+                        .sum::<Vec3>()
+                        / set.len().max(1) as f64
+                };
+                let dir = mean(&outside) - mean(&inside);
+                for t in &mut tris {
+                    let n = (pos(t[1]) - pos(t[0])).cross(&(pos(t[2]) - pos(t[0])));
+                    if n.dot(&dir) < 0.0 {
+                        t.swap(1, 2);
+                    }
+                }
+                out.push(tris);
+            }
+        }
+        out
+    })
+}
+
+/// The grid: origin, cell size, points per axis.
+#[derive(Clone, Copy, Debug)]
+struct Grid {
+    origin: Vec3,
+    h: f64,
+    /// Grid points per axis.
+    n: [usize; 3],
+    /// Blocks per axis.
+    nb: [usize; 3],
+}
+
+impl Grid {
+    fn point(&self, i: [usize; 3]) -> Vec3 {
+        self.origin + Vec3::new(i[0] as f64, i[1] as f64, i[2] as f64) * self.h
+    }
+    fn index(&self, i: [usize; 3]) -> u64 {
+        (i[0] + self.n[0] * (i[1] + self.n[1] * i[2])) as u64
+    }
+}
+
+/// What one block produced.
+#[derive(Default)]
+struct BlockOut {
+    /// Triangles as edge keys (grid index · 8 + direction bits).
+    tris: Vec<[u64; 3]>,
+    /// Vertex position of each edge key this block used.
+    verts: Vec<(u64, [f64; 3])>,
+    /// Faces (−x, +x, −y, +y, −z, +z) with a sign change.
+    mixed_faces: [bool; 6],
+    /// A grid point on the grid's outer boundary inside the solid, if any.
+    open_at: Option<Vec3>,
+}
+
+fn process_block(f: &(dyn Fn(Vec3) -> f64 + Sync), g: &Grid, b: [usize; 3]) -> BlockOut {
+    let m = BLOCK + 1;
+    let base = [b[0] * BLOCK, b[1] * BLOCK, b[2] * BLOCK];
+    let ext = [
+        (g.n[0] - 1 - base[0]).min(BLOCK),
+        (g.n[1] - 1 - base[1]).min(BLOCK),
+        (g.n[2] - 1 - base[2]).min(BLOCK),
+    ];
+    let delta = ZERO_OFFSET * g.h;
+    let mut vals = vec![0.0f64; m * m * m];
+    let at = |i: usize, j: usize, k: usize| i + m * (j + m * k);
+    for k in 0..=ext[2] {
+        for j in 0..=ext[1] {
+            for i in 0..=ext[0] {
+                let v = f(g.point([base[0] + i, base[1] + j, base[2] + k]));
+                vals[at(i, j, k)] = if v.abs() < delta || v.is_nan() {
+                    delta
+                } else {
+                    v
+                };
+            }
+        }
+    }
+    let mut out = BlockOut::default();
+    // Sign changes on each face of the block.
+    for (face, (axis, side)) in [(0, 0), (0, 1), (1, 0), (1, 1), (2, 0), (2, 1)]
+        .into_iter()
+        .enumerate()
+    {
+        let fixed = if side == 0 { 0 } else { ext[axis] };
+        let (a1, a2) = ((axis + 1) % 3, (axis + 2) % 3);
+        let on_grid_boundary = base[axis] + fixed == 0 || base[axis] + fixed == g.n[axis] - 1;
+        let (mut neg, mut pos) = (false, false);
+        for p in 0..=ext[a1] {
+            for q in 0..=ext[a2] {
+                let mut idx = [0; 3];
+                idx[axis] = fixed;
+                idx[a1] = p;
+                idx[a2] = q;
+                if vals[at(idx[0], idx[1], idx[2])] < 0.0 {
+                    neg = true;
+                    if on_grid_boundary && out.open_at.is_none() {
+                        out.open_at =
+                            Some(g.point([base[0] + idx[0], base[1] + idx[1], base[2] + idx[2]]));
+                    }
+                } else {
+                    pos = true;
+                }
+            }
+        }
+        out.mixed_faces[face] = neg && pos;
+    }
+    let table = table();
+    let mut seen: HashMap<u64, ()> = HashMap::new();
+    for k in 0..ext[2] {
+        for j in 0..ext[1] {
+            for i in 0..ext[0] {
+                let cv: [f64; 8] = std::array::from_fn(|c| {
+                    vals[at(i + (c & 1), j + (c >> 1 & 1), k + (c >> 2 & 1))]
+                });
+                let all_in = cv.iter().all(|&v| v < 0.0);
+                let all_out = cv.iter().all(|&v| v >= 0.0);
+                if all_in || all_out {
+                    continue;
+                }
+                let gi = [base[0] + i, base[1] + j, base[2] + k];
+                for (ti, tet) in TETS.iter().enumerate() {
+                    let mut mask = 0usize;
+                    for (l, &c) in tet.iter().enumerate() {
+                        if cv[c as usize] < 0.0 {
+                            mask |= 1 << l;
+                        }
+                    }
+                    for tri in &table[ti * 16 + mask] {
+                        let mut keys = [0u64; 3];
+                        for (slot, e) in tri.iter().enumerate() {
+                            let (c0, c1) = (tet[e[0] as usize], tet[e[1] as usize]);
+                            // Kuhn edges join a corner to one with a superset of its bits.
+                            let (lo, hi) = if c0 & c1 == c0 { (c0, c1) } else { (c1, c0) };
+                            let p0 = [
+                                gi[0] + (lo & 1) as usize,
+                                gi[1] + (lo >> 1 & 1) as usize,
+                                gi[2] + (lo >> 2 & 1) as usize,
+                            ];
+                            let key = g.index(p0) * 8 + (lo ^ hi) as u64;
+                            keys[slot] = key;
+                            if seen.insert(key, ()).is_none() {
+                                let (v0, v1) = (cv[lo as usize], cv[hi as usize]);
+                                let s = v0 / (v0 - v1);
+                                let a = g.point(p0);
+                                let d = Vec3::new(
+                                    ((lo ^ hi) & 1) as f64,
+                                    ((lo ^ hi) >> 1 & 1) as f64,
+                                    ((lo ^ hi) >> 2 & 1) as f64,
+                                ) * g.h;
+                                let q = a + d * s;
+                                out.verts.push((key, [q.x, q.y, q.z]));
+                            }
+                        }
+                        out.tris.push(keys);
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Mesh the solid `f < 0` inside `bounds` with cells of `h` mm. `f` must be a signed
+/// distance bound (`geometry::sdf`) and positive outside `bounds`.
+pub fn mesh_solid(
+    f: &(dyn Fn(Vec3) -> f64 + Sync),
+    bounds: Aabb,
+    h: f64,
+) -> Result<Mesh, MesherError> {
+    // Two cells of margin so the outermost grid points are outside the solid.
+    let b = bounds.inflate(2.0 * h);
+    let size = b.size();
+    let cells = [
+        (size[0] / h).ceil() as usize + 1,
+        (size[1] / h).ceil() as usize + 1,
+        (size[2] / h).ceil() as usize + 1,
+    ];
+    if cells.iter().any(|&c| c > MAX_CELLS_PER_AXIS) {
+        return Err(MesherError::GridTooLarge {
+            nx: cells[0],
+            ny: cells[1],
+            nz: cells[2],
+            h,
+            max: MAX_CELLS_PER_AXIS,
+        });
+    }
+    let g = Grid {
+        origin: Vec3::new(b.min[0], b.min[1], b.min[2]),
+        h,
+        n: [cells[0] + 1, cells[1] + 1, cells[2] + 1],
+        nb: [
+            cells[0].div_ceil(BLOCK),
+            cells[1].div_ceil(BLOCK),
+            cells[2].div_ceil(BLOCK),
+        ],
+    };
+    let nblocks = g.nb[0] * g.nb[1] * g.nb[2];
+    let unflat = |i: usize| {
+        [
+            i % g.nb[0],
+            (i / g.nb[0]) % g.nb[1],
+            i / (g.nb[0] * g.nb[1]),
+        ]
+    };
+    let half_diag = 0.5 * (BLOCK as f64) * h * 3f64.sqrt();
+    let mut wave: Vec<usize> = (0..nblocks)
+        .into_par_iter()
+        .filter(|&i| {
+            let bi = unflat(i);
+            let c = g.point([
+                bi[0] * BLOCK + BLOCK / 2,
+                bi[1] * BLOCK + BLOCK / 2,
+                bi[2] * BLOCK + BLOCK / 2,
+            ]);
+            f(c).abs() <= SKIP_SAFETY * half_diag + h
+        })
+        .collect();
+    let mut done = vec![false; nblocks];
+    let mut outs: Vec<BlockOut> = Vec::new();
+    while !wave.is_empty() {
+        for &i in &wave {
+            done[i] = true;
+        }
+        let results: Vec<(usize, BlockOut)> = wave
+            .par_iter()
+            .map(|&i| (i, process_block(f, &g, unflat(i))))
+            .collect();
+        let mut next = Vec::new();
+        for (i, r) in results {
+            let bi = unflat(i);
+            for (face, &mixed) in r.mixed_faces.iter().enumerate() {
+                if !mixed {
+                    continue;
+                }
+                let axis = face / 2;
+                let mut nbi = bi;
+                if face % 2 == 0 {
+                    if bi[axis] == 0 {
+                        continue;
+                    }
+                    nbi[axis] -= 1;
+                } else {
+                    nbi[axis] += 1;
+                    if nbi[axis] >= g.nb[axis] {
+                        continue;
+                    }
+                }
+                let j = nbi[0] + g.nb[0] * (nbi[1] + g.nb[1] * nbi[2]);
+                if !done[j] {
+                    done[j] = true;
+                    next.push(j);
+                }
+            }
+            outs.push(r);
+        }
+        // `done` marks queued blocks too, so a block is processed once.
+        wave = next;
+    }
+    // The grid's outer boundary must be outside the solid, or the mesh would be open there.
+    if let Some(p) = outs.iter().find_map(|o| o.open_at) {
+        return Err(MesherError::OpenAtBoundary {
+            x: p.x,
+            y: p.y,
+            z: p.z,
+        });
+    }
+    // Weld: one vertex per edge key.
+    let total_verts: usize = outs.iter().map(|o| o.verts.len()).sum();
+    let mut index: HashMap<u64, u32> = HashMap::with_capacity(total_verts);
+    let mut mesh = Mesh::default();
+    for o in &outs {
+        for &(key, p) in &o.verts {
+            index.entry(key).or_insert_with(|| {
+                mesh.vertices.push(p);
+                (mesh.vertices.len() - 1) as u32
+            });
+        }
+    }
+    mesh.triangles
+        .reserve(outs.iter().map(|o| o.tris.len()).sum());
+    for o in &outs {
+        for t in &o.tris {
+            mesh.triangles
+                .push([index[&t[0]], index[&t[1]], index[&t[2]]]);
+        }
+    }
+    Ok(mesh)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::sdf::{Cuboid, Cylinder, Difference, Sdf, Sphere};
+    use crate::geometry::sweep::{Frame, Section, Sweep};
+
+    /// Every sign pattern of every tetrahedron gives outward faces: checked by the meshes
+    /// below having positive volume and no misoriented edge; here, that the table has the
+    /// expected number of triangles per case.
+    #[test]
+    fn table_counts() {
+        let t = table();
+        for ti in 0..6 {
+            for mask in 0..16usize {
+                let n = t[ti * 16 + mask].len();
+                let inside = mask.count_ones();
+                let want = match inside {
+                    0 | 4 => 0,
+                    2 => 2,
+                    _ => 1,
+                };
+                assert_eq!(n, want, "tet {ti} mask {mask:04b}");
+            }
+        }
+    }
+
+    /// A sphere meshes to one closed 2-manifold shell whose volume is within 1 % of
+    /// 4/3 πr³, and whose vertices lie on the sphere within the interpolation error.
+    #[test]
+    fn sphere_is_watertight_with_the_right_volume() {
+        let s = Sphere {
+            center: Vec3::new(0.3, -0.2, 0.1),
+            radius: 5.0,
+        };
+        let m = mesh_solid(&|p| s.dist(p), s.bounds(), 0.4).unwrap();
+        let c = m.check();
+        assert!(c.is_closed_manifold(), "{}", c.summary());
+        assert_eq!(c.shells, 1);
+        let want = 4.0 / 3.0 * std::f64::consts::PI * 125.0;
+        assert!(
+            (c.volume_mm3 / want - 1.0).abs() < 0.01,
+            "{} vs {want}",
+            c.volume_mm3
+        );
+        let worst = m
+            .vertices
+            .iter()
+            .map(|v| s.dist(Vec3::new(v[0], v[1], v[2])).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 0.02, "vertex off the sphere by {worst}");
+    }
+
+    /// A box with a through hole (genus 1, sharp edges) is still a closed manifold, with
+    /// the expected volume within the edge-rounding error.
+    #[test]
+    fn box_with_hole_is_watertight() {
+        let d = Difference::new(
+            Box::new(Cuboid::aligned(
+                Vec3::new(-10.0, -10.0, -3.0),
+                Vec3::new(10.0, 10.0, 3.0),
+            )),
+            vec![Box::new(Cylinder::z(0.0, 0.0, -5.0, 5.0, 4.0))],
+        );
+        let m = mesh_solid(&|p| d.dist(p), d.bounds(), 0.5).unwrap();
+        let c = m.check();
+        assert!(c.is_closed_manifold(), "{}", c.summary());
+        let want = 20.0 * 20.0 * 6.0 - std::f64::consts::PI * 16.0 * 6.0;
+        assert!(
+            (c.volume_mm3 / want - 1.0).abs() < 0.01,
+            "{} vs {want}",
+            c.volume_mm3
+        );
+    }
+
+    /// The sweep of a simple closed curve (a circle carrying a half-ellipse section) is
+    /// watertight and has the volume Pappus's theorem gives: section area × path length of
+    /// its centroid.
+    #[test]
+    fn sweep_of_a_circle_has_pappus_volume() {
+        let (big, a, b) = (15.0, 3.0, 1.5);
+        let n = 1000;
+        let frames: Vec<Frame> = (0..n)
+            .map(|i| {
+                let t = i as f64 / n as f64 * std::f64::consts::TAU;
+                Frame {
+                    o: Vec3::new(big * t.cos(), big * t.sin(), 0.0),
+                    u: Vec3::new(t.cos(), t.sin(), 0.0),
+                }
+            })
+            .collect();
+        let s = Sweep::new(frames, Section::HalfEllipse { a, b });
+        let m = mesh_solid(&|p| s.dist(p), s.bounds(), 0.25).unwrap();
+        let c = m.check();
+        assert!(c.is_closed_manifold(), "{}", c.summary());
+        // Half ellipse: area πab/2, centroid 4a/(3π) from the flat side, i.e. at radius
+        // R − a + 4a/(3π) from the axis (the apex is at R, the flat side at R − a).
+        let area = std::f64::consts::PI * a * b / 2.0;
+        let rc = big - a + 4.0 * a / (3.0 * std::f64::consts::PI);
+        let want = area * std::f64::consts::TAU * rc;
+        assert!(
+            (c.volume_mm3 / want - 1.0).abs() < 0.01,
+            "{} vs {want}",
+            c.volume_mm3
+        );
+    }
+
+    /// A solid that the bounds cut is an error, not an open mesh.
+    #[test]
+    fn solid_beyond_its_bounds_is_an_error() {
+        let s = Sphere {
+            center: Vec3::zeros(),
+            radius: 5.0,
+        };
+        let small = Aabb::new([-2.0; 3], [2.0; 3]);
+        assert!(matches!(
+            mesh_solid(&|p| s.dist(p), small, 0.5),
+            Err(MesherError::OpenAtBoundary { .. })
+        ));
+    }
+}
