@@ -71,8 +71,8 @@ impl Aabb {
     /// Euclidean distance from `p` to the box, 0 inside.
     pub fn distance(&self, p: [f64; 3]) -> f64 {
         let mut s = 0.0;
-        for k in 0..3 {
-            let d = (self.min[k] - p[k]).max(p[k] - self.max[k]).max(0.0);
+        for (k, &x) in p.iter().enumerate() {
+            let d = (self.min[k] - x).max(x - self.max[k]).max(0.0);
             s += d * d;
         }
         s.sqrt()
