@@ -20,6 +20,8 @@
 //! - [`rig`]: bench configuration, serial links, backends, simulated devices, sessions and
 //!   recordings.
 //! - [`analysis`]: measured versus target poses, metrics, timing ratios, reports.
+//! - [`build`]: printable parts from a mechanism (rims, carved driver, struts, support),
+//!   their checks over the period.
 //! - [`geometry`]: triangle meshes in mm, the watertightness check, scenes of moving parts.
 //! - [`plot`]: PNG/SVG charts with an embedded font, shared by every report.
 //! - [`cli`]: one file per subcommand; calls into the modules above.
@@ -27,6 +29,7 @@
 //! Frames, classes, closure and the `mechanism.json` format follow `docs/conventions.md`.
 
 pub mod analysis;
+pub mod build;
 pub mod cli;
 pub mod geometry;
 pub mod motion;

@@ -9,6 +9,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 pub mod analyze;
+pub mod build;
 pub mod demo;
 pub mod measure;
 pub mod motion;
@@ -36,6 +37,8 @@ pub enum Command {
     /// Compare a recording with its target law and write the report (plots, report.md,
     /// report.html, summary.json).
     Analyze(analyze::AnalyzeArgs),
+    /// Printable parts from a mechanism: STL, 3MF and an animated GLB, with their checks.
+    Build(build::BuildArgs),
     /// The main job on a simulated bench: synthesize the example, measure it, report.
     Demo(demo::DemoArgs),
     /// Check, plot and sample motion specifications.
@@ -75,6 +78,7 @@ pub fn init_logging(verbose: u8, quiet: bool) {
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {
         Command::Analyze(args) => analyze::run(args),
+        Command::Build(args) => build::run(args),
         Command::Demo(args) => demo::run(args),
         Command::Motion(args) => motion::run(args),
         Command::Ports(args) => ports::run(args),

@@ -286,6 +286,79 @@ impl Mesh {
         );
     }
 
+    /// The mesh split into its connected pieces (shells), each with its own vertices.
+    pub fn shells(&self) -> Vec<Mesh> {
+        let nv = self.vertices.len();
+        let mut parent: Vec<usize> = (0..nv).collect();
+        fn find(p: &mut [usize], mut i: usize) -> usize {
+            while p[i] != i {
+                p[i] = p[p[i]];
+                i = p[i];
+            }
+            i
+        }
+        for t in &self.triangles {
+            for (a, b) in [(t[0], t[1]), (t[1], t[2])] {
+                let (ra, rb) = (find(&mut parent, a as usize), find(&mut parent, b as usize));
+                parent[ra] = rb;
+            }
+        }
+        let mut shell_of_root: HashMap<usize, usize> = HashMap::new();
+        let mut out: Vec<Mesh> = Vec::new();
+        let mut remap: Vec<u32> = vec![u32::MAX; nv];
+        for t in &self.triangles {
+            let root = find(&mut parent, t[0] as usize);
+            let s = *shell_of_root.entry(root).or_insert_with(|| {
+                out.push(Mesh::default());
+                out.len() - 1
+            });
+            let m = &mut out[s];
+            let mut tri = [0u32; 3];
+            for (k, &v) in t.iter().enumerate() {
+                if remap[v as usize] == u32::MAX {
+                    m.vertices.push(self.vertices[v as usize]);
+                    remap[v as usize] = (m.vertices.len() - 1) as u32;
+                }
+                tri[k] = remap[v as usize];
+            }
+            m.triangles.push(tri);
+        }
+        out
+    }
+
+    /// Whether `p` lies inside this closed mesh: the parity of crossings of a ray from `p`
+    /// (in a fixed direction off every axis, so it misses edges and vertices in practice).
+    pub fn contains(&self, p: [f64; 3]) -> bool {
+        let d = [0.577_215_664_9, 0.312_829_455_4, 0.754_877_666_2];
+        let mut crossings = 0usize;
+        for i in 0..self.triangles.len() {
+            let [a, b, c] = self.corners(i);
+            // Möller–Trumbore.
+            let e1 = sub(b, a);
+            let e2 = sub(c, a);
+            let h = cross(d, e2);
+            let det = dot(e1, h);
+            if det.abs() < 1e-14 {
+                continue;
+            }
+            let f = 1.0 / det;
+            let s = sub(p, a);
+            let u = f * dot(s, h);
+            if !(0.0..=1.0).contains(&u) {
+                continue;
+            }
+            let q = cross(s, e1);
+            let v = f * dot(d, q);
+            if v < 0.0 || u + v > 1.0 {
+                continue;
+            }
+            if f * dot(e2, q) > 0.0 {
+                crossings += 1;
+            }
+        }
+        crossings % 2 == 1
+    }
+
     /// The edge check: see the module doc and [`MeshCheck`].
     pub fn check(&self) -> MeshCheck {
         let nv = self.vertices.len();
@@ -538,6 +611,11 @@ pub(crate) mod tests {
         assert!(c.is_closed_manifold());
         assert_eq!(c.shells, 2);
         assert_eq!(c.summary(), "closed 2-manifold, 2 shells");
+        let parts = two.shells();
+        assert_eq!(parts.len(), 2);
+        assert!(parts.iter().all(|m| m.check().is_closed_manifold()));
+        assert!(two.contains([3.5, 0.5, 0.5]) && two.contains([0.5, 0.5, 0.5]));
+        assert!(!two.contains([2.0, 0.5, 0.5]) && !two.contains([0.5, 0.5, 1.5]));
     }
 
     /// Merge vertices at identical positions (test helper).

@@ -7,6 +7,7 @@
 //! | [`scene`] | parts with poses over one period, for animation and renders |
 //! | [`sdf`] | implicit solids (signed distance bounds), primitives, CSG |
 //! | [`sweep`] | sections swept along closed curves, the segment BVH |
+//! | [`voxel`] | voxel grids, exact distance transforms, shortest free paths |
 //! | [`mesher`] | implicit solid → closed 2-manifold mesh (marching tetrahedra, sparse blocks) |
 //!
 //! It does not know what a mechanism is: turning `mechanism.json` into parts is `build`'s
@@ -17,6 +18,7 @@ pub mod mesher;
 pub mod scene;
 pub mod sdf;
 pub mod sweep;
+pub mod voxel;
 
 pub use mesh::{Aabb, Mesh, MeshCheck};
 pub use scene::{Pose, Scene, ScenePart};

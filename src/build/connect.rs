@@ -1,0 +1,225 @@
+//! Joining each part into one piece through space the other part never enters.
+//!
+//! Owns the planning of struts and posts on voxel grids of free space: the other part's
+//! (and the support's) swept volume, seen from this part's frame ([`swept_field`]), says
+//! how far each voxel is from anything that will pass there during the period; a strut of
+//! radius [`STRUT_RADIUS_MM`] may run where that clearance is at least its radius plus
+//! [`STRUT_MARGIN_MM`]. Plates (follower) and bands (driver) are joined one by one, nearest
+//! first, to what is already joined, starting from the hub, by the cheapest path (A*,
+//! `geometry::voxel`) straightened into a few segments, the paper's "thickened polyline"
+//! (§5.3) found by search instead of by hand. For 3R it also plans the support's post to
+//! the ball's cup, and places the IMU pad and end-effector where the driver never passes.
+//! It does not shape the final parts (`parts`).
+
+use crate::geometry::mesh::Aabb;
+use crate::geometry::sdf::{arr, Sdf, ThickPolyline, Vec3};
+use crate::geometry::voxel::{shortest_path, DistanceField, PathQuery, VoxelGrid};
+
+use super::dims::*;
+use super::kinematics::Kinematics;
+use super::swept::{swept_bounds, swept_field, Balls, Frame};
+use super::BuildError;
+
+/// Extra room around a part's material in its planning grid, mm.
+const GRID_MARGIN_MM: f64 = 25.0;
+/// Samples per period for grid bounds.
+const BOUNDS_SAMPLES: usize = 360;
+/// Clearance at which a path step costs no more than its length: twice the minimum.
+const COMFORT_FACTOR: f64 = 2.0;
+
+/// A planning grid around `bodies` seen from `frame` (static bodies of that frame only).
+pub fn grid_around(kin: &Kinematics, bodies: &[&Balls], frame: Frame) -> VoxelGrid {
+    let mut b = Aabb::EMPTY;
+    for body in bodies {
+        if body.frame == frame {
+            b = b.union(&swept_bounds(kin, body, frame, BOUNDS_SAMPLES));
+        }
+    }
+    VoxelGrid::covering(b.inflate(GRID_MARGIN_MM), PLAN_VOXEL_MM)
+}
+
+/// Clearance field in `frame` from the union of `obstacles` (any frames) over the period.
+pub fn clearance(
+    kin: &Kinematics,
+    obstacles: &[Balls],
+    frame: Frame,
+    grid: VoxelGrid,
+) -> DistanceField {
+    swept_field(kin, obstacles, frame, grid)
+}
+
+/// What is joined so far: a boolean per voxel.
+pub struct Joined {
+    grid: VoxelGrid,
+    set: Vec<bool>,
+}
+
+impl Joined {
+    /// Nothing joined.
+    pub fn new(grid: VoxelGrid) -> Joined {
+        Joined {
+            grid,
+            set: vec![false; grid.len()],
+        }
+    }
+
+    /// Mark the voxels within `radius` of `centers`.
+    pub fn mark_balls(&mut self, centers: &[Vec3], radius: f64) {
+        let g = self.grid;
+        let r = (radius / g.h).ceil() as i64;
+        for c in centers {
+            let Some(v) = g.voxel_of(*c).or_else(|| nearest_inside(&g, *c)) else {
+                continue;
+            };
+            for dk in -r..=r {
+                for dj in -r..=r {
+                    for di in -r..=r {
+                        let w = [v[0] as i64 + di, v[1] as i64 + dj, v[2] as i64 + dk];
+                        if (0..3).any(|k| w[k] < 0 || w[k] >= g.n[k] as i64) {
+                            continue;
+                        }
+                        let w = [w[0] as usize, w[1] as usize, w[2] as usize];
+                        if (g.center(w) - c).norm() <= radius {
+                            self.set[g.index(w)] = true;
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Mark a solid's voxels (centre inside).
+    pub fn mark_solid(&mut self, s: &dyn Sdf) {
+        let g = self.grid;
+        let b = s.bounds();
+        let lo = g.voxel_of(Vec3::new(b.min[0], b.min[1], b.min[2]));
+        let hi = g.voxel_of(Vec3::new(b.max[0], b.max[1], b.max[2]));
+        let (lo, hi) = match (lo, hi) {
+            (Some(l), Some(h)) => (l, h),
+            _ => ([0, 0, 0], [g.n[0] - 1, g.n[1] - 1, g.n[2] - 1]),
+        };
+        for k in lo[2]..=hi[2] {
+            for j in lo[1]..=hi[1] {
+                for i in lo[0]..=hi[0] {
+                    if s.dist(g.center([i, j, k])) <= 0.0 {
+                        self.set[g.index([i, j, k])] = true;
+                    }
+                }
+            }
+        }
+    }
+
+    /// Whether voxel `v` is joined.
+    pub fn contains(&self, v: [usize; 3]) -> bool {
+        self.set[self.grid.index(v)]
+    }
+}
+
+fn nearest_inside(g: &VoxelGrid, p: Vec3) -> Option<[usize; 3]> {
+    let q = (p - g.origin) / g.h;
+    let mut v = [0usize; 3];
+    for k in 0..3 {
+        let r = q[k].round();
+        if r < -2.0 || r > g.n[k] as f64 + 1.0 {
+            return None;
+        }
+        v[k] = (r.max(0.0) as usize).min(g.n[k] - 1);
+    }
+    Some(v)
+}
+
+/// The free voxels among `candidates` (points of the piece to join).
+fn free_sources(field: &DistanceField, candidates: &[Vec3], need: f64) -> Vec<[usize; 3]> {
+    let mut out: Vec<[usize; 3]> = candidates
+        .iter()
+        .filter_map(|p| field.grid.voxel_of(*p))
+        .filter(|v| field.at(*v) >= need)
+        .collect();
+    out.sort();
+    out.dedup();
+    out
+}
+
+/// Plan one strut from `candidates` to what is `joined`; its polyline, or an error naming
+/// `what` when no free path exists.
+pub fn strut(
+    field: &DistanceField,
+    joined: &Joined,
+    candidates: &[Vec3],
+    toward: Vec3,
+    what: &str,
+) -> Result<ThickPolyline, BuildError> {
+    let need = STRUT_RADIUS_MM + STRUT_MARGIN_MM;
+    let sources = free_sources(field, candidates, need);
+    if sources.is_empty() {
+        return Err(BuildError::NoRoom {
+            what: what.to_string(),
+            detail: format!(
+                "no point of it is {need:.1} mm clear of the other part's swept volume, so no strut can start there"
+            ),
+        });
+    }
+    // The goal must be free too; the heuristic aims at the hub (it is a guide only: any
+    // joined voxel ends the search).
+    let is_goal = |v: [usize; 3]| joined.contains(v);
+    let heuristic = |p: Vec3| 0.5 * (p - toward).norm();
+    let q = PathQuery {
+        clearance: field,
+        min_clearance: need,
+        comfortable: need * COMFORT_FACTOR,
+        sources: &sources,
+        is_goal: &is_goal,
+        heuristic: &heuristic,
+    };
+    let path = shortest_path(&q).ok_or_else(|| BuildError::NoRoom {
+        what: what.to_string(),
+        detail: format!(
+            "no path {need:.1} mm clear of the other part's swept volume joins it to the rest of its part"
+        ),
+    })?;
+    Ok(ThickPolyline {
+        points: path,
+        radius: STRUT_RADIUS_MM,
+    })
+}
+
+/// Points along a polyline, every `step` mm, for covers and marking.
+pub fn polyline_points(p: &ThickPolyline, step: f64) -> Vec<Vec3> {
+    let mut out = vec![p.points[0]];
+    for w in p.points.windows(2) {
+        let n = ((w[1] - w[0]).norm() / step).ceil().max(1.0) as usize;
+        for i in 1..=n {
+            out.push(w[0] + (w[1] - w[0]) * (i as f64 / n as f64));
+        }
+    }
+    out
+}
+
+/// A ball cover of a strut.
+pub fn strut_cover(p: &ThickPolyline, frame: Frame) -> Balls {
+    Balls {
+        frame,
+        centers: polyline_points(p, 0.5 * p.radius),
+        radius: p.radius * 1.05,
+    }
+}
+
+/// The first free spot along `dir` from the origin, at least `from` mm out, whose
+/// clearance is at least `need`: where a pad of that radius fits.
+pub fn free_spot(field: &DistanceField, dir: Vec3, from: f64, to: f64, need: f64) -> Option<Vec3> {
+    let d = dir.normalize();
+    let mut s = from;
+    while s <= to {
+        let p = d * s;
+        if field.sample(p) >= need {
+            return Some(p);
+        }
+        s += 0.5 * field.grid.h;
+    }
+    None
+}
+
+/// Convert a list of points into `[f64; 3]` (for reports).
+pub fn points_mm(p: &[Vec3]) -> Vec<[f64; 3]> {
+    p.iter().map(|v| arr(*v)).collect()
+}

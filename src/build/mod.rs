@@ -1,0 +1,347 @@
+//! Printable parts from a mechanism: `mpc-rig build` (paper §5.3, and the bench hardware the
+//! paper never had).
+//!
+//! ```text
+//! mechanism.json ─► kinematics (law in mm) ─► shapes: rims + webs (follower), bands (driver)
+//!                                              layout: hubs, joint, coupling, sensors, support
+//!                                              connect: struts/posts through free space
+//!                        parts: follower = rims ∪ webs ∪ struts ∪ hub … (shrunk c/2)
+//!                               driver   = (bands ∪ struts ∪ hub) − sweep(rims ⊕ c/2) − bores
+//!                               support  = base ∪ bosses ∪ pillar/arm or post/cup − holes
+//!                        ─► mesher (closed 2-manifolds) ─► check (edges, interference, gaps)
+//!                        ─► files (STL, 3MF, GLB), renders, build.json / build.md
+//! ```
+//!
+//! | module | owns |
+//! |---|---|
+//! | [`dims`] | every dimension with its reason |
+//! | [`bench`] | which motor coupling and follower sensors, from a rig |
+//! | [`kinematics`] | the parts' relative motion in mm, speed bounds |
+//! | [`swept`] | coarse swept-volume fields and the exact swept distance |
+//! | [`shapes`] | rims, webs, bands from the curve pairs |
+//! | [`layout`] | hubs, joint, couplings, sensor features, support, by rule |
+//! | [`connect`] | struts and posts planned through free space |
+//! | [`parts`] | the design and the three solids |
+//! | [`check`] | interference and contact gaps over the period, mesh error |
+//!
+//! It does not synthesize (`synth`), and knows meshes only through `geometry`.
+
+pub mod bench;
+pub mod check;
+pub mod connect;
+pub mod dims;
+pub mod kinematics;
+pub mod layout;
+pub mod parts;
+pub mod shapes;
+pub mod swept;
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use crate::geometry::mesh::Mesh;
+use crate::geometry::mesher::{mesh_solid, MesherError};
+use crate::geometry::sdf::{Sdf, Vec3};
+use crate::synth::closure::Class;
+use crate::synth::mechanism::Mechanism;
+
+pub use bench::Bench;
+pub use check::CheckFigures;
+
+/// What can stop a build.
+#[derive(Debug, thiserror::Error)]
+pub enum BuildError {
+    /// An option is out of range.
+    #[error("{option}: {message}")]
+    BadOption {
+        /// The option, as the user typed it.
+        option: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// The mechanism's follower law could not be rebuilt.
+    #[error("the mechanism's follower_motion: {0}")]
+    Motion(String),
+    /// The rig cannot measure this class of mechanism.
+    #[error("rig {rig:?} cannot measure a {class:?} mechanism: it has no {missing}")]
+    RigCannotMeasure {
+        /// Rig name.
+        rig: String,
+        /// Class.
+        class: Class,
+        /// What is missing.
+        missing: String,
+    },
+    /// No room for a connection.
+    #[error("cannot join {what}: {detail}")]
+    NoRoom {
+        /// What could not be joined.
+        what: String,
+        /// Why.
+        detail: String,
+    },
+    /// Meshing failed.
+    #[error("meshing the {part}: {source}")]
+    Mesh {
+        /// Part.
+        part: &'static str,
+        /// Cause.
+        #[source]
+        source: MesherError,
+    },
+    /// A mesh is not a closed 2-manifold (a bug: the mesher guarantees it).
+    #[error("the {part} mesh is not printable: {summary}")]
+    NotManifold {
+        /// Part.
+        part: &'static str,
+        /// What the edge check found.
+        summary: String,
+    },
+    /// A part came out in several pieces.
+    #[error("the {part} is in {pieces} separate pieces: {detail}")]
+    Disconnected {
+        /// Part.
+        part: &'static str,
+        /// Pieces that carry contact surfaces.
+        pieces: usize,
+        /// Which.
+        detail: String,
+    },
+    /// The built parts collide or lose their design contacts.
+    #[error("the built parts fail the interference check: {0}")]
+    Interference(String),
+}
+
+/// Options of a build.
+#[derive(Clone, Debug)]
+pub struct BuildOptions {
+    /// mm per model unit (the file's `scale_mm` when `None`).
+    pub scale_mm: Option<f64>,
+    /// Print clearance, mm.
+    pub clearance_mm: f64,
+    /// Mesher cell, mm.
+    pub cell_mm: f64,
+    /// The bench the parts are for.
+    pub bench: Option<Bench>,
+    /// Leave curve pair k (0-based) out: an experiment whose parts need not close.
+    pub without_pair: Option<usize>,
+    /// Skip the interference check's failure (still measured and reported): for
+    /// experiments such as `without_pair`.
+    pub allow_interference: bool,
+}
+
+impl Default for BuildOptions {
+    fn default() -> Self {
+        BuildOptions {
+            scale_mm: None,
+            clearance_mm: dims::DEFAULT_CLEARANCE_MM,
+            cell_mm: dims::DEFAULT_CELL_MM,
+            bench: None,
+            without_pair: None,
+            allow_interference: false,
+        }
+    }
+}
+
+/// Range of the clearance option, mm: below 0 is meaningless; above 2 mm the parts rattle
+/// far beyond any fit a printer needs.
+pub const CLEARANCE_RANGE_MM: (f64, f64) = (0.0, 2.0);
+/// Range of the mesher cell, mm: 0.1 mm is already finer than any nozzle; above 1 mm the
+/// 0.85 mm apex radius of the rims is lost.
+pub const CELL_RANGE_MM: (f64, f64) = (0.1, 1.0);
+/// Range of the scale, mm per model unit: below 4 the rims and bands (mm-sized) no longer
+/// fit between the 0.5-unit gaps of the bands; above 40 the parts outgrow desktop printers.
+pub const SCALE_RANGE_MM: (f64, f64) = (4.0, 40.0);
+
+/// One printed part.
+#[derive(Clone, Debug)]
+pub struct Part {
+    /// "driver", "follower", "support".
+    pub name: &'static str,
+    /// The mesh in the part's own frame, mm.
+    pub mesh: Mesh,
+    /// Loose fragments dropped (pieces of web cut off by the driver's sweep), with their
+    /// volume in mm³.
+    pub dropped: Vec<f64>,
+    /// Seconds spent meshing it.
+    pub seconds: f64,
+}
+
+/// A finished build.
+pub struct Built {
+    /// The design (for simulation and reports).
+    pub design: parts::Design,
+    /// Driver, follower, support.
+    pub parts: Vec<Part>,
+    /// Interference and gap figures.
+    pub figures: CheckFigures,
+    /// Seconds per stage.
+    pub timings: Vec<(String, f64)>,
+}
+
+fn in_range(option: &str, v: f64, r: (f64, f64)) -> Result<(), BuildError> {
+    if v.is_finite() && v >= r.0 && v <= r.1 {
+        Ok(())
+    } else {
+        Err(BuildError::BadOption {
+            option: option.into(),
+            message: format!("{v} is outside {}–{}", r.0, r.1),
+        })
+    }
+}
+
+/// Build the parts of `mech`.
+pub fn build(
+    mech: &Mechanism,
+    opts: &BuildOptions,
+    progress: &dyn Fn(&str),
+) -> Result<Built, BuildError> {
+    let scale = opts.scale_mm.unwrap_or(mech.scale_mm);
+    in_range("--scale-mm", scale, SCALE_RANGE_MM)?;
+    in_range("--clearance", opts.clearance_mm, CLEARANCE_RANGE_MM)?;
+    in_range("cell size", opts.cell_mm, CELL_RANGE_MM)?;
+    if let Some(k) = opts.without_pair {
+        if k >= mech.curve_pairs.len() {
+            return Err(BuildError::BadOption {
+                option: "--without-pair".into(),
+                message: format!(
+                    "pair {} does not exist (the mechanism has {})",
+                    k + 1,
+                    mech.curve_pairs.len()
+                ),
+            });
+        }
+    }
+    let mut timings = Vec::new();
+    let t0 = Instant::now();
+    let kin = Arc::new(kinematics::Kinematics::new(mech, scale)?);
+    let bench = opts
+        .bench
+        .clone()
+        .unwrap_or_else(|| Bench::default_for(mech.class));
+    let design = parts::design(mech, kin, &bench, opts, progress)?;
+    timings.push(("design".to_string(), t0.elapsed().as_secs_f64()));
+
+    let mut out = Vec::new();
+    {
+        progress("meshing the follower");
+        let f = design.follower_solid();
+        let apexes: Vec<Vec3> = design
+            .rims
+            .iter()
+            .flat_map(|r| {
+                r.frames()
+                    .iter()
+                    .step_by(10)
+                    .map(|fr| fr.o - fr.u * (0.5 * dims::RIM_DEPTH_MM))
+            })
+            .collect();
+        out.push(mesh_part("follower", &f, &apexes, opts.cell_mm)?);
+    }
+    {
+        progress("carving and meshing the driver");
+        let d = design.driver_solid();
+        let anchors: Vec<Vec3> = design
+            .bands
+            .iter()
+            .flat_map(|b| {
+                b.frames()
+                    .iter()
+                    .step_by(10)
+                    .map(|fr| fr.o - fr.u * (0.5 * dims::BAND_DEPTH_MM))
+            })
+            .collect();
+        out.push(mesh_part("driver", &d, &anchors, opts.cell_mm)?);
+    }
+    {
+        progress("meshing the support");
+        let s = design.support_solid();
+        out.push(mesh_part("support", &s, &[], opts.cell_mm)?);
+    }
+    // Order: driver, follower, support.
+    out.swap(0, 1);
+    for p in &out {
+        timings.push((format!("mesh {}", p.name), p.seconds));
+    }
+    progress("checking interference over the period");
+    let t1 = Instant::now();
+    let figures = check::run(&design, mech, &out[0].mesh, &out[1].mesh, &out[2].mesh);
+    timings.push(("check".to_string(), t1.elapsed().as_secs_f64()));
+    if !opts.allow_interference {
+        if let Some(msg) = figures.failure() {
+            return Err(BuildError::Interference(msg));
+        }
+    }
+    Ok(Built {
+        design,
+        parts: out,
+        figures,
+        timings,
+    })
+}
+
+/// Mesh one part, check it, and drop loose fragments that hold none of the `anchors` (the
+/// part's functional points); more than one piece holding anchors is an error.
+fn mesh_part(
+    name: &'static str,
+    solid: &dyn Sdf,
+    anchors: &[Vec3],
+    cell: f64,
+) -> Result<Part, BuildError> {
+    let t = Instant::now();
+    let f = |p: Vec3| solid.dist(p);
+    let mesh = mesh_solid(&f, solid.bounds(), cell)
+        .map_err(|source| BuildError::Mesh { part: name, source })?;
+    let check = mesh.check();
+    if !check.is_closed_manifold() {
+        return Err(BuildError::NotManifold {
+            part: name,
+            summary: check.summary(),
+        });
+    }
+    let mut shells = mesh.shells();
+    let mut dropped = Vec::new();
+    if shells.len() > 1 {
+        shells.sort_by(|a, b| b.volume().total_cmp(&a.volume()));
+        let holds = |m: &Mesh| {
+            if anchors.is_empty() {
+                return false;
+            }
+            anchors.iter().any(|a| m.contains([a.x, a.y, a.z]))
+        };
+        let mut kept = Vec::new();
+        for (i, s) in shells.into_iter().enumerate() {
+            if i == 0 || holds(&s) {
+                kept.push(s);
+            } else {
+                dropped.push(s.volume());
+            }
+        }
+        if kept.len() > 1 {
+            return Err(BuildError::Disconnected {
+                part: name,
+                pieces: kept.len(),
+                detail: format!(
+                    "volumes {} mm³",
+                    kept.iter()
+                        .map(|m| format!("{:.0}", m.volume()))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            });
+        }
+        let mesh = kept.pop().expect("the largest shell is kept");
+        return Ok(Part {
+            name,
+            mesh,
+            dropped,
+            seconds: t.elapsed().as_secs_f64(),
+        });
+    }
+    Ok(Part {
+        name,
+        mesh,
+        dropped,
+        seconds: t.elapsed().as_secs_f64(),
+    })
+}

@@ -1,0 +1,638 @@
+//! The three printed parts as solids: the design step that joins shapes, layout and plans.
+//!
+//! Owns [`Design`] and its construction, in this order (each step plans against what the
+//! earlier ones fixed):
+//! 1. rims and webs (follower) and bands (driver) from the curve pairs (`shapes`);
+//! 2. hubs, joint, couplings, sensor features and support by rule (`layout`);
+//! 3. for 3R, the support's post to the ball's cup, planned around both parts' sweeps;
+//! 4. the webs kept [`WEB_MARGIN_MM`] clear of the driver's swept bands (exactly, near
+//!    their edge) and the follower's struts, cap and pad joined through the space the
+//!    driver and support never enter;
+//! 5. the driver's struts joined through the space the whole follower never enters.
+//!
+//! Then the solids: the follower shrunk by half the clearance; the driver as bands, struts
+//! and hub minus the exact swept volume of the rims grown by half the clearance (the
+//! groove); the support. It does not mesh or check (`build`).
+
+use std::sync::Arc;
+
+use crate::geometry::mesh::Aabb;
+use crate::geometry::sdf::{
+    Cylinder, Difference, Offset, Sdf, ThickPolyline, ThickTriangles, Union, Vec3,
+};
+use crate::geometry::sweep::Sweep;
+use crate::geometry::voxel::DistanceField;
+use crate::synth::closure::Class;
+use crate::synth::mechanism::Mechanism;
+
+use super::bench::{Bench, Reading};
+use super::connect::{self, Joined};
+use super::dims::*;
+use super::kinematics::Kinematics;
+use super::layout::{cover_cylinder, Layout, Pieces};
+use super::shapes;
+use super::swept::{Balls, ExactSweep, Frame};
+use super::{BuildError, BuildOptions};
+
+/// Beyond this coarse clearance (mm) a web point is certainly clear of the driver's bands;
+/// nearer, the exact swept distance decides.
+const WEB_EXACT_BELOW_MM: f64 = WEB_MARGIN_MM + 2.5;
+/// The exact carve of the driver is computed only where its value matters: within this many
+/// cells of the surface (values beyond are capped).
+const CARVE_CAP_CELLS: f64 = 3.0;
+
+/// Everything the parts are made of, placed and planned.
+pub struct Design {
+    /// The kinematics.
+    pub kin: Arc<Kinematics>,
+    /// Placement by rule.
+    pub layout: Layout,
+    /// Follower rims (follower frame), nominal.
+    pub rims: Vec<Sweep>,
+    /// Driver bands (driver frame), nominal.
+    pub bands: Vec<Sweep>,
+    /// Follower webs before keeping them clear.
+    pub webs: Vec<Arc<ThickTriangles>>,
+    /// Follower struts.
+    pub follower_struts: Vec<ThickPolyline>,
+    /// Driver struts.
+    pub driver_struts: Vec<ThickPolyline>,
+    /// Follower features by rule plus planned ones (pad, end-effector).
+    pub follower_pieces: Pieces,
+    /// Driver hub and coupling.
+    pub driver_pieces: Pieces,
+    /// Support by rule plus planned ones (post, cup).
+    pub support_pieces: Pieces,
+    /// Clearance from the driver's hub and the support (coarse), follower frame.
+    pub follower_other_field: Arc<DistanceField>,
+    /// Clearance from the whole driver and support (coarse), follower frame.
+    pub follower_field: Arc<DistanceField>,
+    /// Clearance from the whole follower and support (coarse), driver frame: a lower bound
+    /// of the rims' swept distance, used to skip the exact carve far from the groove.
+    pub driver_field: Arc<DistanceField>,
+    /// Cells per mm of the mesher (for the carve's cap).
+    pub cell_mm: f64,
+    /// Print clearance.
+    pub clearance: f64,
+    /// Pair left out (`--without-pair`), if any.
+    pub without_pair: Option<usize>,
+}
+
+fn boxed<S: Sdf + 'static>(s: S) -> Box<dyn Sdf> {
+    Box::new(s)
+}
+
+/// Design the parts of `mech`.
+pub fn design(
+    mech: &Mechanism,
+    kin: Arc<Kinematics>,
+    bench: &Bench,
+    opts: &BuildOptions,
+    progress: &dyn Fn(&str),
+) -> Result<Design, BuildError> {
+    let s = kin.scale_mm();
+    let pairs: Vec<(usize, &crate::synth::mechanism::CurvePair)> = mech
+        .curve_pairs
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| Some(*k) != opts.without_pair)
+        .collect();
+    let rims: Vec<Sweep> = pairs.iter().map(|(_, cp)| shapes::rim(cp, s)).collect();
+    let bands: Vec<Sweep> = pairs.iter().map(|(_, cp)| shapes::band(cp, s)).collect();
+    let webs_tris: Vec<(ThickTriangles, Vec<[Vec3; 3]>)> = rims.iter().map(shapes::web).collect();
+    let rim_covers: Vec<Balls> = rims
+        .iter()
+        .map(|r| shapes::sweep_cover(r, Frame::Follower))
+        .collect();
+    let band_covers: Vec<Balls> = bands
+        .iter()
+        .map(|b| shapes::sweep_cover(b, Frame::Driver))
+        .collect();
+    let web_full_covers: Vec<Balls> = webs_tris
+        .iter()
+        .map(|(_, t)| shapes::web_cover(t, |_| true))
+        .collect();
+
+    // 2. By rule.
+    let mut f_cover: Vec<Balls> = rim_covers.clone();
+    f_cover.extend(web_full_covers.iter().cloned());
+    let layout = Layout::new(&kin, bench, opts.clearance_mm, &f_cover, &band_covers);
+    let mut follower_pieces = layout.follower_pieces();
+    let driver_pieces = layout.driver_pieces();
+    let mut support_pieces = layout.support_pieces();
+
+    // 3. 3R: the post from the base to the ball's cup.
+    if kin.class() == Class::R3 {
+        progress("planning the post to the ball joint");
+        plan_post(
+            &kin,
+            &layout,
+            &f_cover,
+            &band_covers,
+            &driver_pieces,
+            &mut support_pieces,
+        )?;
+    }
+
+    // 4. Follower: clearance from the driver and the support.
+    progress("sweeping the driver through the follower's frame");
+    let mut obstacles: Vec<Balls> = band_covers.clone();
+    let mut others: Vec<Balls> = driver_pieces.cover.clone();
+    others.extend(support_pieces.cover.iter().cloned());
+    obstacles.extend(others.iter().cloned());
+    let mut f_bodies: Vec<&Balls> = f_cover.iter().collect();
+    f_bodies.extend(follower_pieces.cover.iter());
+    let fgrid = connect::grid_around(&kin, &f_bodies, Frame::Follower);
+    let follower_field = Arc::new(connect::clearance(&kin, &obstacles, Frame::Follower, fgrid));
+    let follower_other_field = Arc::new(connect::clearance(&kin, &others, Frame::Follower, fgrid));
+
+    // The webs, kept clear of the swept bands (exact near the edge).
+    let band_union = Arc::new(Union::new(bands.iter().cloned().map(boxed).collect()));
+    let webs: Vec<Arc<ThickTriangles>> = webs_tris.into_iter().map(|(w, _)| Arc::new(w)).collect();
+    let web_clear = WebClearance {
+        kin: kin.clone(),
+        bands: band_union.clone(),
+        coarse: follower_field.clone(),
+        others: follower_other_field.clone(),
+    };
+    // What survives of each web, as cover points for the driver's planning.
+    let web_kept_covers: Vec<Balls> = web_full_covers
+        .iter()
+        .map(|c| Balls {
+            frame: Frame::Follower,
+            centers: c
+                .centers
+                .iter()
+                .copied()
+                .filter(|p| web_clear.clearance(*p) >= WEB_MARGIN_MM - 0.5 * c.radius)
+                .collect(),
+            radius: c.radius,
+        })
+        .collect();
+
+    // 3R: the IMU pad and end-effector on the follower, where nothing passes.
+    if kin.class() == Class::R3 && bench.reading == Reading::Imu {
+        place_imu_pad(&follower_field, &mut follower_pieces)?;
+    }
+
+    // Follower struts: plates and cap to the hub (or ball).
+    progress("planning the follower's struts");
+    let mut joined = Joined::new(fgrid);
+    let hub_center = match layout.follower_hub {
+        Some((z0, z1)) => Vec3::new(0.0, 0.0, 0.5 * (z0 + z1)),
+        None => Vec3::zeros(),
+    };
+    // The hub (or ball) is where joining starts.
+    for a in follower_pieces.add.iter().take(1) {
+        joined.mark_solid(a.as_ref());
+    }
+    let mut order: Vec<usize> = (0..rims.len()).collect();
+    let core_of = |k: usize| shapes::rim_core(&rims[k]);
+    order.sort_by(|&a, &b| {
+        let da = core_of(a)
+            .iter()
+            .map(|p| (p - hub_center).norm())
+            .fold(f64::INFINITY, f64::min);
+        let db = core_of(b)
+            .iter()
+            .map(|p| (p - hub_center).norm())
+            .fold(f64::INFINITY, f64::min);
+        da.total_cmp(&db)
+    });
+    let mut follower_struts = Vec::new();
+    for &k in &order {
+        let mut cand = core_of(k);
+        cand.extend(web_kept_covers[k].centers.iter().copied());
+        let st = connect::strut(
+            &follower_field,
+            &joined,
+            &cand,
+            hub_center,
+            &format!("plate {} (curve pair {})", k + 1, pairs[k].0 + 1),
+        )?;
+        joined.mark_balls(&connect::polyline_points(&st, 0.5), st.radius);
+        joined.mark_balls(&cand, 1.5);
+        follower_struts.push(st);
+    }
+    // Rule-placed features other than the hub/ball (cap, flange, pad) joined too.
+    let extra: Vec<Vec<Vec3>> = follower_pieces
+        .cover
+        .iter()
+        .skip(1)
+        .map(|b| b.centers.clone())
+        .collect();
+    for (i, pts) in extra.iter().enumerate() {
+        // A feature touching what is joined already needs no strut.
+        if pts
+            .iter()
+            .any(|p| fgrid.voxel_of(*p).is_some_and(|v| joined.contains(v)))
+        {
+            joined.mark_balls(pts, 1.0);
+            continue;
+        }
+        let st = connect::strut(
+            &follower_field,
+            &joined,
+            pts,
+            hub_center,
+            &format!("follower feature {}", i + 2),
+        )?;
+        joined.mark_balls(&connect::polyline_points(&st, 0.5), st.radius);
+        joined.mark_balls(pts, 1.0);
+        follower_struts.push(st);
+    }
+
+    // 5. Driver: clearance from the whole follower and the support.
+    progress("sweeping the follower through the driver's frame");
+    let mut d_obstacles: Vec<Balls> = rim_covers.clone();
+    d_obstacles.extend(web_kept_covers.iter().cloned());
+    d_obstacles.extend(follower_pieces.cover.iter().cloned());
+    d_obstacles.extend(
+        follower_struts
+            .iter()
+            .map(|s| connect::strut_cover(s, Frame::Follower)),
+    );
+    d_obstacles.extend(support_pieces.cover.iter().cloned());
+    let mut d_bodies: Vec<&Balls> = band_covers.iter().collect();
+    d_bodies.extend(driver_pieces.cover.iter());
+    let dgrid = connect::grid_around(&kin, &d_bodies, Frame::Driver);
+    let driver_field = Arc::new(connect::clearance(&kin, &d_obstacles, Frame::Driver, dgrid));
+    progress("planning the driver's struts");
+    let mut djoined = Joined::new(dgrid);
+    joined_mark_first(&mut djoined, &driver_pieces);
+    let dhub = Vec3::new(0.0, 0.0, 0.5 * (layout.driver_hub.0 + layout.driver_hub.1));
+    let mut dorder: Vec<usize> = (0..bands.len()).collect();
+    dorder.sort_by(|&a, &b| {
+        let d = |k: usize| {
+            band_covers[k]
+                .centers
+                .iter()
+                .map(|p| (p - dhub).norm())
+                .fold(f64::INFINITY, f64::min)
+        };
+        d(a).total_cmp(&d(b))
+    });
+    let mut driver_struts = Vec::new();
+    for &k in &dorder {
+        // Start inside the band behind its groove: the section's centre line.
+        let cand: Vec<Vec3> = bands[k]
+            .frames()
+            .iter()
+            .map(|f| f.o - f.u * (0.5 * BAND_DEPTH_MM))
+            .collect();
+        let st = connect::strut(
+            &driver_field,
+            &djoined,
+            &cand,
+            dhub,
+            &format!("band {} (curve pair {})", k + 1, pairs[k].0 + 1),
+        )?;
+        djoined.mark_balls(&connect::polyline_points(&st, 0.5), st.radius);
+        djoined.mark_balls(&cand, 1.5);
+        driver_struts.push(st);
+    }
+
+    Ok(Design {
+        kin,
+        layout,
+        rims,
+        bands,
+        webs,
+        follower_struts,
+        driver_struts,
+        follower_pieces,
+        driver_pieces,
+        support_pieces,
+        follower_other_field,
+        follower_field,
+        driver_field,
+        cell_mm: opts.cell_mm,
+        clearance: opts.clearance_mm,
+        without_pair: opts.without_pair,
+    })
+}
+
+fn joined_mark_first(j: &mut Joined, p: &Pieces) {
+    if let Some(a) = p.add.first() {
+        j.mark_solid(a.as_ref());
+    }
+}
+
+/// Clearance of a follower point from the driver's swept bands (exact near the edge) and
+/// from the driver's hub and the support (coarse).
+struct WebClearance {
+    kin: Arc<Kinematics>,
+    bands: Arc<Union>,
+    coarse: Arc<DistanceField>,
+    others: Arc<DistanceField>,
+}
+
+impl WebClearance {
+    fn clearance(&self, p: Vec3) -> f64 {
+        let c = self.coarse.sample(p);
+        if c >= WEB_EXACT_BELOW_MM {
+            return c;
+        }
+        let exact = ExactSweep {
+            kin: &self.kin,
+            solid: self.bands.as_ref(),
+            frame: Frame::Driver,
+            target: Frame::Follower,
+            cap: WEB_EXACT_BELOW_MM,
+            coarse: None,
+        }
+        .value(p);
+        exact.min(self.others.sample(p))
+    }
+}
+
+/// 3R: plan the support's post from the ball's cup down to the base plate, around the
+/// swept volumes of the follower's rims and webs and of the driver.
+fn plan_post(
+    kin: &Kinematics,
+    layout: &Layout,
+    follower: &[Balls],
+    bands: &[Balls],
+    driver: &Pieces,
+    support: &mut Pieces,
+) -> Result<(), BuildError> {
+    let mut obstacles: Vec<Balls> = follower.to_vec();
+    obstacles.extend(bands.iter().cloned());
+    obstacles.extend(driver.cover.iter().cloned());
+    // The grid: from the base up to the ball, as wide as the follower's reach.
+    let r = layout.follower_reach + 20.0;
+    let grid = crate::geometry::voxel::VoxelGrid::covering(
+        Aabb::new([-r, -r, layout.base.1 - 5.0], [r, r, 20.0]),
+        PLAN_VOXEL_MM,
+    );
+    let field = connect::clearance(kin, &obstacles, Frame::Reference, grid);
+    let cup_out = BALL_RADIUS_MM + layout.clearance + CUP_WALL_MM;
+    // Sources: points on a sphere just outside the cup, below the ball.
+    let mut sources = Vec::new();
+    for i in 0..40 {
+        for j in 0..12 {
+            let az = std::f64::consts::TAU * i as f64 / 40.0;
+            let el = -std::f64::consts::FRAC_PI_2 + 0.12 * j as f64;
+            let d = Vec3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
+            sources.push(d * (cup_out + PILLAR_RADIUS_MM));
+        }
+    }
+    let mut base = Joined::new(grid);
+    base.mark_solid(support.add[0].as_ref());
+    let post = connect::strut(
+        &field,
+        &base,
+        &sources,
+        Vec3::new(0.0, 0.0, layout.base.1),
+        "the support's post to the ball joint",
+    )?;
+    let start = post.points[0];
+    let dir = start.normalize();
+    // The cup: a shell around the ball, open away from the post, joined to the post.
+    let cup = Cup {
+        axis: dir,
+        inner: BALL_RADIUS_MM + 0.5 * layout.clearance,
+        outer: cup_out,
+        half_angle: CUP_HALF_ANGLE_DEG.to_radians(),
+    };
+    support.cover.push(Balls {
+        frame: Frame::Reference,
+        centers: vec![dir * (0.5 * (cup.inner + cup.outer))],
+        radius: cup.outer,
+    });
+    let mut pts = vec![dir * (cup.inner + 0.5 * CUP_WALL_MM)];
+    pts.extend(post.points.iter().copied());
+    let post = ThickPolyline {
+        points: pts,
+        radius: PILLAR_RADIUS_MM - 1.0,
+    };
+    support
+        .cover
+        .push(connect::strut_cover(&post, Frame::Reference));
+    support.add.push(Arc::new(cup));
+    support.add.push(Arc::new(post));
+    Ok(())
+}
+
+/// Half-angle of the cup around the 3R ball, measured from the post's direction. 65°: the
+/// cup reaches past the ball's equator on the post's side only, so the follower's struts
+/// keep most of the sphere of directions.
+const CUP_HALF_ANGLE_DEG: f64 = 65.0;
+
+/// A spherical cup: the shell between two radii about the origin, within a cone of
+/// directions around `axis`.
+struct Cup {
+    axis: Vec3,
+    inner: f64,
+    outer: f64,
+    half_angle: f64,
+}
+
+impl Sdf for Cup {
+    fn dist(&self, p: Vec3) -> f64 {
+        let r = p.norm();
+        let shell = (r - self.outer).max(self.inner - r);
+        // Distance to the cone's boundary (a bound): r·sin(angle beyond the half angle).
+        let cosang = if r > 0.0 { p.dot(&self.axis) / r } else { 1.0 };
+        let ang = cosang.clamp(-1.0, 1.0).acos();
+        let cone = if ang - self.half_angle >= std::f64::consts::FRAC_PI_2 {
+            r
+        } else {
+            r * (ang - self.half_angle).sin()
+        };
+        shell.max(cone)
+    }
+    fn bounds(&self) -> Aabb {
+        Aabb::new([-self.outer; 3], [self.outer; 3])
+    }
+}
+
+/// Place the BNO055 pad (and an end-effector post beyond it) on the follower where the
+/// driver and support never pass: along +z first, then other directions.
+fn place_imu_pad(field: &DistanceField, p: &mut Pieces) -> Result<(), BuildError> {
+    let half_diag = 0.5 * IMU_PAD_MM[0].hypot(IMU_PAD_MM[1]);
+    let need = half_diag + SUPPORT_MARGIN_MM;
+    let dirs = [
+        Vec3::z(),
+        Vec3::new(0.0, 0.5, 1.0),
+        Vec3::new(0.0, -0.5, 1.0),
+        Vec3::new(-0.5, 0.0, 1.0),
+        Vec3::new(-1.0, 0.0, 0.3),
+        Vec3::new(0.0, 1.0, 0.3),
+        Vec3::new(0.0, -1.0, 0.3),
+        -Vec3::z(),
+    ];
+    for d in dirs {
+        let Some(c) = connect::free_spot(field, d, 15.0, 150.0, need) else {
+            continue;
+        };
+        let d = d.normalize();
+        // The pad lies across d; the end-effector post continues along d.
+        let rot = nalgebra::Rotation3::rotation_between(&Vec3::z(), &d)
+            .unwrap_or_else(nalgebra::Rotation3::identity);
+        let pad = crate::geometry::sdf::Cuboid {
+            center: c,
+            half: Vec3::new(0.5 * IMU_PAD_MM[0], 0.5 * IMU_PAD_MM[1], 1.5),
+            rotation: rot,
+        };
+        let post = Cylinder {
+            base: c,
+            axis: d,
+            length: 15.0,
+            radius: 3.0,
+        };
+        p.cover.push(Balls {
+            frame: Frame::Follower,
+            centers: vec![c],
+            radius: half_diag + 2.0,
+        });
+        p.cover.push(cover_cylinder(&post, Frame::Follower));
+        p.add.push(Arc::new(pad));
+        p.add.push(Arc::new(post));
+        let sp = 0.5 * IMU_HOLE_SPACING_MM;
+        for s in [-sp, sp] {
+            p.cut.push(Arc::new(Cylinder {
+                base: c + rot * Vec3::new(s, 0.0, -3.0),
+                axis: d,
+                length: 6.0,
+                radius: 1.35,
+            }));
+        }
+        // M3 hole at the end-effector's tip.
+        p.cut.push(Arc::new(Cylinder {
+            base: c + d * 9.0,
+            axis: d,
+            length: 7.0,
+            radius: 1.25,
+        }));
+        return Ok(());
+    }
+    Err(BuildError::NoRoom {
+        what: "the IMU pad".into(),
+        detail: "no direction from the ball has 30 mm of space the driver never enters".into(),
+    })
+}
+
+impl Design {
+    /// The follower as printed (shrunk by half the clearance), follower frame.
+    pub fn follower_solid(&self) -> impl Sdf + '_ {
+        let mut add: Vec<Box<dyn Sdf>> = self.rims.iter().cloned().map(boxed).collect();
+        for w in &self.webs {
+            add.push(Box::new(KeptWeb {
+                web: w.clone(),
+                clear: WebClearance {
+                    kin: self.kin.clone(),
+                    bands: Arc::new(Union::new(self.bands.iter().cloned().map(boxed).collect())),
+                    coarse: self.follower_field.clone(),
+                    others: self.follower_other_field.clone(),
+                },
+            }));
+        }
+        for s in &self.follower_struts {
+            add.push(Box::new(s.clone()));
+        }
+        add.extend(self.follower_pieces.add.iter().map(|a| boxed(a.clone())));
+        let cut: Vec<Box<dyn Sdf>> = self
+            .follower_pieces
+            .cut
+            .iter()
+            .map(|c| boxed(c.clone()))
+            .collect();
+        Offset {
+            inner: Difference::new(Box::new(Union::new(add)), cut),
+            by: -0.5 * self.clearance,
+        }
+    }
+
+    /// The nominal driver material before carving (driver frame).
+    fn driver_material(&self) -> Union {
+        let mut add: Vec<Box<dyn Sdf>> = self.bands.iter().cloned().map(boxed).collect();
+        for s in &self.driver_struts {
+            add.push(Box::new(s.clone()));
+        }
+        add.extend(self.driver_pieces.add.iter().map(|a| boxed(a.clone())));
+        Union::new(add)
+    }
+
+    /// The driver as printed: its material minus the rims' exact swept volume grown by
+    /// half the clearance, minus its bores (driver frame).
+    pub fn driver_solid(&self) -> DriverSolid<'_> {
+        DriverSolid {
+            material: self.driver_material(),
+            rims: Union::new(self.rims.iter().cloned().map(boxed).collect()),
+            design: self,
+        }
+    }
+
+    /// The support (reference frame).
+    pub fn support_solid(&self) -> impl Sdf + '_ {
+        let add: Vec<Box<dyn Sdf>> = self
+            .support_pieces
+            .add
+            .iter()
+            .map(|a| boxed(a.clone()))
+            .collect();
+        let cut: Vec<Box<dyn Sdf>> = self
+            .support_pieces
+            .cut
+            .iter()
+            .map(|c| boxed(c.clone()))
+            .collect();
+        Difference::new(Box::new(Union::new(add)), cut)
+    }
+}
+
+/// A web kept clear of the driver's swept bands.
+struct KeptWeb {
+    web: Arc<ThickTriangles>,
+    clear: WebClearance,
+}
+
+impl Sdf for KeptWeb {
+    fn dist(&self, p: Vec3) -> f64 {
+        let v = self.web.dist(p);
+        if v > 0.0 {
+            return v;
+        }
+        v.max(WEB_MARGIN_MM - self.clear.clearance(p))
+    }
+    fn bounds(&self) -> Aabb {
+        self.web.bounds()
+    }
+}
+
+/// The driver as printed (see [`Design::driver_solid`]).
+pub struct DriverSolid<'a> {
+    material: Union,
+    rims: Union,
+    design: &'a Design,
+}
+
+impl Sdf for DriverSolid<'_> {
+    fn dist(&self, p: Vec3) -> f64 {
+        let m = self.material.dist(p);
+        let cap = CARVE_CAP_CELLS * self.design.cell_mm + 0.5 * self.design.clearance;
+        let v = if m >= cap {
+            m
+        } else {
+            let sweep = ExactSweep {
+                kin: &self.design.kin,
+                solid: &self.rims,
+                frame: Frame::Follower,
+                target: Frame::Driver,
+                cap,
+                coarse: Some(&self.design.driver_field),
+            }
+            .value(p);
+            m.max(0.5 * self.design.clearance - sweep)
+        };
+        self.design
+            .driver_pieces
+            .cut
+            .iter()
+            .fold(v, |acc, c| acc.max(-c.dist(p)))
+    }
+    fn bounds(&self) -> Aabb {
+        self.material.bounds()
+    }
+}

@@ -1,0 +1,203 @@
+//! The functional shapes: what the conjugate curve pairs become.
+//!
+//! Owns, for each curve pair k (paper §5.3):
+//! - the follower's **rim**: a half ellipse swept along c²ₖ (follower frame) with its apex
+//!   on the curve and its major axis along the outward normal n²ₖ, so the rim's surface
+//!   normal at the contact is the design normal;
+//! - the follower's **web**: the surface spanning the rim (a fan from the rim's centroid
+//!   to the ellipse centres behind the apex), thickened, which closes the rim into a
+//!   plate; the caller keeps it clear of the driver's swept volume;
+//! - the driver's **band**: a rounded rectangle swept along c¹ₖ (driver frame), standing
+//!   [`BAND_LIP_MM`] past the contact towards the follower, so the follower's sweep carves
+//!   a groove into it;
+//! - ball covers of each (conservative: every point of the shape lies in a ball) for the
+//!   coarse swept volumes that plan struts.
+//!
+//! It does not place hubs or supports, and does not carve.
+
+use crate::geometry::sdf::{ThickTriangles, Vec3};
+use crate::geometry::sweep::{Frame as PathFrame, Section, Sweep};
+use crate::synth::mechanism::CurvePair;
+
+use super::dims::*;
+use super::swept::{Balls, Frame};
+
+/// The rims' section.
+pub const RIM: Section = Section::HalfEllipse {
+    a: RIM_DEPTH_MM,
+    b: RIM_HALF_WIDTH_MM,
+};
+
+/// The bands' section (u along the driver's outward normal: material from −depth to +lip).
+pub const BAND: Section = Section::RoundedRect {
+    u_min: -BAND_DEPTH_MM,
+    u_max: BAND_LIP_MM,
+    half_width: BAND_HALF_WIDTH_MM,
+    round: BAND_ROUND_MM,
+};
+
+/// Spacing of the sample points a web is covered by, mm.
+const WEB_COVER_SPACING_MM: f64 = 1.4;
+
+fn scaled(p: [f64; 3], s: f64) -> Vec3 {
+    Vec3::new(p[0] * s, p[1] * s, p[2] * s)
+}
+fn unit(p: [f64; 3]) -> Vec3 {
+    Vec3::new(p[0], p[1], p[2]).normalize()
+}
+
+/// The rim of pair `cp` in the follower frame, mm.
+pub fn rim(cp: &CurvePair, scale_mm: f64) -> Sweep {
+    let frames = cp
+        .samples
+        .c2
+        .iter()
+        .zip(&cp.samples.n2)
+        .map(|(c, n)| PathFrame {
+            o: scaled(*c, scale_mm),
+            u: unit(*n),
+        })
+        .collect();
+    Sweep::new(frames, RIM)
+}
+
+/// The band of pair `cp` in the driver frame, mm.
+pub fn band(cp: &CurvePair, scale_mm: f64) -> Sweep {
+    let frames = cp
+        .samples
+        .c1
+        .iter()
+        .zip(&cp.samples.n1)
+        .map(|(c, n)| PathFrame {
+            o: scaled(*c, scale_mm),
+            u: unit(*n),
+        })
+        .collect();
+    Sweep::new(frames, BAND)
+}
+
+/// The ellipse centres behind the rim's apex: where the web joins the rim.
+pub fn rim_core(rim: &Sweep) -> Vec<Vec3> {
+    rim.frames()
+        .iter()
+        .map(|f| f.o - f.u * RIM_DEPTH_MM)
+        .collect()
+}
+
+/// The web closing `rim` into a plate: a fan from the core loop's centroid, thickened.
+pub fn web(rim: &Sweep) -> (ThickTriangles, Vec<[Vec3; 3]>) {
+    let core = rim_core(rim);
+    let c = core.iter().sum::<Vec3>() / core.len() as f64;
+    let n = core.len();
+    let tris: Vec<[Vec3; 3]> = (0..n).map(|i| [c, core[i], core[(i + 1) % n]]).collect();
+    (
+        ThickTriangles::new(tris.clone(), WEB_HALF_THICKNESS_MM),
+        tris,
+    )
+}
+
+/// Balls covering a sweep with `section`: one ball per frame around the section's centre.
+pub fn sweep_cover(s: &Sweep, frame: Frame) -> Balls {
+    let (offset, radius) = match s.section() {
+        Section::HalfEllipse { a, b } => (-0.5 * a, (0.25 * a * a + b * b).sqrt()),
+        Section::RoundedRect {
+            u_min,
+            u_max,
+            half_width,
+            ..
+        } => (
+            0.5 * (u_min + u_max),
+            (0.5 * (u_max - u_min)).hypot(half_width),
+        ),
+    };
+    // Consecutive frames are at most ~1 mm apart in the examples; the ball radius is
+    // raised by half the largest spacing so the cover has no gaps between frames.
+    let fr = s.frames();
+    let gap = (0..fr.len())
+        .map(|i| (fr[(i + 1) % fr.len()].o - fr[i].o).norm())
+        .fold(0.0, f64::max);
+    Balls {
+        frame,
+        centers: fr.iter().map(|f| f.o + f.u * offset).collect(),
+        radius: radius + 0.5 * gap,
+    }
+}
+
+/// Sample points covering a web's fan (centre `tris[i][0]`, rim core `tris[i][1]`), about
+/// [`WEB_COVER_SPACING_MM`] apart: rings of points at fractions of the way from the centre
+/// to the core, each ring thinned to that spacing; with the radius that covers the
+/// thickened web. `keep` filters the points (what survives of a web).
+pub fn web_cover(tris: &[[Vec3; 3]], keep: impl Fn(Vec3) -> bool) -> Balls {
+    let mut centers = Vec::new();
+    if let Some(first) = tris.first() {
+        let c = first[0];
+        let core: Vec<Vec3> = tris.iter().map(|t| t[1]).collect();
+        let n = core.len();
+        let reach = core.iter().map(|q| (q - c).norm()).fold(0.0, f64::max);
+        let spacing = (0..n)
+            .map(|i| (core[(i + 1) % n] - core[i]).norm())
+            .sum::<f64>()
+            / n as f64;
+        let rings = (reach / WEB_COVER_SPACING_MM).ceil().max(1.0) as usize;
+        for j in 0..=rings {
+            let s = j as f64 / rings as f64;
+            let stride = if s * spacing > 0.0 {
+                ((WEB_COVER_SPACING_MM / (s * spacing)).floor() as usize).clamp(1, n)
+            } else {
+                n
+            };
+            for i in (0..n).step_by(stride) {
+                let p = c + (core[i] - c) * s;
+                if keep(p) {
+                    centers.push(p);
+                }
+            }
+        }
+    }
+    Balls {
+        frame: Frame::Follower,
+        centers,
+        // Within a ring samples are at most the spacing apart, rings are the spacing apart
+        // along the rays: any fan point is within spacing·√2/2·2 of a sample.
+        radius: WEB_HALF_THICKNESS_MM + WEB_COVER_SPACING_MM * std::f64::consts::SQRT_2,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::sdf::Sdf;
+
+    /// The rim of a circular curve pair touches the design point with the design normal:
+    /// the apex is on the surface and the rim's distance grows along +n² at rate 1.
+    #[test]
+    fn rim_apex_is_on_the_curve_with_the_design_normal() {
+        let n = 360;
+        let frames: Vec<PathFrame> = (0..n)
+            .map(|i| {
+                let a = i as f64 / n as f64 * std::f64::consts::TAU;
+                PathFrame {
+                    o: Vec3::new(20.0 * a.cos(), 20.0 * a.sin(), 0.0),
+                    // The normal leans 30° upwards from radial.
+                    u: Vec3::new(a.cos() * 0.866, a.sin() * 0.866, 0.5),
+                }
+            })
+            .collect();
+        let r = Sweep::new(frames.clone(), RIM);
+        for f in frames.iter().step_by(37) {
+            assert!(r.dist(f.o).abs() < 1e-3, "apex at {:?}", f.o);
+            assert!((r.dist(f.o + f.u * 0.5) - 0.5).abs() < 1e-3);
+        }
+        let cover = sweep_cover(&r, Frame::Follower);
+        // Every point inside the rim is inside some ball of the cover.
+        for k in 0..500 {
+            let f = &frames[(k * 7) % n];
+            let v = f.u.cross(&Vec3::z()).normalize();
+            let p = f.o - f.u * (0.01 + (k % 29) as f64 * 0.1) + v * ((k % 7) as f64 * 0.2 - 0.6);
+            if r.dist(p) < 0.0 {
+                let inside = cover.centers.iter().any(|c| (p - c).norm() <= cover.radius);
+                assert!(inside, "{p:?} not covered");
+            }
+        }
+    }
+}

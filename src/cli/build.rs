@@ -1,0 +1,87 @@
+//! `mpc-rig build`: printable parts from a mechanism.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::Context;
+use clap::Args;
+
+use crate::build::{self, Bench, BuildOptions};
+use crate::rig::config::RigConfig;
+use crate::synth::mechanism::Mechanism;
+
+/// Arguments of `mpc-rig build`.
+#[derive(Debug, Args)]
+pub struct BuildArgs {
+    /// The mechanism file (or its directory).
+    pub mechanism: PathBuf,
+    /// Output folder (default: `parts/` beside the mechanism file).
+    #[arg(short = 'o', long = "out")]
+    pub out: Option<PathBuf>,
+    /// Millimetres per model unit (default: the file's `scale_mm`).
+    #[arg(long = "scale-mm")]
+    pub scale_mm: Option<f64>,
+    /// Print clearance between driver and follower, mm.
+    #[arg(long, default_value_t = build::dims::DEFAULT_CLEARANCE_MM)]
+    pub clearance: f64,
+    /// Mesher cell size, mm (smaller: finer and slower).
+    #[arg(long = "cell-mm", default_value_t = build::dims::DEFAULT_CELL_MM)]
+    pub cell_mm: f64,
+    /// Make the motor coupling and sensor mounts for this rig (default: the simulated
+    /// stepper bench of the mechanism's class).
+    #[arg(long)]
+    pub rig: Option<PathBuf>,
+    /// Leave curve pair K (1-based) out: an experiment whose parts need not close; the
+    /// interference figures are reported, not enforced.
+    #[arg(long = "without-pair", value_name = "K")]
+    pub without_pair: Option<usize>,
+}
+
+/// Run `mpc-rig build`.
+pub fn run(args: BuildArgs) -> anyhow::Result<ExitCode> {
+    let mech = Mechanism::load(&args.mechanism)?;
+    let bench = match &args.rig {
+        Some(r) => Some(Bench::from_rig(&RigConfig::load(r)?, mech.class)?),
+        None => None,
+    };
+    let opts = BuildOptions {
+        scale_mm: args.scale_mm,
+        clearance_mm: args.clearance,
+        cell_mm: args.cell_mm,
+        bench,
+        without_pair: args.without_pair.map(|k| k.saturating_sub(1)),
+        allow_interference: args.without_pair.is_some(),
+    };
+    let t = std::time::Instant::now();
+    let built = build::build(&mech, &opts, &|s| eprintln!("  {s}"))
+        .with_context(|| format!("building {}", args.mechanism.display()))?;
+    for p in &built.parts {
+        let c = p.mesh.check();
+        let b = p.mesh.aabb().size();
+        println!(
+            "{:<9} {:>8} triangles  {:>9.0} mm³  {:.0} × {:.0} × {:.0} mm  {}  {:.1} s",
+            p.name,
+            c.triangles,
+            c.volume_mm3,
+            b[0],
+            b[1],
+            b[2],
+            c.summary(),
+            p.seconds
+        );
+    }
+    for pe in &built.figures.penetrations {
+        println!("{:<24} {:.3} mm at t = {:.4}", pe.what, pe.depth_mm, pe.t);
+    }
+    for g in &built.figures.gaps {
+        println!(
+            "pair {}: gap {:.3}–{:.3} mm (mean {:.3})",
+            g.pair, g.min_mm, g.max_mm, g.mean_mm
+        );
+    }
+    for (what, s) in &built.timings {
+        println!("{what}: {s:.1} s");
+    }
+    println!("total {:.1} s", t.elapsed().as_secs_f64());
+    Ok(ExitCode::SUCCESS)
+}
