@@ -14,6 +14,7 @@ pub mod measure;
 pub mod motion;
 pub mod ports;
 pub mod sim_device;
+pub mod sim_pico;
 pub mod synth;
 
 /// Design, fabricate and bench-verify multi-point conjugation mechanisms.
