@@ -20,9 +20,10 @@ import * as fs from 'node:fs';
 import { parseArgs } from 'node:util';
 import { GPIOPinState, Simulator } from 'rp2040js';
 
-import { loadableSegments } from './lib/elf.mjs';
+import { findSymbol, loadableSegments } from './lib/elf.mjs';
 import { answerFlashUniqueId, mapXipControl, raiseTxEmptyOnAbort } from './lib/fixes.mjs';
 import { I2cKind, Link, LogLevel, Reply, Tag, parseSyncReply, timed } from './lib/link.mjs';
+import { RttReader } from './lib/rtt.mjs';
 import { UsbHost } from './lib/usb-host.mjs';
 
 const FLASH_BASE = 0x10000000;
@@ -60,9 +61,10 @@ if (!(sliceNs > 0)) {
   usage(`--slice-us ${args['slice-us']}: expected a positive number`);
 }
 
-function load(path) {
+function readElf(path) {
   try {
-    return loadableSegments(new Uint8Array(fs.readFileSync(path)), path);
+    const bytes = new Uint8Array(fs.readFileSync(path));
+    return { bytes, segments: loadableSegments(bytes, path) };
   } catch (e) {
     usage(e.message);
   }
@@ -88,14 +90,15 @@ mcu.logger = {
 
 // The boot ROM, then the image (loadBootrom resets the chip, erasing the flash).
 const rom = new Uint8Array(ROM_SIZE);
-for (const s of load(args.rom)) {
+for (const s of readElf(args.rom).segments) {
   if (s.address + s.bytes.length > ROM_SIZE) {
     usage(`${args.rom}: a segment at 0x${s.address.toString(16)} lies outside the 16 KiB ROM`);
   }
   rom.set(s.bytes, s.address);
 }
 mcu.loadBootrom(new Uint32Array(rom.buffer));
-for (const s of load(args.image)) {
+const image = readElf(args.image);
+for (const s of image.segments) {
   if (s.address < FLASH_BASE || s.address + s.bytes.length > FLASH_BASE + mcu.flash.length) {
     usage(`${args.image}: a segment at 0x${s.address.toString(16)} lies outside flash`);
   }
@@ -192,6 +195,9 @@ function halt(reason) {
   finish();
 }
 
+// RTT: the firmware's defmt frames, read from its up-channel 0 as a debug probe would.
+const rtt = new RttReader(mcu, findSymbol(image.bytes, args.image, '_SEGGER_RTT'));
+
 /** Input changes for the next slice, spread evenly across it (all at once when `now`). */
 function applyInputs(inputs, atOnce) {
   inputs.forEach(({ gpio, level }, k) => {
@@ -208,6 +214,10 @@ function applyInputs(inputs, atOnce) {
 }
 
 function sync(initial = false) {
+  const log = rtt.take();
+  if (log.length > 0) {
+    link.post(Tag.RTT, log);
+  }
   const bytes = Buffer.concat(fromDevice);
   fromDevice = [];
   const reply = link.request(Tag.SYNC, timed(now(), bytes));

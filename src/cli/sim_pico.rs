@@ -46,6 +46,10 @@ pub struct SimPicoArgs {
     /// Also expose the port at this path (a symlink), like a udev name.
     #[arg(long, value_name = "PATH")]
     pub link: Option<PathBuf>,
+    /// Append the board's defmt log frames to this file (decode them with
+    /// `defmt-print -e IMAGE < FILE`).
+    #[arg(long, value_name = "FILE")]
+    pub defmt_log: Option<PathBuf>,
 }
 
 fn parse_flash_id(s: &str) -> Result<u64, String> {
@@ -76,6 +80,7 @@ pub fn run(a: SimPicoArgs) -> anyhow::Result<ExitCode> {
         files,
         flash_id: a.flash_id.unwrap_or(DEFAULT_FLASH_ID),
         link: a.link,
+        defmt_log: a.defmt_log,
     })
     .context("starting the emulated board")?;
     {

@@ -39,7 +39,7 @@ pub mod link;
 pub mod port;
 pub mod wiring;
 
-use std::io::{BufReader, BufWriter};
+use std::io::{BufReader, BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -109,6 +109,14 @@ pub enum PicoError {
         /// The key.
         key: &'static str,
     },
+    /// Writing the board's log file.
+    #[error("board log {path}: {message}", path = path.display())]
+    Log {
+        /// The file.
+        path: PathBuf,
+        /// What failed.
+        message: String,
+    },
     /// Setting up the pseudo-terminal.
     #[error(transparent)]
     Rig(#[from] RigError),
@@ -130,6 +138,9 @@ pub struct SimPicoOptions {
     pub flash_id: u64,
     /// Also expose the port at this path (a symlink).
     pub link: Option<PathBuf>,
+    /// Append the firmware's defmt log frames (its RTT up-channel) to this file; decode them
+    /// with `defmt-print -e IMAGE < FILE`.
+    pub defmt_log: Option<PathBuf>,
 }
 
 /// What the emulated board has done so far.
@@ -161,6 +172,8 @@ pub struct PicoStatus {
     pub bytes_corrupted: u64,
     /// I²C address phases on bus A and bus B.
     pub i2c_transfers: [u64; 2],
+    /// Bytes of defmt log frames the firmware wrote.
+    pub log_bytes: u64,
     /// The board stopped (a breakpoint or a hard fault), with the reason.
     pub halted: Option<String>,
 }
@@ -459,6 +472,19 @@ fn run(
     let mut from_board = BufReader::with_capacity(1 << 16, stdout);
     let mut to_board = BufWriter::new(stdin);
     let mut wiring = Wiring::new(&opts);
+    let mut defmt_log = match &opts.defmt_log {
+        Some(path) => Some(
+            std::fs::OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(path)
+                .map_err(|e| PicoError::Log {
+                    path: path.clone(),
+                    message: e.to_string(),
+                })?,
+        ),
+        None => None,
+    };
     let mut st = PicoStatus::default();
     let mut pacing = Pacing {
         start: Instant::now(),
@@ -540,7 +566,15 @@ fn run(
                 st.halted = Some(reason);
                 *status.lock().unwrap_or_else(|p| p.into_inner()) = st.clone();
             }
-            BoardMessage::Rtt(_) => {}
+            BoardMessage::Rtt(bytes) => {
+                st.log_bytes += bytes.len() as u64;
+                if let (Some(f), Some(path)) = (defmt_log.as_mut(), &opts.defmt_log) {
+                    f.write_all(&bytes).map_err(|e| PicoError::Log {
+                        path: path.clone(),
+                        message: e.to_string(),
+                    })?;
+                }
+            }
         }
     }
     process.kill();
