@@ -93,7 +93,9 @@ export class UsbHost {
     this.cdc = null;
     this.configured = false;
     this.portOpen = false;
+    // DTR/RTS last requested, and last acknowledged by the device.
     this.lineState = 0;
+    this.lineStateDone = 0;
     this.toDevice = [];
     // Buffers the device armed: OUT endpoint → length, IN endpoint → packet. The device arms
     // its OUT buffers while it handles SET_CONFIGURATION, before that request completes.
@@ -150,6 +152,7 @@ export class UsbHost {
     this.cdc = null;
     this.configured = false;
     this.lineState = 0;
+    this.lineStateDone = 0;
     this.outArmed.clear();
     this.inHeld.clear();
     const info = {};
@@ -224,11 +227,18 @@ export class UsbHost {
       return;
     }
     this.lineState = wanted;
-    this.control(setup(0x21, CDC_SET_CONTROL_LINE_STATE, wanted, this.cdc.control, 0));
+    this.control(setup(0x21, CDC_SET_CONTROL_LINE_STATE, wanted, this.cdc.control, 0), () => {
+      this.lineStateDone = wanted;
+      this.sendOut();
+    });
   }
 
+  /** Bytes go out once the device has been told the port is open: on a real host a program
+   *  opens the port (raising DTR) before it can write, and the port exists only once the
+   *  device has enumerated. */
   sendOut() {
-    if (!this.configured || this.cdc === null || this.toDevice.length === 0) {
+    const open = (this.lineStateDone & LINE_DTR_RTS) !== 0;
+    if (!this.configured || this.cdc === null || !open || this.toDevice.length === 0) {
       return;
     }
     const armed = this.outArmed.get(this.cdc.out);
