@@ -96,7 +96,7 @@ pub fn run(a: SimPicoArgs) -> anyhow::Result<ExitCode> {
     serve_until_ctrl_c(|| sim.is_running())?;
     let status = sim.stop().context("the emulated board")?;
     eprintln!(
-        "emulated board ended after {:.1} s of board time: {} steps, USB serial number {}, {} bytes out ({} dropped, {} corrupted), I²C transfers A {} B {}, at most {:.0} ms behind the wall clock",
+        "emulated board ended after {:.1} s of board time: driver at {} microsteps, USB serial number {}, {} bytes out ({} dropped, {} corrupted), I²C transfers A {} B {}, at most {:.0} ms behind the wall clock",
         status.time_s,
         status.steps,
         status
