@@ -73,6 +73,8 @@ pub mod cobs;
 pub mod codec;
 pub mod command;
 pub mod crc;
+#[cfg(feature = "std")]
+pub mod dump;
 pub mod flags;
 pub mod frame;
 #[cfg(feature = "std")]
