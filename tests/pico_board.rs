@@ -73,6 +73,7 @@ fn board(files: BoardFiles, mechanics: Mechanics, flash_id: u64) -> PicoHandle {
         flash_id,
         link: None,
         defmt_log: None,
+        capture: None,
     })
     .unwrap()
 }

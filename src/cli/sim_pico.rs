@@ -50,6 +50,10 @@ pub struct SimPicoArgs {
     /// `defmt-print -e IMAGE < FILE`).
     #[arg(long, value_name = "FILE")]
     pub defmt_log: Option<PathBuf>,
+    /// Record both directions of the link in this directory (to-device.bin, to-host.bin)
+    /// for `mpc-rig wire-dump`.
+    #[arg(long, value_name = "DIR")]
+    pub capture: Option<PathBuf>,
 }
 
 fn parse_flash_id(s: &str) -> Result<u64, String> {
@@ -81,6 +85,7 @@ pub fn run(a: SimPicoArgs) -> anyhow::Result<ExitCode> {
         flash_id: a.flash_id.unwrap_or(DEFAULT_FLASH_ID),
         link: a.link,
         defmt_log: a.defmt_log,
+        capture: a.capture,
     })
     .context("starting the emulated board")?;
     {

@@ -109,8 +109,8 @@ pub enum PicoError {
         /// The key.
         key: &'static str,
     },
-    /// Writing the board's log file.
-    #[error("board log {path}: {message}", path = path.display())]
+    /// Writing the board's log or a capture.
+    #[error("{path}: {message}", path = path.display())]
     Log {
         /// The file.
         path: PathBuf,
@@ -141,6 +141,9 @@ pub struct SimPicoOptions {
     /// Append the firmware's defmt log frames (its RTT up-channel) to this file; decode them
     /// with `defmt-print -e IMAGE < FILE`.
     pub defmt_log: Option<PathBuf>,
+    /// Record the link in this directory: `to-device.bin` (what the host wrote) and
+    /// `to-host.bin` (what reached the host, after the byte faults), for `mpc-rig wire-dump`.
+    pub capture: Option<PathBuf>,
 }
 
 /// What the emulated board has done so far.
@@ -472,17 +475,22 @@ fn run(
     let mut from_board = BufReader::with_capacity(1 << 16, stdout);
     let mut to_board = BufWriter::new(stdin);
     let mut wiring = Wiring::new(&opts);
-    let mut defmt_log = match &opts.defmt_log {
-        Some(path) => Some(
-            std::fs::OpenOptions::new()
-                .create(true)
-                .append(true)
-                .open(path)
-                .map_err(|e| PicoError::Log {
-                    path: path.clone(),
-                    message: e.to_string(),
-                })?,
-        ),
+    let mut defmt_log = opts
+        .defmt_log
+        .as_deref()
+        .map(OutputFile::append)
+        .transpose()?;
+    let mut capture = match &opts.capture {
+        Some(dir) => {
+            std::fs::create_dir_all(dir).map_err(|e| PicoError::Log {
+                path: dir.clone(),
+                message: e.to_string(),
+            })?;
+            Some((
+                OutputFile::append(&dir.join("to-device.bin"))?,
+                OutputFile::append(&dir.join("to-host.bin"))?,
+            ))
+        }
         None => None,
     };
     let mut st = PicoStatus::default();
@@ -516,7 +524,10 @@ fn run(
                 let now_us = t_us as u64;
                 wiring.bench.update(now_us);
                 let host_open = port.host_present();
-                to_host(&mut port, &mut wiring.bench.plant, &usb, host_open, &mut st)?;
+                let sent = to_host(&mut port, &mut wiring.bench.plant, &usb, host_open, &mut st)?;
+                if let Some((_, to_host_file)) = capture.as_mut() {
+                    to_host_file.write(&sent)?;
+                }
                 pacing.wait_until(Duration::from_micros(now_us));
                 if stop.load(Ordering::Relaxed) {
                     break;
@@ -527,6 +538,9 @@ fn run(
                     port.read_all(&mut host_bytes)?;
                 }
                 st.bytes_in += host_bytes.len() as u64;
+                if let Some((to_device_file, _)) = capture.as_mut() {
+                    to_device_file.write(&host_bytes)?;
+                }
                 st.host_open = host_open;
                 let reply = SyncReply {
                     host_open,
@@ -568,11 +582,8 @@ fn run(
             }
             BoardMessage::Rtt(bytes) => {
                 st.log_bytes += bytes.len() as u64;
-                if let (Some(f), Some(path)) = (defmt_log.as_mut(), &opts.defmt_log) {
-                    f.write_all(&bytes).map_err(|e| PicoError::Log {
-                        path: path.clone(),
-                        message: e.to_string(),
-                    })?;
+                if let Some(f) = defmt_log.as_mut() {
+                    f.write(&bytes)?;
                 }
             }
         }
@@ -581,21 +592,54 @@ fn run(
     Ok(())
 }
 
+/// A file the board's log or a capture is appended to.
+struct OutputFile {
+    file: std::fs::File,
+    path: PathBuf,
+}
+
+impl OutputFile {
+    fn append(path: &Path) -> Result<OutputFile, PicoError> {
+        let file = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(path)
+            .map_err(|e| PicoError::Log {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            })?;
+        Ok(OutputFile {
+            file,
+            path: path.to_path_buf(),
+        })
+    }
+
+    fn write(&mut self, bytes: &[u8]) -> Result<(), PicoError> {
+        if bytes.is_empty() {
+            return Ok(());
+        }
+        self.file.write_all(bytes).map_err(|e| PicoError::Log {
+            path: self.path.clone(),
+            message: e.to_string(),
+        })
+    }
+}
+
 /// The board's USB bytes to the host, through the link faults; dropped while no program
-/// holds the port.
+/// holds the port. Returns the bytes the host received.
 fn to_host(
     port: &mut HostPort,
     plant: &mut Plant,
     bytes: &[u8],
     host_open: bool,
     st: &mut PicoStatus,
-) -> Result<(), PicoError> {
+) -> Result<Vec<u8>, PicoError> {
     if bytes.is_empty() {
-        return Ok(());
+        return Ok(Vec::new());
     }
     if !host_open {
         st.bytes_dropped += bytes.len() as u64;
-        return Ok(());
+        return Ok(Vec::new());
     }
     let mut wire = Vec::with_capacity(bytes.len());
     for &b in bytes {
@@ -611,5 +655,6 @@ fn to_host(
     let n = port.write_lossy(&wire)?;
     st.bytes_out += n as u64;
     st.bytes_dropped += (wire.len() - n) as u64;
-    Ok(())
+    wire.truncate(n);
+    Ok(wire)
 }
