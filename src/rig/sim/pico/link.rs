@@ -220,6 +220,12 @@ fn decode(tag: u8, mut p: Vec<u8>) -> Result<BoardMessage, PicoError> {
         }
         I2C => {
             let t_us = time(tag, &p, 5)?;
+            if p[8] > 1 {
+                return Err(bad(format!(
+                    "I²C controller {} (the RP2040 has 0 and 1)",
+                    p[8]
+                )));
+            }
             let arg = p[12];
             let event = match p[11] {
                 0 => I2cEvent::Connect {
@@ -377,6 +383,7 @@ mod tests {
             (msg(PIN, &timed(1.0, &[10])), "needs at least 10"),
             (msg(PIN, &timed(1.0, &[10, 7])), "pin level 7"),
             (msg(I2C, &timed(1.0, &[0, 4, 5, 9, 0])), "event kind 9"),
+            (msg(I2C, &timed(1.0, &[2, 4, 5, 0, 0])), "I²C controller 2"),
             (msg(0x42, b""), "unknown message tag 0x42"),
             (msg(SYNC, &timed(-1.0, b"")), "time -1"),
             (msg(USB, b"{"), "USB descriptors"),

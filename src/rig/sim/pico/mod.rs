@@ -52,7 +52,7 @@ use crate::motion::Motion;
 use crate::rig::sim::plant::{LinkByte, Plant, PlantConfig};
 use crate::rig::sim::pty::StableLink;
 use crate::rig::sim::stepper::i2c::SensorBus;
-use crate::rig::sim::stepper::pins::{DriverChip, SimQuadrature};
+use crate::rig::sim::stepper::pins::{DirPin, DriverChip, EnablePin, SimQuadrature, StepPin};
 use crate::rig::sim::stepper::{Bench, Mechanics, MAX_CATCH_UP};
 use crate::rig::RigError;
 
@@ -284,25 +284,26 @@ fn refuse_unsupported_faults(plant: &PlantConfig) -> Result<(), PicoError> {
     }
 }
 
-/// The bench around the chip: driver, sensors, inputs, the host's port, pacing.
-struct Wiring {
+/// What is connected to the chip's pins: the driver, the sensor buses, the quadrature
+/// encoder and the e-stop button, with the plant behind them.
+struct Attached {
     bench: Bench,
-    step: crate::rig::sim::stepper::pins::StepPin,
-    dir: crate::rig::sim::stepper::pins::DirPin,
-    enable: crate::rig::sim::stepper::pins::EnablePin,
+    step: StepPin,
+    dir: DirPin,
+    enable: EnablePin,
     buses: [ByteTarget; 2],
     /// The bench bus each I²C controller addressed in its present transfer.
     routed: [Option<SensorBusId>; 2],
-    quadrature_count: i64,
-    estop_high: Option<bool>,
+    /// Quadrature count and e-stop level last put on the pins (`None` before the first sync).
+    inputs_sent: Option<(i64, bool)>,
     /// GPIOs already reported as driven with nothing wired (bit n: GPn).
     reported_gpios: u32,
     /// I²C (controller, SDA, SCL) routings already reported as leading nowhere.
     reported_routes: Vec<(u8, u8, u8)>,
 }
 
-impl Wiring {
-    fn new(opts: &SimPicoOptions) -> Wiring {
+impl Attached {
+    fn new(opts: &SimPicoOptions) -> Attached {
         let mech = &opts.mechanics;
         let chip = DriverChip::new(true);
         let bus_a = SensorBus::new(mech.as5600, mech.imu);
@@ -317,15 +318,14 @@ impl Wiring {
             None,
         );
         bench.update(0);
-        Wiring {
+        Attached {
             bench,
             step: chip.step_pin(),
             dir: chip.dir_pin(),
             enable: chip.enable_pin(),
             buses: [ByteTarget::new(bus_a), ByteTarget::new(bus_b)],
             routed: [None, None],
-            quadrature_count: 0,
-            estop_high: None,
+            inputs_sent: None,
             reported_gpios: 0,
             reported_routes: Vec::new(),
         }
@@ -334,38 +334,62 @@ impl Wiring {
     fn pin(&mut self, gpio: u8, level: Level) {
         // An undriven input of the driver reads low: the worst case for EN (enabled).
         let high = level == Level::High;
-        let pin: &mut dyn OutputPin<Error = std::convert::Infallible> = match wiring::driver_input(
-            gpio,
-        ) {
-            Some(DriverInput::Step) => &mut self.step,
-            Some(DriverInput::Dir) => &mut self.dir,
-            Some(DriverInput::Enable) => &mut self.enable,
-            None => {
-                let input = [wiring::ESTOP, wiring::QUADRATURE_A, wiring::QUADRATURE_B];
-                let bit = 1u32.checked_shl(u32::from(gpio)).unwrap_or(0);
-                if level != Level::Undriven && self.reported_gpios & bit == 0 {
-                    self.reported_gpios |= bit;
-                    let what = if input.contains(&gpio) {
-                        "an input of the bench (e-stop or quadrature): the firmware drives against it"
-                    } else {
-                        "nothing on the bench"
-                    };
-                    tracing::warn!(
-                            "emulated board: GP{gpio} is driven {} but is wired to {what} (the bench: STEP GP{}, DIR GP{}, EN GP{})",
-                            if high { "high" } else { "low" },
-                            wiring::STEP,
-                            wiring::DIR,
-                            wiring::ENABLE
-                        );
+        let pin: &mut dyn OutputPin<Error = std::convert::Infallible> =
+            match wiring::driver_input(gpio) {
+                Some(DriverInput::Step) => &mut self.step,
+                Some(DriverInput::Dir) => &mut self.dir,
+                Some(DriverInput::Enable) => &mut self.enable,
+                None => {
+                    if level != Level::Undriven {
+                        self.report_unwired_gpio(gpio, high);
+                    }
+                    return;
                 }
-                return;
-            }
-        };
+            };
         let _ = if high { pin.set_high() } else { pin.set_low() };
     }
 
+    /// Say once per GPIO that the firmware drives a pin the driver is not wired to.
+    fn report_unwired_gpio(&mut self, gpio: u8, high: bool) {
+        let bit = 1u32.checked_shl(u32::from(gpio)).unwrap_or(0);
+        if self.reported_gpios & bit != 0 {
+            return;
+        }
+        self.reported_gpios |= bit;
+        let what = if [wiring::ESTOP, wiring::QUADRATURE_A, wiring::QUADRATURE_B].contains(&gpio) {
+            "an input of the bench (e-stop or quadrature), against which the firmware drives"
+        } else {
+            "nothing on the bench"
+        };
+        let level = if high { "high" } else { "low" };
+        tracing::warn!(
+            "emulated board: GP{gpio} is driven {level} but is wired to {what} (the bench: STEP GP{}, DIR GP{}, EN GP{})",
+            wiring::STEP,
+            wiring::DIR,
+            wiring::ENABLE
+        );
+    }
+
+    /// Say once per routing that a controller addresses pins where no bus is wired.
+    fn report_unwired_bus(&mut self, controller: u8, sda: u8, scl: u8, address: u8) {
+        if self.reported_routes.contains(&(controller, sda, scl)) {
+            return;
+        }
+        self.reported_routes.push((controller, sda, scl));
+        let (a, b) = (wiring::BUS_A_PINS, wiring::BUS_B_PINS);
+        tracing::warn!(
+            "emulated board: I2C{controller} addresses 0x{address:02x} on SDA {} / SCL {}, where no sensor bus is wired (bus A: GP{}/GP{}, bus B: GP{}/GP{})",
+            gpio_name(sda),
+            gpio_name(scl),
+            a.0,
+            a.1,
+            b.0,
+            b.1
+        );
+    }
+
     fn i2c(&mut self, t_us: f64, controller: u8, sda: u8, scl: u8, event: I2cEvent) -> Option<u8> {
-        let c = usize::from(controller.min(1));
+        let c = usize::from(controller);
         match event {
             I2cEvent::Connect { address, .. } => {
                 self.bench.update(t_us as u64);
@@ -374,19 +398,7 @@ impl Wiring {
                 let ack = match bus {
                     Some(b) => self.buses[b as usize].connect(address),
                     None => {
-                        if !self.reported_routes.contains(&(controller, sda, scl)) {
-                            self.reported_routes.push((controller, sda, scl));
-                            let (a, b) = (wiring::BUS_A_PINS, wiring::BUS_B_PINS);
-                            tracing::warn!(
-                                "emulated board: I2C{controller} addresses 0x{address:02x} on SDA {} / SCL {}, where no sensor bus is wired (bus A: GP{}/GP{}, bus B: GP{}/GP{})",
-                                gpio_name(sda),
-                                gpio_name(scl),
-                                a.0,
-                                a.1,
-                                b.0,
-                                b.1
-                            );
-                        }
+                        self.report_unwired_bus(controller, sda, scl, address);
                         false
                     }
                 };
@@ -411,20 +423,29 @@ impl Wiring {
         }
     }
 
-    /// Input changes for the next slice: the quadrature edges since the last sync, and the
-    /// e-stop contact (open, so the pin is pulled high, while the button is pressed).
+    /// Input changes for the next slice: all input levels at the first sync, then the
+    /// quadrature edges since the last sync and the e-stop contact when it changed (open,
+    /// so the pin is pulled high, while the button is pressed).
     fn inputs(&mut self, estop_pressed: bool) -> Vec<(u8, bool)> {
         let count = i64::from(self.bench.quadrature.0.get());
-        let mut out = wiring::quadrature_edges(self.quadrature_count, count);
-        if self.estop_high.is_none() {
-            let (a, b) = wiring::quadrature_channels(count);
-            out = vec![(wiring::QUADRATURE_A, a), (wiring::QUADRATURE_B, b)];
-        }
-        self.quadrature_count = count;
-        if self.estop_high != Some(estop_pressed) {
-            self.estop_high = Some(estop_pressed);
-            out.push((wiring::ESTOP, estop_pressed));
-        }
+        let out = match self.inputs_sent {
+            None => {
+                let (a, b) = wiring::quadrature_channels(count);
+                vec![
+                    (wiring::QUADRATURE_A, a),
+                    (wiring::QUADRATURE_B, b),
+                    (wiring::ESTOP, estop_pressed),
+                ]
+            }
+            Some((sent, estop_sent)) => {
+                let mut edges = wiring::quadrature_edges(sent, count);
+                if estop_sent != estop_pressed {
+                    edges.push((wiring::ESTOP, estop_pressed));
+                }
+                edges
+            }
+        };
+        self.inputs_sent = Some((count, estop_pressed));
         out
     }
 }
@@ -462,53 +483,131 @@ impl Pacing {
     }
 }
 
+/// The host's side of the board: its port, what is attached to the pins, the files kept,
+/// the pacing and the status being built.
+struct Surroundings {
+    port: HostPort,
+    attached: Attached,
+    defmt_log: Option<OutputFile>,
+    /// (to-device.bin, to-host.bin)
+    capture: Option<(OutputFile, OutputFile)>,
+    pacing: Pacing,
+    st: PicoStatus,
+}
+
+impl Surroundings {
+    fn new(opts: &SimPicoOptions, port: HostPort) -> Result<Surroundings, PicoError> {
+        let capture = match &opts.capture {
+            Some(dir) => {
+                std::fs::create_dir_all(dir).map_err(|e| PicoError::Log {
+                    path: dir.clone(),
+                    message: e.to_string(),
+                })?;
+                Some((
+                    OutputFile::append(&dir.join("to-device.bin"))?,
+                    OutputFile::append(&dir.join("to-host.bin"))?,
+                ))
+            }
+            None => None,
+        };
+        Ok(Surroundings {
+            port,
+            attached: Attached::new(opts),
+            defmt_log: opts
+                .defmt_log
+                .as_deref()
+                .map(OutputFile::append)
+                .transpose()?,
+            capture,
+            pacing: Pacing {
+                start: Instant::now(),
+                slip: Duration::ZERO,
+                max_behind: Duration::ZERO,
+            },
+            st: PicoStatus::default(),
+        })
+    }
+
+    /// The end of a slice: pass the board's bytes to the host, wait for the wall clock,
+    /// and gather the answer (`None` when told to stop meanwhile).
+    fn sync(
+        &mut self,
+        t_us: f64,
+        usb: &[u8],
+        stop: &AtomicBool,
+        estop: &AtomicBool,
+    ) -> Result<Option<SyncReply>, PicoError> {
+        let now_us = t_us as u64;
+        let a = &mut self.attached;
+        a.bench.update(now_us);
+        let host_open = self.port.host_present();
+        let sent = to_host(
+            &mut self.port,
+            &mut a.bench.plant,
+            usb,
+            host_open,
+            &mut self.st,
+        )?;
+        if let Some((_, to_host_file)) = self.capture.as_mut() {
+            to_host_file.write(&sent)?;
+        }
+        self.pacing.wait_until(Duration::from_micros(now_us));
+        if stop.load(Ordering::Relaxed) {
+            return Ok(None);
+        }
+        let host_open = self.port.host_present();
+        let mut host_bytes = Vec::new();
+        if host_open {
+            self.port.read_all(&mut host_bytes)?;
+        }
+        if let Some((to_device_file, _)) = self.capture.as_mut() {
+            to_device_file.write(&host_bytes)?;
+        }
+        let st = &mut self.st;
+        st.bytes_in += host_bytes.len() as u64;
+        st.host_open = host_open;
+        st.time_s = t_us / 1e6;
+        st.max_behind_s = self.pacing.max_behind.as_secs_f64();
+        st.slipped_s = self.pacing.slip.as_secs_f64();
+        st.steps = a.bench.last_steps;
+        st.physical_steps = a.bench.physical;
+        st.enabled = a.bench.chip.enabled();
+        st.i2c_transfers = [a.buses[0].transfers(), a.buses[1].transfers()];
+        Ok(Some(SyncReply {
+            host_open,
+            inputs: a.inputs(estop.load(Ordering::Relaxed)),
+            host_bytes,
+        }))
+    }
+
+    fn publish(&self, status: &Mutex<PicoStatus>) {
+        *status.lock().unwrap_or_else(|p| p.into_inner()) = self.st.clone();
+    }
+}
+
 fn run(
     opts: SimPicoOptions,
-    mut port: HostPort,
+    port: HostPort,
     stop: &AtomicBool,
     estop: &AtomicBool,
     status: &Mutex<PicoStatus>,
 ) -> Result<(), PicoError> {
+    let mut around = Surroundings::new(&opts, port)?;
     let mut process = opts.files.spawn(opts.flash_id, SLICE_US)?;
     let stdout = process.child.stdout.take().expect("piped stdout");
     let stdin = process.child.stdin.take().expect("piped stdin");
     let mut from_board = BufReader::with_capacity(1 << 16, stdout);
     let mut to_board = BufWriter::new(stdin);
-    let mut wiring = Wiring::new(&opts);
-    let mut defmt_log = opts
-        .defmt_log
-        .as_deref()
-        .map(OutputFile::append)
-        .transpose()?;
-    let mut capture = match &opts.capture {
-        Some(dir) => {
-            std::fs::create_dir_all(dir).map_err(|e| PicoError::Log {
-                path: dir.clone(),
-                message: e.to_string(),
-            })?;
-            Some((
-                OutputFile::append(&dir.join("to-device.bin"))?,
-                OutputFile::append(&dir.join("to-host.bin"))?,
-            ))
-        }
-        None => None,
-    };
-    let mut st = PicoStatus::default();
-    let mut pacing = Pacing {
-        start: Instant::now(),
-        slip: Duration::ZERO,
-        max_behind: Duration::ZERO,
-    };
     loop {
         let Some(msg) = link::read_message(&mut from_board)? else {
-            if stop.load(Ordering::Relaxed) || st.halted.is_some() {
+            if stop.load(Ordering::Relaxed) || around.st.halted.is_some() {
                 break;
             }
             let _ = process.child.wait();
             return Err(PicoError::Exited(process.stderr_tail()));
         };
         match msg {
-            BoardMessage::Pin { gpio, level, .. } => wiring.pin(gpio, level),
+            BoardMessage::Pin { gpio, level, .. } => around.attached.pin(gpio, level),
             BoardMessage::I2c {
                 t_us,
                 controller,
@@ -516,47 +615,17 @@ fn run(
                 scl,
                 event,
             } => {
-                if let Some(v) = wiring.i2c(t_us, controller, sda, scl, event) {
+                if let Some(v) = around.attached.i2c(t_us, controller, sda, scl, event) {
                     link::send(&mut to_board, &link::encode_i2c_reply(v))?;
                 }
             }
-            BoardMessage::Sync { t_us, usb } => {
-                let now_us = t_us as u64;
-                wiring.bench.update(now_us);
-                let host_open = port.host_present();
-                let sent = to_host(&mut port, &mut wiring.bench.plant, &usb, host_open, &mut st)?;
-                if let Some((_, to_host_file)) = capture.as_mut() {
-                    to_host_file.write(&sent)?;
+            BoardMessage::Sync { t_us, usb } => match around.sync(t_us, &usb, stop, estop)? {
+                Some(reply) => {
+                    link::send(&mut to_board, &link::encode_sync_reply(&reply))?;
+                    around.publish(status);
                 }
-                pacing.wait_until(Duration::from_micros(now_us));
-                if stop.load(Ordering::Relaxed) {
-                    break;
-                }
-                let host_open = port.host_present();
-                let mut host_bytes = Vec::new();
-                if host_open {
-                    port.read_all(&mut host_bytes)?;
-                }
-                st.bytes_in += host_bytes.len() as u64;
-                if let Some((to_device_file, _)) = capture.as_mut() {
-                    to_device_file.write(&host_bytes)?;
-                }
-                st.host_open = host_open;
-                let reply = SyncReply {
-                    host_open,
-                    inputs: wiring.inputs(estop.load(Ordering::Relaxed)),
-                    host_bytes,
-                };
-                link::send(&mut to_board, &link::encode_sync_reply(&reply))?;
-                st.time_s = t_us / 1e6;
-                st.max_behind_s = pacing.max_behind.as_secs_f64();
-                st.slipped_s = pacing.slip.as_secs_f64();
-                st.steps = wiring.bench.last_steps;
-                st.physical_steps = wiring.bench.physical;
-                st.enabled = wiring.bench.chip.enabled();
-                st.i2c_transfers = [wiring.buses[0].transfers(), wiring.buses[1].transfers()];
-                *status.lock().unwrap_or_else(|p| p.into_inner()) = st.clone();
-            }
+                None => break,
+            },
             BoardMessage::Usb(d) => {
                 tracing::info!(
                     "emulated board enumerated: {:04x}:{:04x} `{}` `{}`, serial number `{}`",
@@ -566,7 +635,7 @@ fn run(
                     d.product.as_deref().unwrap_or("-"),
                     d.serial.as_deref().unwrap_or("-"),
                 );
-                st.usb = Some(d);
+                around.st.usb = Some(d);
             }
             BoardMessage::Log { warning, text } => {
                 if warning {
@@ -577,12 +646,12 @@ fn run(
             }
             BoardMessage::Halt(reason) => {
                 tracing::error!("emulated board stopped: {reason}");
-                st.halted = Some(reason);
-                *status.lock().unwrap_or_else(|p| p.into_inner()) = st.clone();
+                around.st.halted = Some(reason);
+                around.publish(status);
             }
             BoardMessage::Rtt(bytes) => {
-                st.log_bytes += bytes.len() as u64;
-                if let Some(f) = defmt_log.as_mut() {
+                around.st.log_bytes += bytes.len() as u64;
+                if let Some(f) = around.defmt_log.as_mut() {
                     f.write(&bytes)?;
                 }
             }
