@@ -18,7 +18,7 @@
 
 import * as fs from 'node:fs';
 import { parseArgs } from 'node:util';
-import { GPIOPinState, Simulator } from 'rp2040js';
+import { GPIOPinState, RP2040 } from 'rp2040js';
 
 import { findSymbol, loadableSegments } from './lib/elf.mjs';
 import { answerFlashUniqueId, mapXipControl, raiseTxEmptyOnAbort } from './lib/fixes.mjs';
@@ -27,6 +27,7 @@ import { RttReader } from './lib/rtt.mjs';
 import { UsbHost } from './lib/usb-host.mjs';
 
 const FLASH_BASE = 0x10000000;
+/** The ROM's size (RP2040 datasheet, address map). */
 const ROM_SIZE = 16 * 1024;
 /** I²C function of a GPIO (RP2040 datasheet, GPIO function table: F3). */
 const FUNCSEL_I2C = 3;
@@ -70,8 +71,7 @@ function readElf(path) {
   }
 }
 
-const simulator = new Simulator();
-const mcu = simulator.rp2040;
+const mcu = new RP2040();
 const { clock } = mcu;
 const link = new Link();
 
@@ -198,7 +198,7 @@ function halt(reason) {
 // RTT: the firmware's defmt frames, read from its up-channel 0 as a debug probe would.
 const rtt = new RttReader(mcu, findSymbol(image.bytes, args.image, '_SEGGER_RTT'));
 
-/** Input changes for the next slice, spread evenly across it (all at once when `now`). */
+/** Input changes for the next slice, spread evenly across it (all at once when `atOnce`). */
 function applyInputs(inputs, atOnce) {
   inputs.forEach(({ gpio, level }, k) => {
     const pin = mcu.gpio[gpio];
@@ -237,11 +237,12 @@ function sync(initial = false) {
   }
 }
 
-const cycleNs = 1e9 / 125e6;
 const { core } = mcu;
 sync(true); // the initial input levels, before the first instruction
 for (;;) {
   const end = clock.nanos + sliceNs;
+  // clk_sys as the firmware configured it (125 MHz under embassy-rp's defaults).
+  const cycleNs = 1e9 / mcu.clkSys;
   while (clock.nanos < end && halted === null) {
     if (core.waiting) {
       const next = clock.nanosToNextAlarm;
