@@ -97,10 +97,11 @@ export class UsbHost {
     this.lineState = 0;
     this.lineStateDone = 0;
     this.toDevice = [];
-    // Buffers the device armed: OUT endpoint → length, IN endpoint → packet. The device arms
-    // its OUT buffers while it handles SET_CONFIGURATION, before that request completes.
+    // OUT buffers the device armed (endpoint → length): it arms them while it handles
+    // SET_CONFIGURATION, before that request completes. The IN packet armed on the CDC data
+    // endpoint and not yet read.
     this.outArmed = new Map();
-    this.inHeld = new Map();
+    this.inHeld = null;
     this.buffers = holdDataEndpointBuffers(usb, {
       onOutArmed: (endpoint, length) => {
         this.outArmed.set(endpoint, length);
@@ -108,7 +109,7 @@ export class UsbHost {
       },
       onInArmed: (endpoint, packet) => {
         if (this.cdc !== null && endpoint === this.cdc.in) {
-          this.inHeld.set(endpoint, packet);
+          this.inHeld = packet;
           this.readIn();
         } else {
           // The notification endpoint: the cdc-acm driver polls it whenever the port is
@@ -154,7 +155,7 @@ export class UsbHost {
     this.lineState = 0;
     this.lineStateDone = 0;
     this.outArmed.clear();
-    this.inHeld.clear();
+    this.inHeld = null;
     const info = {};
     this.control(setup(0x00, 5, 1, 0, 0)); // SET_ADDRESS 1
     this.control(getDescriptor(DESCRIPTOR_DEVICE, 0, 18), (device) => {
@@ -251,11 +252,11 @@ export class UsbHost {
   }
 
   readIn() {
-    const packet = this.cdc === null ? undefined : this.inHeld.get(this.cdc.in);
-    if (packet === undefined || !this.portOpen) {
+    const packet = this.inHeld;
+    if (packet === null || !this.portOpen) {
       return;
     }
-    this.inHeld.delete(this.cdc.in);
+    this.inHeld = null;
     this.buffers.completeIn(this.cdc.in);
     this.events.onData(packet);
   }

@@ -241,6 +241,8 @@ impl Drop for PicoHandle {
 /// Start an emulated board on a new pseudo-terminal.
 pub fn spawn(opts: SimPicoOptions) -> Result<PicoHandle, PicoError> {
     refuse_unsupported_faults(&opts.plant)?;
+    // Checked here too (the board thread checks again when it starts the harness) so that a
+    // missing file is an error of `spawn`, not of a thread already running.
     opts.files.check()?;
     let port = HostPort::open()?;
     let link = match &opts.link {
