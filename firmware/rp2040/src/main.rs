@@ -205,7 +205,7 @@ async fn main(spawner: Spawner) {
     let mut tx = [0u8; 64];
     // The host has configured the device (its endpoints are enabled).
     let mut configured = false;
-    let mut listening = false;
+    let mut was_connected = false;
     loop {
         let wake = device
             .next_deadline_us()
@@ -226,8 +226,8 @@ async fn main(spawner: Spawner) {
         device.set_estop_input(estop.is_high());
         device.poll();
         let connected = configured && class.dtr();
-        if connected != listening {
-            listening = connected;
+        if connected != was_connected {
+            was_connected = connected;
             info!(
                 "host {=str} the port",
                 if connected { "opened" } else { "closed" }
