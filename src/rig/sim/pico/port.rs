@@ -9,13 +9,12 @@
 //! without being asked. Owns the pseudo-terminal only.
 
 use std::fs::File;
-use std::io::{Read, Write};
 use std::os::fd::AsFd;
 use std::path::{Path, PathBuf};
 
 use nix::poll::{PollFd, PollFlags, PollTimeout};
 
-use crate::rig::sim::pty::open_raw_pair;
+use crate::rig::sim::pty::{self, open_raw_pair};
 use crate::rig::RigError;
 
 /// The device end of the board's serial port.
@@ -53,13 +52,7 @@ impl HostPort {
 
     /// Read what the host wrote so far (0 when nothing waits or nobody holds the port).
     pub fn read_available(&mut self, buf: &mut [u8]) -> Result<usize, RigError> {
-        match self.master.read(buf) {
-            Ok(n) => Ok(n),
-            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => Ok(0),
-            // EIO: no program holds the host end.
-            Err(e) if e.raw_os_error() == Some(nix::libc::EIO) => Ok(0),
-            Err(e) => Err(RigError::Pty(format!("read: {e}"))),
-        }
+        pty::read_available(&mut self.master, buf)
     }
 
     /// Append everything the host wrote so far to `out`.
@@ -77,24 +70,14 @@ impl HostPort {
     /// Write bytes to the host; what does not fit (a host that stopped reading) is dropped.
     /// Returns how many were written.
     pub fn write_lossy(&mut self, bytes: &[u8]) -> Result<usize, RigError> {
-        let mut done = 0;
-        while done < bytes.len() {
-            match self.master.write(&bytes[done..]) {
-                Ok(0) => break,
-                Ok(n) => done += n,
-                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break,
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(e) if e.raw_os_error() == Some(nix::libc::EIO) => break,
-                Err(e) => return Err(RigError::Pty(format!("write: {e}"))),
-            }
-        }
-        Ok(done)
+        pty::write_lossy(&mut self.master, bytes)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::io::{Read, Write};
     use std::time::{Duration, Instant};
 
     /// Guards the presence detection DTR follows: nobody at first, present while a program
