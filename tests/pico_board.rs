@@ -211,7 +211,8 @@ impl Host {
     }
 }
 
-/// The board's status once its simulated time has passed `t_s` (it may lag the wall clock).
+/// The board's status once its simulated time has passed `t_s` (it may lag the wall clock;
+/// the status is published at the end of each 1 ms slice).
 fn status_after(board: &PicoHandle, t_s: f64) -> PicoStatus {
     let end = Instant::now() + REPLY_WAIT;
     loop {
@@ -269,8 +270,8 @@ fn sensors_pins_and_serial_number_as_wired() {
         last.encoder_a
     );
     assert_eq!(host.ack(Command::SetMotorEnabled(false)), AckCode::Ok);
-    host.pump(Duration::from_millis(50));
-    assert!(!b.status().enabled, "EN inactive after disabling");
+    let s = status_after(&b, b.status().time_s + 0.005);
+    assert!(!s.enabled, "EN inactive after disabling: {s:?}");
     let s = b.stop().unwrap();
     assert!(s.i2c_transfers[1] > 0, "bus B was probed: {s:?}");
 }
@@ -347,7 +348,8 @@ fn estop_input_stops_and_latches() {
         "cleared while the button is pressed"
     );
     b.set_estop(false);
-    host.heartbeats(Duration::from_millis(50));
+    // The release reaches the pin within a slice of board time; the clear must come after.
+    status_after(&b, b.status().time_s + 0.01);
     assert_eq!(host.ack(Command::ClearEmergencyStop), AckCode::Ok);
     assert!(!b.status().enabled);
 }
