@@ -15,7 +15,9 @@ pub mod measure;
 pub mod motion;
 pub mod ports;
 pub mod sim_device;
+pub mod sim_pico;
 pub mod synth;
+pub mod wire_dump;
 
 /// Design, fabricate and bench-verify multi-point conjugation mechanisms.
 #[derive(Debug, Parser)]
@@ -51,6 +53,8 @@ pub enum Command {
     SimDevice(sim_device::SimDeviceArgs),
     /// Measure a mechanism on a bench (real or simulated) and record it.
     Measure(measure::MeasureArgs),
+    /// Print a captured byte stream of the bench link frame by frame, to debug a link.
+    WireDump(wire_dump::WireDumpArgs),
 }
 
 /// Set up `tracing` output on stderr from the -v/-q flags (`RUST_LOG` overrides).
@@ -85,6 +89,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Synth(args) => synth::run(args),
         Command::SimDevice(args) => sim_device::run(args),
         Command::Measure(args) => measure::run(args),
+        Command::WireDump(args) => wire_dump::run(args),
     }
 }
 

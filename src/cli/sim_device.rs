@@ -40,6 +40,9 @@ pub enum SimDevice {
     /// A Dynamixel Protocol 2.0 bus: an XL430-W250 driver servo and a torque-off XL430
     /// follower servo whose present position obeys the plant model.
     Dynamixel(SimDynamixelArgs),
+    /// The board image of firmware/rp2040 in the rp2040js emulator (Node.js), on the
+    /// stepper bench's plant and sensors; its USB serial port on a pseudo-terminal.
+    Pico(super::sim_pico::SimPicoArgs),
     /// A mixed bench from a rig file with `[sensor_board]`: a Dynamixel bus whose driver
     /// servo turns the mechanism and our firmware reading the follower on a second
     /// pseudo-terminal. Prints `NAME=PATH NAME=PATH` (the rig's port names) on its first
@@ -132,6 +135,7 @@ pub fn run(args: SimDeviceArgs) -> anyhow::Result<ExitCode> {
         SimDevice::Stepper(a) => run_stepper(a),
         SimDevice::Dynamixel(a) => run_dynamixel(a),
         SimDevice::Mixed(a) => run_mixed(a),
+        SimDevice::Pico(a) => super::sim_pico::run(a),
     }
 }
 
@@ -160,7 +164,7 @@ fn run_mixed(a: SimMixedArgs) -> anyhow::Result<ExitCode> {
 }
 
 /// Block until Ctrl-C or until the simulator stops serving by itself.
-fn serve_until_ctrl_c(running: impl Fn() -> bool) -> anyhow::Result<()> {
+pub(super) fn serve_until_ctrl_c(running: impl Fn() -> bool) -> anyhow::Result<()> {
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
     ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
@@ -171,7 +175,7 @@ fn serve_until_ctrl_c(running: impl Fn() -> bool) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn plant_from(faults: &[String]) -> anyhow::Result<PlantConfig> {
+pub(super) fn plant_from(faults: &[String]) -> anyhow::Result<PlantConfig> {
     PlantConfig::from_faults(faults).with_context(|| {
         let keys: Vec<&str> = FAULT_KEYS.iter().map(|k| k.0).collect();
         format!("known --fault keys: {}", keys.join(", "))
@@ -222,7 +226,7 @@ fn run_stepper(a: SimStepperArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-fn load_target(t: &TargetArgs) -> anyhow::Result<Motion> {
+pub(super) fn load_target(t: &TargetArgs) -> anyhow::Result<Motion> {
     match (&t.mechanism, &t.motion) {
         (Some(m), _) => Motion::from_mechanism_file(m)
             .with_context(|| format!("loading mechanism {}", m.display())),

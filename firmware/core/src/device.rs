@@ -11,8 +11,8 @@ use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::OutputPin;
 use mpc_wire::{
     encode_frame, AckCode, BoardName, Capabilities, Command, Config, Decoder, DeviceInfo, Event,
-    EventKind, Report, Sample, SampleFlags, SensorSet, Status, StatusFlags, MAX_BATCH,
-    MAX_FRAME_LEN, PROTOCOL_VERSION,
+    EventKind, Report, Sample, SampleFlags, SensorSet, Status, StatusFlags, ESTOP_BY_INPUT,
+    MAX_BATCH, MAX_FRAME_LEN, PROTOCOL_VERSION,
 };
 
 use crate::outbox::Outbox;
@@ -70,6 +70,7 @@ pub struct Device<P: Platform> {
     stepper: StepGenerator,
     enabled: bool,
     estop: bool,
+    estop_input: bool,
     disable_at_rest: bool,
     watchdog: Watchdog,
     watchdog_tripped: bool,
@@ -108,6 +109,7 @@ impl<P: Platform> Device<P> {
             }),
             enabled: false,
             estop: false,
+            estop_input: false,
             disable_at_rest: false,
             watchdog: Watchdog::new(DEFAULT_WATCHDOG_MS, now),
             watchdog_tripped: false,
@@ -133,7 +135,13 @@ impl<P: Platform> Device<P> {
         d.probe_sensors();
         if d.pin_fault {
             d.estop = true;
+            error!("boot: a driver pin cannot be set; emergency stop latched");
         }
+        info!(
+            "boot: sensors answering {=u8:#x} of {=u8:#x} fitted",
+            d.capabilities.bits(),
+            d.board.fitted.bits()
+        );
         d.event(EventKind::Boot, 0, now);
         d
     }
@@ -188,6 +196,21 @@ impl<P: Platform> Device<P> {
     /// Whether the emergency stop is latched.
     pub fn estop_latched(&self) -> bool {
         self.estop
+    }
+
+    /// The board's e-stop input: `asserted` while the button is pressed or its loop is
+    /// broken. Asserting it latches the emergency stop (an [`EventKind::EmergencyStop`]
+    /// event with detail [`ESTOP_BY_INPUT`]); while it stays asserted, `ClearEmergencyStop`
+    /// is refused. A board without the input never calls it.
+    pub fn set_estop_input(&mut self, asserted: bool) {
+        if asserted && !self.estop_input {
+            warn!("e-stop input asserted");
+            let now = self.parts.clock.now_us();
+            self.emergency_stop(now, ESTOP_BY_INPUT);
+        } else if !asserted && self.estop_input {
+            info!("e-stop input released (the stop stays latched until cleared)");
+        }
+        self.estop_input = asserted;
     }
 
     /// Whether steps are being generated.
@@ -250,7 +273,10 @@ impl<P: Platform> Device<P> {
             match self.decoder.push(b) {
                 None => {}
                 Some(Ok(frame)) => self.on_command(frame.seq, frame.msg),
-                Some(Err(_)) => self.rx_errors = self.rx_errors.wrapping_add(1),
+                Some(Err(_)) => {
+                    debug!("dropped a damaged frame from the host");
+                    self.rx_errors = self.rx_errors.wrapping_add(1);
+                }
             }
         }
     }
@@ -296,7 +322,8 @@ impl<P: Platform> Device<P> {
         let low = self.parts.step.set_low().is_ok();
         if !(high && low) || self.pin_fault {
             self.pin_fault = true;
-            self.emergency_stop(now);
+            error!("STEP or DIR pin cannot be set; emergency stop");
+            self.emergency_stop(now, 0);
         }
         if let Some(c) = self.stepper.take_completion() {
             self.completed(c, ev.at_us.max(now));
@@ -332,14 +359,16 @@ impl<P: Platform> Device<P> {
         self.pin_fault |= !ok;
     }
 
-    fn emergency_stop(&mut self, now: u64) {
+    /// Stop stepping at once, disable the driver and latch; `detail` says why (the event's
+    /// [`Event::detail`]: 0 for the command or a pin fault, [`ESTOP_BY_INPUT`]).
+    fn emergency_stop(&mut self, now: u64, detail: u8) {
         self.stepper.halt();
         self.set_enable_pin(false);
         self.disable_at_rest = false;
         let was = self.estop;
         self.estop = true;
         if !was {
-            self.event(EventKind::EmergencyStop, 0, now);
+            self.event(EventKind::EmergencyStop, detail, now);
         }
     }
 
@@ -349,6 +378,7 @@ impl<P: Platform> Device<P> {
             return;
         }
         self.watchdog_tripped = true;
+        warn!("watchdog: no command or heartbeat in time; stopping the motor and the stream");
         if let Some(b) = self.sampler.stop() {
             self.send(Report::Samples(b));
         }
@@ -429,6 +459,7 @@ impl<P: Platform> Device<P> {
         let was = self.healthy.contains(sensor);
         self.healthy.set(sensor, ok);
         if was && !ok {
+            warn!("sensor {=u8:#x} stopped answering", sensor.bits());
             self.event(EventKind::SensorFault, sensor.bits(), now);
         }
     }
@@ -454,6 +485,9 @@ impl<P: Platform> Device<P> {
         };
         if !queued {
             if let Report::Samples(b) = report {
+                if self.samples_dropped == 0 {
+                    warn!("output queue full: dropping sample batches (the host does not read)");
+                }
                 self.samples_dropped = self.samples_dropped.wrapping_add(b.len() as u32);
             }
         }
@@ -512,6 +546,10 @@ impl<P: Platform> Device<P> {
                 self.sampler.stop();
                 self.stepper.stop(now);
                 self.version_ok = protocol_version == PROTOCOL_VERSION;
+                info!(
+                    "hello: host protocol {=u16}, ours {=u16}",
+                    protocol_version, PROTOCOL_VERSION
+                );
                 return Report::Hello(self.info(seq));
             }
             Command::Configure(c) => self.configure(c),
@@ -565,11 +603,12 @@ impl<P: Platform> Device<P> {
                 AckCode::Ok
             }
             Command::EmergencyStop => {
-                self.emergency_stop(now);
+                warn!("emergency stop commanded");
+                self.emergency_stop(now, 0);
                 AckCode::Ok
             }
             Command::ClearEmergencyStop => {
-                if self.pin_fault {
+                if self.pin_fault || self.estop_input {
                     AckCode::EStopLatched
                 } else {
                     self.estop = false;
@@ -642,6 +681,12 @@ impl<P: Platform> Device<P> {
         }
         self.watchdog.set_timeout_ms(c.watchdog_ms);
         self.config = Some(c);
+        info!(
+            "configured: {=u16} Hz, sensors {=u8:#x}, watchdog {=u16} ms",
+            c.sample_rate_hz,
+            c.sensors.bits(),
+            c.watchdog_ms
+        );
         AckCode::Ok
     }
 

@@ -12,6 +12,10 @@
 //! - [`sampler`]: sample scheduling, IMU decimation, batching.
 //! - [`sensors`]: AS5600 and BNO055 drivers, quadrature decoder.
 //! - [`watchdog`], [`outbox`]: dead-man deadline; transmit queue.
+//! - [`identity`]: the USB serial number made from the flash's unique ID.
+//!
+//! Logging goes through embassy-style macros (`fmt.rs`): defmt frames with the `defmt`
+//! feature (the board), nothing without it (host tests, the simulated bench).
 //!
 //! # Running it (a board, or the host's simulated bench)
 //! The device is passive: feed it received bytes, poll it at or after its next deadline
@@ -92,7 +96,11 @@
 #![cfg_attr(not(test), no_std)]
 #![warn(missing_docs)]
 
+#[macro_use]
+mod fmt;
+
 pub mod device;
+pub mod identity;
 pub mod outbox;
 pub mod platform;
 pub mod sampler;
@@ -101,4 +109,5 @@ pub mod stepper;
 pub mod watchdog;
 
 pub use device::{mdeg_to_usteps, Device, FIRMWARE_VERSION};
+pub use identity::SerialNumber;
 pub use platform::{BoardConfig, Clock, NoBus, NoQuadrature, Parts, Platform, QuadratureCounter};

@@ -481,6 +481,44 @@ fn trapezoidal_moves_end_exactly_on_target() {
     assert_eq!((b.device.position(), b.net_steps.get()), (0, 0));
 }
 
+/// Guards the e-stop input: asserting it stops the steps and disables the driver at once,
+/// latches the stop with an event saying it came from the input, and `ClearEmergencyStop`
+/// is refused while the input stays asserted and accepted once it is released.
+#[test]
+fn estop_input_latches_and_holds_while_asserted() {
+    let mut b = Bench::new();
+    b.configure(config());
+    b.request(Command::SetMotorEnabled(true));
+    b.request(Command::RunSpeed {
+        speed_mdeg_s: 360_000,
+    });
+    b.run_until(300_000, 100_000);
+    let at_stop = b.net_steps.get();
+    assert!(at_stop > 0);
+    b.device.set_estop_input(true);
+    assert!(b.enable.high.get(), "driver disabled");
+    b.run_until(600_000, 100_000);
+    assert_eq!(b.net_steps.get(), at_stop, "no step after the e-stop input");
+    let events = b.events(EventKind::EmergencyStop);
+    assert_eq!(events.len(), 1);
+    assert_eq!(events[0].detail, mpc_wire::ESTOP_BY_INPUT);
+    assert_eq!(
+        ack_code(b.request(Command::ClearEmergencyStop)),
+        AckCode::EStopLatched,
+        "cleared while the input is asserted"
+    );
+    b.device.set_estop_input(false);
+    assert!(
+        b.device.estop_latched(),
+        "releasing the input does not clear the stop"
+    );
+    assert_eq!(
+        ack_code(b.request(Command::ClearEmergencyStop)),
+        AckCode::Ok
+    );
+    assert!(!b.device.is_enabled());
+}
+
 /// Guards the latched emergency stop: steps cease at once, the driver is disabled, motion
 /// and enable are refused until cleared, and clearing does not re-enable the motor.
 #[test]

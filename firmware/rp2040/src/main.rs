@@ -1,20 +1,26 @@
 //! Bench firmware for a Raspberry Pi Pico (RP2040): runs `mpc-firmware-core`'s [`Device`]
-//! with embassy-rp. USB CDC-ACM serial to the host, STEP/DIR/EN on GPIO outputs timed by
-//! the 1 MHz system timer, two blocking I²C buses for the sensors, and a software
-//! quadrature decoder on two GPIO inputs. Pin map and wiring: `firmware/README.md`.
+//! with embassy-rp. USB CDC-ACM serial to the host with the flash's unique ID as serial
+//! number, STEP/DIR/EN on GPIO outputs timed by the 1 MHz system timer, two blocking I²C
+//! buses for the sensors, a software quadrature decoder on two GPIO inputs, and an e-stop
+//! input. Pin map and wiring: `firmware/README.md`. Logs go out as defmt frames over RTT.
 //!
 //! One loop owns the device: it sleeps until the device's next deadline (next step, next
-//! sample, watchdog) or until a USB packet arrives, polls the device, and writes queued
+//! sample, watchdog), a USB packet or an e-stop edge, polls the device, and writes queued
 //! frames with a short timeout so a host that stops reading cannot stall the steps (the
-//! device then drops and counts sample batches).
+//! device then drops and counts sample batches). Frames go out only while a program holds
+//! the port open (DTR set, as Linux, macOS and Windows set it on open); otherwise they are
+//! dropped, so that stale frames do not greet the next host.
 #![no_std]
 #![no_main]
 
 use core::sync::atomic::{AtomicI32, Ordering};
 
+use defmt::{info, warn};
+use defmt_rtt as _;
 use embassy_executor::Spawner;
-use embassy_futures::select::{select, Either};
+use embassy_futures::select::{select, select3, Either3};
 use embassy_rp::bind_interrupts;
+use embassy_rp::flash::{self, Flash};
 use embassy_rp::gpio::{Input, Level, Output, Pull};
 use embassy_rp::i2c::{self, Blocking, I2c};
 use embassy_rp::peripherals::{I2C0, I2C1, USB};
@@ -23,9 +29,11 @@ use embassy_time::{with_timeout, Delay, Duration, Instant, Timer};
 use embassy_usb::class::cdc_acm::{CdcAcmClass, State};
 use embassy_usb::{Builder, UsbDevice};
 use mpc_firmware_core::sensors::quadrature::QuadratureDecoder;
-use mpc_firmware_core::{BoardConfig, Clock, Device, Parts, Platform, QuadratureCounter};
+use mpc_firmware_core::{
+    BoardConfig, Clock, Device, Parts, Platform, QuadratureCounter, SerialNumber,
+};
 use mpc_wire::SensorSet;
-use panic_halt as _;
+use panic_probe as _;
 use static_cell::StaticCell;
 
 bind_interrupts!(struct Irqs {
@@ -55,8 +63,14 @@ const USB_VID_PID: (u16, u16) = (0x2E8A, 0x000A);
 /// takes a packet every 1 ms frame; longer waits would delay steps.
 const USB_WRITE_TIMEOUT_MS: u64 = 2;
 
-/// Longest sleep when the device has no deadline, ms (keeps USB connection checks going).
+/// Longest sleep when the device has no deadline, ms: how soon a change of DTR (a program
+/// opening or closing the port) is noticed.
 const IDLE_POLL_MS: u64 = 10;
+
+/// Size of the Pico's QSPI flash (W25Q16JV), bytes.
+const FLASH_SIZE: usize = 2 * 1024 * 1024;
+
+defmt::timestamp!("{=u64:us}", Instant::now().as_micros());
 
 /// Quadrature count published by the decoder task, read by the device.
 static QUADRATURE: AtomicI32 = AtomicI32::new(0);
@@ -106,6 +120,19 @@ async fn quadrature_task(mut a: Input<'static>, mut b: Input<'static>) -> ! {
     }
 }
 
+/// The USB serial number: the flash chip's unique ID in hex (see `SerialNumber`).
+fn serial_number(flash: embassy_rp::peripherals::FLASH) -> SerialNumber {
+    let mut flash = Flash::<_, flash::Blocking, FLASH_SIZE>::new_blocking(flash);
+    let mut id = [0u8; 8];
+    match flash.blocking_unique_id(&mut id) {
+        Ok(()) => SerialNumber::from_unique_id(id),
+        Err(_) => {
+            warn!("cannot read the flash unique ID; serial number 0000000000000000");
+            SerialNumber::from_unique_id([0; 8])
+        }
+    }
+}
+
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
     let p = embassy_rp::init(Default::default());
@@ -114,6 +141,16 @@ async fn main(spawner: Spawner) {
     let enable = Output::new(p.PIN_12, Level::High);
     let step = Output::new(p.PIN_10, Level::Low);
     let dir = Output::new(p.PIN_11, Level::Low);
+    // The e-stop button: a normally closed contact to ground. Pressed, or its wire broken,
+    // the pull-up takes the pin high.
+    let mut estop = Input::new(p.PIN_13, Pull::Up);
+
+    static SERIAL: StaticCell<SerialNumber> = StaticCell::new();
+    let serial = SERIAL.init(serial_number(p.FLASH));
+    info!(
+        "mpc-bench-rp2040 booting, USB serial number {=str}",
+        serial.as_str()
+    );
 
     let mut i2c_config = i2c::Config::default();
     i2c_config.frequency = I2C_HZ;
@@ -131,7 +168,7 @@ async fn main(spawner: Spawner) {
     let mut usb_config = embassy_usb::Config::new(USB_VID_PID.0, USB_VID_PID.1);
     usb_config.manufacturer = Some("mpc-rig");
     usb_config.product = Some("mpc bench (rp2040)");
-    usb_config.serial_number = Some("mpc-bench-1");
+    usb_config.serial_number = Some(serial.as_str());
     usb_config.max_power = 100;
     usb_config.max_packet_size_0 = 64;
     static CONFIG_DESC: StaticCell<[u8; 256]> = StaticCell::new();
@@ -166,22 +203,36 @@ async fn main(spawner: Spawner) {
 
     let mut rx = [0u8; 64];
     let mut tx = [0u8; 64];
-    let mut connected = false;
+    // The host has configured the device (its endpoints are enabled).
+    let mut configured = false;
+    let mut was_connected = false;
     loop {
         let wake = device
             .next_deadline_us()
             .map(Instant::from_micros)
             .unwrap_or_else(|| Instant::now() + Duration::from_millis(IDLE_POLL_MS));
-        if connected {
-            match select(class.read_packet(&mut rx), Timer::at(wake)).await {
-                Either::First(Ok(n)) => device.receive(&rx[..n]),
-                Either::First(Err(_)) => connected = false,
-                Either::Second(()) => {}
+        let edge = estop.wait_for_any_edge();
+        if configured {
+            match select3(class.read_packet(&mut rx), Timer::at(wake), edge).await {
+                Either3::First(Ok(n)) => device.receive(&rx[..n]),
+                Either3::First(Err(_)) => configured = false,
+                Either3::Second(()) | Either3::Third(()) => {}
             }
-        } else if let Either::First(()) = select(class.wait_connection(), Timer::at(wake)).await {
-            connected = true;
+        } else if let Either3::First(()) =
+            select3(class.wait_connection(), Timer::at(wake), edge).await
+        {
+            configured = true;
         }
+        device.set_estop_input(estop.is_high());
         device.poll();
+        let connected = configured && class.dtr();
+        if connected != was_connected {
+            was_connected = connected;
+            info!(
+                "host {=str} the port",
+                if connected { "opened" } else { "closed" }
+            );
+        }
         if connected {
             // Send what is queued, one packet at a time, never waiting long.
             while device.pending_output() > 0 {
@@ -196,7 +247,7 @@ async fn main(spawner: Spawner) {
                         }
                     }
                     Ok(Err(_)) => {
-                        connected = false;
+                        configured = false;
                         break;
                     }
                     Err(_) => break,

@@ -73,6 +73,8 @@ pub mod cobs;
 pub mod codec;
 pub mod command;
 pub mod crc;
+#[cfg(feature = "std")]
+pub mod dump;
 pub mod flags;
 pub mod frame;
 #[cfg(feature = "std")]
@@ -88,7 +90,7 @@ pub use frame::encode_frame_vec;
 pub use frame::{decode_payload, encode_frame, Decoder, Frame, FrameError, FRAME_OVERHEAD};
 pub use report::{
     AckCode, BoardName, Capabilities, DeviceInfo, Event, EventKind, MotionMode, Report, Sample,
-    SampleBatch, Status,
+    SampleBatch, Status, ESTOP_BY_INPUT,
 };
 
 /// Version of this protocol; both ends must agree exactly (checked in the handshake).

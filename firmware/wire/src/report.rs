@@ -363,7 +363,8 @@ pub enum EventKind {
     MoveDone = 2,
     /// A `Stop` finished decelerating.
     Stopped = 3,
-    /// The emergency stop latched.
+    /// The emergency stop latched; `detail` says why: 0 for the `EmergencyStop` command (or
+    /// a driver pin that cannot be set), [`ESTOP_BY_INPUT`] for the board's e-stop input.
     EmergencyStop = 4,
     /// The dead-man watchdog stopped the motor and the stream.
     WatchdogExpired = 5,
@@ -385,12 +386,16 @@ impl EventKind {
     }
 }
 
+/// [`Event::detail`] of an [`EventKind::EmergencyStop`] latched by the board's e-stop input.
+pub const ESTOP_BY_INPUT: u8 = 1;
+
 /// An unsolicited device event.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Event {
     /// What happened.
     pub kind: EventKind,
-    /// Kind-specific detail (sensor bits for [`EventKind::SensorFault`], else 0).
+    /// Kind-specific detail: sensor bits for [`EventKind::SensorFault`], the cause for
+    /// [`EventKind::EmergencyStop`], else 0.
     pub detail: u8,
     /// Device time, µs.
     pub timestamp_us: u32,

@@ -8,6 +8,8 @@
 //! - [`stepper`]: our firmware core on emulated pins and I²C sensors.
 //! - [`mixed`]: a Dynamixel bus turning the mechanism and a firmware sensor board reading
 //!   it, wired from a mixed rig file.
+//! - [`pico`]: the board image itself, run in the rp2040js emulator, on the stepper
+//!   bench's plant and sensor models.
 //! - [`pty`]: pseudo-terminal pairs (and a stable symlink for re-plugging).
 //!
 //! It owns no host-side protocol logic: the backends in [`crate::rig::backend`] are the
@@ -15,6 +17,7 @@
 
 pub mod dynamixel;
 pub mod mixed;
+pub mod pico;
 pub mod plant;
 pub mod pty;
 pub mod stepper;

@@ -77,31 +77,43 @@ impl Pty {
 
     /// Read what the host has written so far (0 when nothing is waiting).
     pub fn read_available(&mut self, buf: &mut [u8]) -> Result<usize, RigError> {
-        match self.master.read(buf) {
-            Ok(n) => Ok(n),
-            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => Ok(0),
-            // EIO on the master means no slave is open; ours always is, but be lenient.
-            Err(e) if e.raw_os_error() == Some(nix::libc::EIO) => Ok(0),
-            Err(e) => Err(RigError::Pty(format!("read: {e}"))),
-        }
+        read_available(&mut self.master, buf)
     }
 
     /// Write bytes to the host. When the host does not read and the pty buffer is full,
     /// the excess is dropped (like a USB CDC device whose host stopped polling) and the
     /// number of bytes actually written is returned.
     pub fn write_lossy(&mut self, bytes: &[u8]) -> Result<usize, RigError> {
-        let mut done = 0;
-        while done < bytes.len() {
-            match self.master.write(&bytes[done..]) {
-                Ok(0) => break,
-                Ok(n) => done += n,
-                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break,
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(e) => return Err(RigError::Pty(format!("write: {e}"))),
-            }
-        }
-        Ok(done)
+        write_lossy(&mut self.master, bytes)
     }
+}
+
+/// Read what the host has written to a non-blocking master so far (0 when nothing is
+/// waiting, or no slave is open: EIO).
+pub fn read_available(master: &mut File, buf: &mut [u8]) -> Result<usize, RigError> {
+    match master.read(buf) {
+        Ok(n) => Ok(n),
+        Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => Ok(0),
+        Err(e) if e.raw_os_error() == Some(nix::libc::EIO) => Ok(0),
+        Err(e) => Err(RigError::Pty(format!("read: {e}"))),
+    }
+}
+
+/// Write to a non-blocking master what fits; the rest (the host not reading, or no slave
+/// open: EIO) is dropped. Returns how many bytes were written.
+pub fn write_lossy(master: &mut File, bytes: &[u8]) -> Result<usize, RigError> {
+    let mut done = 0;
+    while done < bytes.len() {
+        match master.write(&bytes[done..]) {
+            Ok(0) => break,
+            Ok(n) => done += n,
+            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) if e.raw_os_error() == Some(nix::libc::EIO) => break,
+            Err(e) => return Err(RigError::Pty(format!("write: {e}"))),
+        }
+    }
+    Ok(done)
 }
 
 /// A symlink that always points at the current pseudo-terminal of a simulator.

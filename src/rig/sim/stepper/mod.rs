@@ -325,17 +325,19 @@ pub fn spawn(opts: SimStepperOptions) -> Result<SimHandle, RigError> {
     })
 }
 
-/// The simulator's loop state besides the firmware.
-struct Bench {
-    plant: Plant,
+/// The simulator's loop state besides the firmware: the driver chip's step count turned
+/// into the plant's follower and the sensor values. The emulated-board bench
+/// ([`crate::rig::sim::pico`]) drives the same one from the board image's pins.
+pub(in crate::rig::sim) struct Bench {
+    pub(in crate::rig::sim) plant: Plant,
     mech: Mechanics,
-    chip: DriverChip,
+    pub(in crate::rig::sim) chip: DriverChip,
     bus_a: SensorBus,
     bus_b: SensorBus,
-    quadrature: SimQuadrature,
-    last_steps: i64,
-    physical: i64,
-    missed: u64,
+    pub(in crate::rig::sim) quadrature: SimQuadrature,
+    pub(in crate::rig::sim) last_steps: i64,
+    pub(in crate::rig::sim) physical: i64,
+    pub(in crate::rig::sim) missed: u64,
     last_step_change_us: u64,
     external: Option<External>,
 }
@@ -380,8 +382,33 @@ impl External {
 }
 
 impl Bench {
+    /// A bench at rest whose follower obeys `plant` and whose sensors are those of `mech`.
+    pub(in crate::rig::sim) fn new(
+        plant: Plant,
+        mech: Mechanics,
+        chip: DriverChip,
+        bus_a: SensorBus,
+        bus_b: SensorBus,
+        quadrature: SimQuadrature,
+        external: Option<DriverAngleSource>,
+    ) -> Bench {
+        Bench {
+            plant,
+            mech,
+            chip,
+            bus_a,
+            bus_b,
+            quadrature,
+            last_steps: 0,
+            physical: 0,
+            missed: 0,
+            last_step_change_us: 0,
+            external: external.map(External::new),
+        }
+    }
+
     /// Account new steps and refresh the sensors for the present physical angle.
-    fn update(&mut self, now_us: u64) {
+    pub(in crate::rig::sim) fn update(&mut self, now_us: u64) {
         let steps = self.chip.pins().steps;
         let delta = steps - self.last_steps;
         if delta != 0 {
@@ -435,19 +462,15 @@ fn run(
     let bus_a = SensorBus::new(mech.as5600, mech.imu).with_read_hook(hook.clone());
     let bus_b = SensorBus::new(mech.as5600_b, false).with_read_hook(hook.clone());
     let quadrature = SimQuadrature(Default::default(), hook.clone());
-    let bench = Rc::new(RefCell::new(Bench {
-        plant: Plant::new(opts.target.clone(), opts.plant.clone()),
-        mech: mech.clone(),
-        chip: chip.clone(),
-        bus_a: bus_a.clone(),
-        bus_b: bus_b.clone(),
-        quadrature: quadrature.clone(),
-        last_steps: 0,
-        physical: 0,
-        missed: 0,
-        last_step_change_us: 0,
-        external: opts.driver.clone().map(External::new),
-    }));
+    let bench = Rc::new(RefCell::new(Bench::new(
+        Plant::new(opts.target.clone(), opts.plant.clone()),
+        mech.clone(),
+        chip.clone(),
+        bus_a.clone(),
+        bus_b.clone(),
+        quadrature.clone(),
+        opts.driver.clone(),
+    )));
     bench.borrow_mut().update(0);
     {
         // Sensors read what the plant is at the read's instant. Weak: the bench owns the
