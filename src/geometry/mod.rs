@@ -5,12 +5,17 @@
 //! |---|---|
 //! | [`mesh`] | indexed triangle meshes, measures, the watertightness (edge) check |
 //! | [`scene`] | parts with poses over one period, for animation and renders |
+//! | [`primitives`] | closed meshes of boxes, UV spheres and tori, built directly |
+//! | [`shading`] | crease-split vertex normals, as the GLB and the renders shade a mesh |
+//! | [`io`] | files: binary STL, 3MF packages laid out on a bed, the animated GLB |
 //!
 //! It does not know what a mechanism is: turning `mechanism.json` into parts is `build`'s
 //! job; this module gives it shapes, meshes and files.
 
 pub mod mesh;
+pub mod primitives;
 pub mod scene;
+pub mod shading;
 
 pub use mesh::{Aabb, Mesh, MeshCheck};
 pub use scene::{Pose, Scene, ScenePart};
