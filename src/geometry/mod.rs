@@ -12,6 +12,7 @@
 //! It does not know what a mechanism is: turning `mechanism.json` into parts is `build`'s
 //! job; this module gives it shapes, meshes and files.
 
+pub mod io;
 pub mod mesh;
 pub mod primitives;
 pub mod scene;
