@@ -367,7 +367,7 @@ fn write_package<W: Write + Seek>(
     zip.start_file("[Content_Types].xml", small)?;
     zip.write_all(CONTENT_TYPES.as_bytes())?;
     zip.start_file("_rels/.rels", small)?;
-    zip.write_all(RELS.as_bytes())?;
+    zip.write_all(rels().as_bytes())?;
     // Model XML runs to ~110 bytes per triangle: past 4 GiB the entry needs Zip64.
     let estimate: u64 = parts
         .iter()
@@ -393,11 +393,16 @@ const CONTENT_TYPES: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
 </Types>
 "#;
 
-const RELS: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
+/// `_rels/.rels`: the one relationship, from the package to the model part.
+fn rels() -> String {
+    format!(
+        r#"<?xml version="1.0" encoding="UTF-8"?>
 <Relationships xmlns="http://schemas.openxmlformats.org/package/2006/relationships">
- <Relationship Target="/3D/3dmodel.model" Id="rel0" Type="http://schemas.microsoft.com/3dmanufacturing/2013/01/3dmodel"/>
+ <Relationship Target="/{MODEL_PART}" Id="rel0" Type="{MODEL_REL_TYPE}"/>
 </Relationships>
-"#;
+"#
+    )
+}
 
 fn write_model(
     w: &mut impl Write,
