@@ -5,7 +5,7 @@
 //! |---|---|
 //! | [`mesh`] | indexed triangle meshes, measures, the watertightness (edge) check |
 //! | [`scene`] | parts with poses over one period, for animation and renders |
-//! | [`primitives`] | closed meshes of boxes, UV spheres and tori, built directly |
+//! | [`primitive_meshes`] | closed meshes of boxes, UV spheres and tori, built directly |
 //! | [`shading`] | crease-split vertex normals, as the GLB and the renders shade a mesh |
 //! | [`io`] | files: binary STL, 3MF packages laid out on a bed, the animated GLB |
 //!
@@ -14,7 +14,7 @@
 
 pub mod io;
 pub mod mesh;
-pub mod primitives;
+pub mod primitive_meshes;
 pub mod scene;
 pub mod shading;
 

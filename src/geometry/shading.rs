@@ -123,7 +123,7 @@ fn corner_angle(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::primitives::{cuboid, uv_sphere};
+    use crate::geometry::primitive_meshes::{cuboid, uv_sphere};
 
     /// A box splits at every edge: 24 vertices (4 per side), each normal along an axis.
     #[test]

@@ -4,7 +4,7 @@
 //! 5 mm up and down, over a period of 2 s in `keys` steps (the last key equals the first).
 //! Included by `#[path]` from the geometry test crates.
 
-use mpc_rig::geometry::primitives::{cuboid, torus, uv_sphere};
+use mpc_rig::geometry::primitive_meshes::{cuboid, torus, uv_sphere};
 use mpc_rig::geometry::{Mesh, Pose, Scene, ScenePart};
 
 /// Driver axis offset, mm.

@@ -512,7 +512,7 @@ fn check_scene(scene: &Scene) -> Result<(), SceneError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::primitives::{cuboid, uv_sphere};
+    use crate::geometry::primitive_meshes::{cuboid, uv_sphere};
     use crate::geometry::scene::ScenePart;
 
     fn turn_z(deg: f64) -> Pose {

@@ -199,7 +199,7 @@ pub fn parse_stl(bytes: &[u8]) -> Result<Mesh, StlFormatError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::primitives::{torus, uv_sphere};
+    use crate::geometry::primitive_meshes::{torus, uv_sphere};
 
     /// A written and read mesh has, triangle by triangle, the same corners rounded to f32,
     /// as many vertices (all distinct in f32) and still passes the edge check: the round

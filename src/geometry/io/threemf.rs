@@ -744,7 +744,7 @@ fn parse_model(part: &str, xml: &str) -> Result<ThreeMfModel, ThreeMfFormatError
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::primitives::{cuboid, torus, uv_sphere};
+    use crate::geometry::primitive_meshes::{cuboid, torus, uv_sphere};
 
     /// The two meshes have the same triangles over the same points rounded to f32 (the
     /// file's decimals are the shortest that read back to the written f32).

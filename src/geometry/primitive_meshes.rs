@@ -1,5 +1,5 @@
-//! Closed triangle meshes of simple solids, built directly rather than through a mesher:
-//! boxes, UV spheres and tori.
+//! Closed triangle meshes of simple solids, built directly rather than through the mesher
+//! from implicit solids (`sdf`): boxes, UV spheres and tori.
 //!
 //! Owns the three constructors. Each result is a closed, consistently oriented 2-manifold
 //! (it passes [`Mesh::check`]) with outward counter-clockwise faces, so exports, renders and
