@@ -8,6 +8,7 @@
 //! | [`primitive_meshes`] | closed meshes of boxes, UV spheres and tori, built directly |
 //! | [`shading`] | crease-split vertex normals, as the GLB and the renders shade a mesh |
 //! | [`io`] | files: binary STL, 3MF packages laid out on a bed, the animated GLB |
+//! | [`render`] | shaded, anti-aliased PNG pictures of a scene at a key time |
 //!
 //! It does not know what a mechanism is: turning `mechanism.json` into parts is `build`'s
 //! job; this module gives it shapes, meshes and files.
@@ -15,6 +16,7 @@
 pub mod io;
 pub mod mesh;
 pub mod primitive_meshes;
+pub mod render;
 pub mod scene;
 pub mod shading;
 
