@@ -1,9 +1,11 @@
-//! The 3MF package read by a reader that is not ours: Python `trimesh` (with `networkx` and
-//! `lxml`, which its 3MF loader needs; `.ci/run` installs them). Skipped, with a message
-//! saying why, when python3 or those packages are missing.
+//! The 3MF package and the GLB read by a reader that is not ours: Python `trimesh` (with
+//! `networkx` and `lxml`, which its 3MF loader needs; `.ci/run` installs them). Skipped, with
+//! a message saying why, when python3 or those packages are missing.
 
+use std::path::Path;
 use std::process::Command;
 
+use mpc_rig::geometry::io::gltf::write_glb;
 use mpc_rig::geometry::io::threemf::{write_3mf, Bed, Part};
 
 #[path = "support/scenes.rs"]
@@ -44,22 +46,7 @@ fn trimesh_reads_the_package() {
     let path = tmp.path().join("mechanism.3mf");
     let bed = Bed::default();
     let offsets = write_3mf(&path, &parts, &bed).expect("written");
-    let script = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/tests/support/threemf_trimesh_check.py"
-    );
-    let out = Command::new("python3")
-        .arg(script)
-        .arg(&path)
-        .output()
-        .expect("python3 runs");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "trimesh failed:\n{stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let report: serde_json::Value = serde_json::from_str(stdout.trim()).expect("JSON");
+    let report = trimesh_report(&path);
     eprintln!("trimesh: {report}");
     assert_eq!(report["units"], "millimeter");
     let objects = report["objects"].as_array().unwrap();
@@ -106,5 +93,61 @@ fn trimesh_reads_the_package() {
             "{} rests on the bed",
             part.name
         );
+    }
+}
+
+/// What `tests/support/trimesh_check.py` finds in `path`.
+fn trimesh_report(path: &Path) -> serde_json::Value {
+    let script = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/support/trimesh_check.py"
+    );
+    let out = Command::new("python3")
+        .arg(script)
+        .arg(path)
+        .output()
+        .expect("python3 runs");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "trimesh failed:\n{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_str(stdout.trim()).expect("the script prints JSON")
+}
+
+/// Guards the GLB's units and axes as a viewer sees them: trimesh places the three parts
+/// (at their first pose) in metres with our +z as glTF's +y and our +y as glTF's −z, so
+/// the scene spans x −0.025…0.055 m, y −0.018…0.007 m, z −0.025…0.025 m.
+#[test]
+fn trimesh_sees_the_glb_upright_in_metres() {
+    if let Err(why) = trimesh_available() {
+        eprintln!("SKIPPED trimesh_sees_the_glb_upright_in_metres: {why}");
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("assembly.glb");
+    write_glb(&path, &scenes::mechanism_scene(72)).expect("written");
+    let report = trimesh_report(&path);
+    eprintln!("trimesh: {}", report["bounds"]);
+    let names: Vec<&str> = report["objects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|o| o["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names.len(), 3, "{names:?}");
+    for want in ["support", "driver", "follower"] {
+        assert!(
+            names.iter().any(|n| n.starts_with(want)),
+            "{want} in {names:?}"
+        );
+    }
+    let want = [[-0.025, -0.018, -0.025], [0.055, 0.007, 0.025]];
+    for (i, row) in want.iter().enumerate() {
+        for (k, w) in row.iter().enumerate() {
+            let got = report["bounds"][i][k].as_f64().unwrap();
+            assert!((got - w).abs() < 1e-6, "bounds[{i}][{k}] = {got}, want {w}");
+        }
     }
 }

@@ -1,7 +1,8 @@
-"""Reads a 3MF package with trimesh (an independent reader) and prints, as one JSON object,
-what it found: for every placed object its name, vertex and face counts, whether trimesh
-finds it watertight, its volume and its bounds on the bed (build item transform applied).
-Used by tests/geometry_3mf_trimesh.rs. Usage: python3 threemf_trimesh_check.py FILE.3mf"""
+"""Reads a 3MF package or a GLB file with trimesh (an independent reader) and prints, as one
+JSON object, what it found: the scene's units and world bounds, and for every placed object
+its name, vertex and face counts, whether trimesh finds it watertight, its volume and its
+bounds in the world (build item or node transforms applied).
+Used by tests/geometry_trimesh.rs. Usage: python3 trimesh_check.py FILE"""
 import json
 import sys
 
@@ -27,4 +28,4 @@ for node in scene.graph.nodes_geometry:
             "bounds": placed.bounds.tolist(),
         }
     )
-print(json.dumps({"units": scene.units, "objects": objects}))
+print(json.dumps({"units": scene.units, "bounds": scene.bounds.tolist(), "objects": objects}))
