@@ -301,7 +301,7 @@ impl<'a> Renderer<'a> {
     /// The picture of the scene at key `key` seen along `view`.
     pub fn render(&self, key: usize, view: View) -> Result<Image, RenderError> {
         for part in &self.scene.parts {
-            if part.poses.len() != 1 && key >= part.poses.len() || part.poses.is_empty() {
+            if part.poses.is_empty() || (part.poses.len() != 1 && key >= part.poses.len()) {
                 return Err(RenderError::NoPose {
                     part: part.name.clone(),
                     poses: part.poses.len(),

@@ -16,7 +16,6 @@
 //! never write, with that reason. It does not check meshes (use [`Mesh::check`]).
 
 use std::borrow::Cow;
-use std::fmt::Write as _;
 use std::fs::File;
 use std::io::{BufWriter, Cursor, Read, Seek, Write};
 use std::path::{Path, PathBuf};
@@ -331,7 +330,8 @@ pub fn write_3mf(
         path: path.to_path_buf(),
         source,
     })?;
-    write_package(BufWriter::new(file), parts, &offsets).map_err(|source| match source {
+    let placed: Vec<_> = parts.iter().copied().zip(offsets.iter().copied()).collect();
+    write_package(BufWriter::new(file), &placed).map_err(|source| match source {
         ThreeMfFormatError::Write(source) => ThreeMfError::Io {
             path: path.to_path_buf(),
             source,
@@ -344,22 +344,17 @@ pub fn write_3mf(
     Ok(offsets)
 }
 
-/// The bytes of a 3MF package of `parts` placed at `offsets` (one translation per part).
-pub fn threemf_bytes(
-    parts: &[Part<'_>],
-    offsets: &[[f64; 3]],
-) -> Result<Vec<u8>, ThreeMfFormatError> {
+/// The bytes of a 3MF package of parts, each placed on the bed by a translation (mm).
+pub fn threemf_bytes(placed: &[(Part<'_>, [f64; 3])]) -> Result<Vec<u8>, ThreeMfFormatError> {
     let mut buf = Cursor::new(Vec::new());
-    write_package(&mut buf, parts, offsets)?;
+    write_package(&mut buf, placed)?;
     Ok(buf.into_inner())
 }
 
 fn write_package<W: Write + Seek>(
     out: W,
-    parts: &[Part<'_>],
-    offsets: &[[f64; 3]],
+    placed: &[(Part<'_>, [f64; 3])],
 ) -> Result<(), ThreeMfFormatError> {
-    assert_eq!(parts.len(), offsets.len(), "one offset per part");
     let mut zip = ZipWriter::new(out);
     let small = SimpleFileOptions::default()
         .compression_method(CompressionMethod::Deflated)
@@ -369,9 +364,9 @@ fn write_package<W: Write + Seek>(
     zip.start_file("_rels/.rels", small)?;
     zip.write_all(rels().as_bytes())?;
     // Model XML runs to ~110 bytes per triangle: past 4 GiB the entry needs Zip64.
-    let estimate: u64 = parts
+    let estimate: u64 = placed
         .iter()
-        .map(|p| 110 * p.mesh.triangles.len() as u64)
+        .map(|(p, _)| 110 * p.mesh.triangles.len() as u64)
         .sum();
     zip.start_file(
         MODEL_PART,
@@ -379,7 +374,7 @@ fn write_package<W: Write + Seek>(
     )?;
     {
         let mut w = BufWriter::with_capacity(1 << 20, &mut zip);
-        write_model(&mut w, parts, offsets)?;
+        write_model(&mut w, placed)?;
         w.flush()?;
     }
     zip.finish()?.flush()?;
@@ -404,11 +399,7 @@ fn rels() -> String {
     )
 }
 
-fn write_model(
-    w: &mut impl Write,
-    parts: &[Part<'_>],
-    offsets: &[[f64; 3]],
-) -> std::io::Result<()> {
+fn write_model(w: &mut impl Write, placed: &[(Part<'_>, [f64; 3])]) -> std::io::Result<()> {
     writeln!(w, r#"<?xml version="1.0" encoding="UTF-8"?>"#)?;
     writeln!(
         w,
@@ -420,8 +411,7 @@ fn write_model(
         env!("CARGO_PKG_VERSION")
     )?;
     writeln!(w, " <resources>")?;
-    let mut line = String::with_capacity(128);
-    for (i, p) in parts.iter().enumerate() {
+    for (i, (p, _)) in placed.iter().enumerate() {
         writeln!(
             w,
             r#"  <object id="{}" type="model" name="{}">"#,
@@ -430,21 +420,17 @@ fn write_model(
         )?;
         writeln!(w, "   <mesh>\n    <vertices>")?;
         for v in &p.mesh.vertices {
-            line.clear();
             let [x, y, z] = v.map(|c| c as f32);
-            writeln!(line, r#"     <vertex x="{x}" y="{y}" z="{z}"/>"#).expect("to a String");
-            w.write_all(line.as_bytes())?;
+            writeln!(w, r#"     <vertex x="{x}" y="{y}" z="{z}"/>"#)?;
         }
         writeln!(w, "    </vertices>\n    <triangles>")?;
         for [a, b, c] in &p.mesh.triangles {
-            line.clear();
-            writeln!(line, r#"     <triangle v1="{a}" v2="{b}" v3="{c}"/>"#).expect("to a String");
-            w.write_all(line.as_bytes())?;
+            writeln!(w, r#"     <triangle v1="{a}" v2="{b}" v3="{c}"/>"#)?;
         }
         writeln!(w, "    </triangles>\n   </mesh>\n  </object>")?;
     }
     writeln!(w, " </resources>\n <build>")?;
-    for (i, [x, y, z]) in offsets.iter().enumerate() {
+    for (i, (_, [x, y, z])) in placed.iter().enumerate() {
         writeln!(
             w,
             r#"  <item objectid="{}" transform="1 0 0 0 1 0 0 0 1 {x} {y} {z}"/>"#,
@@ -785,7 +771,8 @@ mod tests {
             .map(|(n, m)| Part { name: n, mesh: m })
             .collect();
         let offsets = layout(&ps, &Bed::default()).unwrap();
-        let bytes = threemf_bytes(&ps, &offsets).unwrap();
+        let placed: Vec<_> = ps.iter().copied().zip(offsets.iter().copied()).collect();
+        let bytes = threemf_bytes(&placed).unwrap();
         let zip = ZipArchive::new(Cursor::new(&bytes[..])).unwrap();
         let names: Vec<&str> = zip.file_names().collect();
         assert!(names.contains(&"3D/3dmodel.model"), "{names:?}");
@@ -894,9 +881,10 @@ mod tests {
             .map(|(n, m)| Part { name: n, mesh: m })
             .collect();
         let offsets = layout(&ps, &Bed::default()).unwrap();
+        let placed: Vec<_> = ps.iter().copied().zip(offsets).collect();
         assert_eq!(
-            threemf_bytes(&ps, &offsets).unwrap(),
-            threemf_bytes(&ps, &offsets).unwrap()
+            threemf_bytes(&placed).unwrap(),
+            threemf_bytes(&placed).unwrap()
         );
     }
 
