@@ -198,8 +198,8 @@ pub fn glb_bytes(scene: &Scene) -> Result<Vec<u8>, SceneError> {
             .collect();
         let normals: Vec<f32> = shaded.normals.iter().flatten().map(|&x| x as f32).collect();
         let indices: Vec<u32> = shaded.triangles.iter().flatten().copied().collect();
-        let pos = bin.floats(&positions, "VEC3", Some(ARRAY_BUFFER), true);
-        let nor = bin.floats(&normals, "VEC3", Some(ARRAY_BUFFER), false);
+        let pos = bin.floats(&positions, Kind::Vec3, Some(ARRAY_BUFFER), true);
+        let nor = bin.floats(&normals, Kind::Vec3, Some(ARRAY_BUFFER), false);
         let idx = bin.indices(&indices);
         meshes.push(json!({
             "name": part.name,
@@ -261,7 +261,7 @@ pub fn glb_bytes(scene: &Scene) -> Result<Vec<u8>, SceneError> {
         .collect();
     if !moving.is_empty() {
         let times: Vec<f32> = scene.times_s.iter().map(|&t| t as f32).collect();
-        let input = bin.floats(&times, "SCALAR", None, true);
+        let input = bin.floats(&times, Kind::Scalar, None, true);
         let (mut samplers, mut channels) = (Vec::new(), Vec::new());
         for &i in &moving {
             let part = &scene.parts[i];
@@ -281,8 +281,8 @@ pub fn glb_bytes(scene: &Scene) -> Result<Vec<u8>, SceneError> {
                 .iter()
                 .flat_map(|p| p.translation.map(|x| x as f32))
                 .collect();
-            let rot = bin.floats(&rotations, "VEC4", None, false);
-            let tra = bin.floats(&translations, "VEC3", None, false);
+            let rot = bin.floats(&rotations, Kind::Vec4, None, false);
+            let tra = bin.floats(&translations, Kind::Vec3, None, false);
             for (output, path) in [(rot, "rotation"), (tra, "translation")] {
                 channels.push(json!({
                     "sampler": samplers.len(),
@@ -326,6 +326,14 @@ const ELEMENT_ARRAY_BUFFER: u32 = 34963;
 const FLOAT: u32 = 5126;
 const UNSIGNED_INT: u32 = 5125;
 
+/// `accessor.type` of the float accessors we write.
+#[derive(Clone, Copy)]
+enum Kind {
+    Scalar,
+    Vec3,
+    Vec4,
+}
+
 /// The binary chunk being assembled, with its buffer views and accessors.
 #[derive(Default)]
 struct Bin {
@@ -347,14 +355,13 @@ impl Bin {
         self.views.len() - 1
     }
 
-    /// An accessor over `values` grouped as `kind` ("SCALAR", "VEC3", "VEC4"), with its
-    /// per-component bounds when `bounds`.
-    fn floats(&mut self, values: &[f32], kind: &str, target: Option<u32>, bounds: bool) -> usize {
-        let comps = match kind {
-            "SCALAR" => 1,
-            "VEC3" => 3,
-            "VEC4" => 4,
-            _ => unreachable!("accessor type {kind}"),
+    /// An accessor over `values` grouped as `kind`, with its per-component bounds when
+    /// `bounds`.
+    fn floats(&mut self, values: &[f32], kind: Kind, target: Option<u32>, bounds: bool) -> usize {
+        let (comps, kind) = match kind {
+            Kind::Scalar => (1, "SCALAR"),
+            Kind::Vec3 => (3, "VEC3"),
+            Kind::Vec4 => (4, "VEC4"),
         };
         let bytes: Vec<u8> = values.iter().flat_map(|x| x.to_le_bytes()).collect();
         let view = self.view(&bytes, target);
