@@ -24,6 +24,7 @@
 //! (that is `build`'s job) and draws no text.
 
 use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
 use crate::geometry::scene::{Pose, Scene};
 use crate::geometry::shading::{ShadedMesh, CREASE_ANGLE_DEG};
@@ -225,11 +226,14 @@ impl Image {
     }
 }
 
-/// A scene prepared for rendering: shading meshes built once, any number of pictures.
+/// A scene prepared for rendering: shading meshes built once, each view's camera fitted
+/// once, any number of pictures.
 pub struct Renderer<'a> {
     scene: &'a Scene,
     shaded: Vec<ShadedMesh>,
     options: RenderOptions,
+    /// The camera of each of [`View::ALL`], fitted on first use.
+    cameras: [OnceLock<Camera>; View::ALL.len()],
 }
 
 /// The z-buffer and what each sample saw.
@@ -295,6 +299,7 @@ impl<'a> Renderer<'a> {
             scene,
             shaded,
             options,
+            cameras: Default::default(),
         })
     }
 
@@ -309,10 +314,14 @@ impl<'a> Renderer<'a> {
                 });
             }
         }
-        let axes = view.axes();
         let ss = self.options.supersample as usize;
         let [w, h] = self.options.size_px.map(|s| s as usize * ss);
-        let camera = Camera::fit(self.scene, axes, [w, h]);
+        let slot = View::ALL
+            .iter()
+            .position(|&v| v == view)
+            .expect("every view is in ALL");
+        let camera =
+            self.cameras[slot].get_or_init(|| Camera::fit(self.scene, view.axes(), [w, h]));
         let mut samples = Samples {
             width: w,
             height: h,
@@ -377,9 +386,9 @@ impl Camera {
             for pose in part.poses.iter().step_by(stride) {
                 // The picture's axes in the part's frame (turned by the inverse rotation),
                 // and where the part's origin lands.
-                let [w, x, y, z] = pose.rotation;
+                let [qw, qx, qy, qz] = pose.rotation;
                 let inverse = Pose {
-                    rotation: [w, -x, -y, -z],
+                    rotation: [qw, -qx, -qy, -qz],
                     translation: [0.0; 3],
                 };
                 let local = [0, 1].map(|k| inverse.rotate(axes[k]));
