@@ -12,8 +12,6 @@
 //! the triangles first use them, and two vertices that round to the same `f32` point become
 //! one. Reading does not check the mesh (use [`Mesh::check`]) and does not read ASCII STL.
 
-use std::fs::File;
-use std::io::{BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
 
 use crate::geometry::mesh::Mesh;
@@ -83,17 +81,14 @@ pub enum StlFormatError {
 
 /// Write `mesh` as a binary STL at `path`; `name` goes into the header (truncated to fit).
 pub fn write_stl(path: &Path, mesh: &Mesh, name: &str) -> Result<(), StlError> {
-    let io = |source| StlError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
     let bytes = stl_bytes(mesh, name).map_err(|source| StlError::Format {
         path: path.to_path_buf(),
         source,
     })?;
-    let mut w = BufWriter::new(File::create(path).map_err(io)?);
-    w.write_all(&bytes).map_err(io)?;
-    w.flush().map_err(io)
+    std::fs::write(path, bytes).map_err(|source| StlError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 /// The bytes of a binary STL of `mesh`.
@@ -129,13 +124,10 @@ pub fn stl_bytes(mesh: &Mesh, name: &str) -> Result<Vec<u8>, StlFormatError> {
 
 /// Read a binary STL, welding bit-identical corners (see the module doc).
 pub fn read_stl(path: &Path) -> Result<Mesh, StlError> {
-    let mut bytes = Vec::new();
-    File::open(path)
-        .and_then(|mut f| f.read_to_end(&mut bytes))
-        .map_err(|source| StlError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+    let bytes = std::fs::read(path).map_err(|source| StlError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
     parse_stl(&bytes).map_err(|source| StlError::Format {
         path: path.to_path_buf(),
         source,

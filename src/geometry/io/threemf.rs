@@ -146,8 +146,8 @@ pub enum ThreeMfFormatError {
     /// The zip layer failed.
     #[error("zip: {0}")]
     Zip(#[from] zip::result::ZipError),
-    /// Writing the model part failed.
-    #[error("writing {MODEL_PART}: {0}")]
+    /// Writing a part of the package failed.
+    #[error("writing the package: {0}")]
     Write(#[from] std::io::Error),
     /// A part the package needs is missing.
     #[error("the package has no part {0:?}")]
@@ -462,13 +462,10 @@ fn escape(s: &str) -> Cow<'_, str> {
 /// Read a 3MF package: follow `_rels/.rels` to the model part and read its objects and build
 /// items (see the module doc for what is supported).
 pub fn read_3mf(path: &Path) -> Result<ThreeMfModel, ThreeMfError> {
-    let mut bytes = Vec::new();
-    File::open(path)
-        .and_then(|mut f| f.read_to_end(&mut bytes))
-        .map_err(|source| ThreeMfError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+    let bytes = std::fs::read(path).map_err(|source| ThreeMfError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
     parse_3mf(&bytes).map_err(|source| ThreeMfError::Format {
         path: path.to_path_buf(),
         source,
