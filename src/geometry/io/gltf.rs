@@ -5,8 +5,8 @@
 //!   [`ShadedMesh`] (split at [`CREASE_ANGLE_DEG`], so freeform contact surfaces shade
 //!   smoothly and printed edges stay crisp);
 //! - **one material per part**: its colour as the PBR base colour (linear RGBA, as
-//!   [`ScenePart::color`] is), non-metallic, roughness [`ROUGHNESS`]; `BLEND` when the colour
-//!   is translucent;
+//!   [`ScenePart::color`](crate::geometry::ScenePart::color) is), non-metallic, roughness
+//!   [`ROUGHNESS`]; `BLEND` when the colour is translucent;
 //! - **one node per part**, holding its first pose, under one root node;
 //! - **one animation** "period" when some part moves: for each moving part a rotation and a
 //!   translation channel with LINEAR interpolation over the scene's key times. Consecutive
