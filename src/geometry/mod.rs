@@ -9,14 +9,22 @@
 //! | [`sweep`] | sections swept along closed curves, the segment BVH |
 //! | [`voxel`] | voxel grids, exact distance transforms, shortest free paths |
 //! | [`mesher`] | implicit solid → closed 2-manifold mesh (marching tetrahedra, sparse blocks) |
+//! | [`primitive_meshes`] | closed meshes of boxes, UV spheres and tori, built directly |
+//! | [`shading`] | crease-split vertex normals, as the GLB and the renders shade a mesh |
+//! | [`io`] | files: binary STL, 3MF packages laid out on a bed, the animated GLB |
+//! | [`render`] | shaded, anti-aliased PNG pictures of a scene at a key time |
 //!
 //! It does not know what a mechanism is: turning `mechanism.json` into parts is `build`'s
 //! job; this module gives it shapes, meshes and files.
 
+pub mod io;
 pub mod mesh;
 pub mod mesher;
+pub mod primitive_meshes;
+pub mod render;
 pub mod scene;
 pub mod sdf;
+pub mod shading;
 pub mod sweep;
 pub mod voxel;
 
