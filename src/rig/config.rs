@@ -32,6 +32,12 @@ pub const DEFAULT_WATCHDOG_MS: u32 = 250;
 /// minutes covers many cycles at bench speeds and bounds an unattended run.
 pub const DEFAULT_MAX_RUN_S: f64 = 600.0;
 
+/// Largest gear ratio accepted (its inverse is the smallest), for either driver kind:
+/// 1000:1. Bench gearboxes and belts stay below 100:1; far beyond, a typo such as `1e9`
+/// makes every speed and step-rate figure derived from it meaningless. The firmware carries
+/// the ratio as a fraction of two 16-bit numbers, which this range always allows.
+pub const MAX_GEAR_RATIO: f64 = 1000.0;
+
 /// Tolerance on the norm of a configured mounting quaternion: beyond it the file is
 /// rejected rather than silently normalized (a typo, not rounding).
 pub const MOUNTING_NORM_TOLERANCE: f64 = 1e-3;
@@ -678,6 +684,13 @@ impl RigConfig {
         let has_port = |name: &str| self.ports.iter().any(|p| p.name == name);
         let sign_ok = |s: Sign| s == 1 || s == -1;
         let pos = |x: f64| x.is_finite() && x > 0.0;
+        let gear_ok = |g: f64| pos(g) && (1.0 / MAX_GEAR_RATIO..=MAX_GEAR_RATIO).contains(&g);
+        let gear_msg = || {
+            format!(
+                "must be a number from 1/{MAX_GEAR_RATIO} to {MAX_GEAR_RATIO} (motor or servo \
+                 revolutions per driver revolution)"
+            )
+        };
         match &self.driver {
             DriverConfig::StepperFirmware(s) => {
                 let f = |k: &'static str| vec![Key("driver"), Key(k)];
@@ -690,8 +703,8 @@ impl RigConfig {
                 if s.microsteps == 0 || !s.microsteps.is_power_of_two() || s.microsteps > 256 {
                     return bad(f("microsteps"), "must be a power of two, 1..=256".into());
                 }
-                if !pos(s.gear_ratio) {
-                    return bad(f("gear_ratio"), "must be a positive number".into());
+                if !gear_ok(s.gear_ratio) {
+                    return bad(f("gear_ratio"), gear_msg());
                 }
                 if !pos(s.max_speed_rpm) {
                     return bad(f("max_speed_rpm"), "must be a positive number".into());
@@ -714,8 +727,8 @@ impl RigConfig {
                 if d.baud == 0 {
                     return bad(f("baud"), "must be > 0".into());
                 }
-                if !pos(d.gear_ratio) {
-                    return bad(f("gear_ratio"), "must be a positive number".into());
+                if !gear_ok(d.gear_ratio) {
+                    return bad(f("gear_ratio"), gear_msg());
                 }
                 if !sign_ok(d.direction) {
                     return bad(f("direction"), "must be 1 or -1".into());
