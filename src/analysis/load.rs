@@ -254,44 +254,25 @@ impl TargetSource {
     }
 }
 
-/// `scale_mm` of a mechanism file (directory or file), or the default when absent.
-fn mechanism_scale_mm(path: &Path) -> Result<f64, AnalysisError> {
-    let file = if path.is_dir() {
-        path.join("mechanism.json")
-    } else {
-        path.to_path_buf()
-    };
-    let text = std::fs::read_to_string(&file).map_err(|e| AnalysisError::io(&file, e))?;
-    let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| AnalysisError::Target {
-        path: file.clone(),
-        message: e.to_string(),
-    })?;
-    match v.get("scale_mm") {
-        None => Ok(DEFAULT_SCALE_MM),
-        Some(x) => x
-            .as_f64()
-            .filter(|s| s.is_finite() && *s > 0.0)
-            .ok_or_else(|| AnalysisError::Target {
-                path: file,
-                message: format!("field `scale_mm`: {x} is not a positive number"),
-            }),
-    }
-}
-
-/// Load the target law.
+/// Load the target law. A mechanism file is validated as `mpc-rig synth --check` does
+/// ([`crate::rig::target::load_mechanism`]) before its follower motion is compared with
+/// anything, and its own `scale_mm` converts heights.
 pub fn load_target(src: &TargetSource) -> Result<TargetLaw, AnalysisError> {
-    let err = |e: crate::motion::MotionError| AnalysisError::Target {
+    let err = |e: crate::rig::RigError| AnalysisError::Target {
         path: src.path().to_path_buf(),
-        message: e.to_string(),
+        message: match e {
+            crate::rig::RigError::Target { message, .. } => message,
+            other => other.to_string(),
+        },
     };
     match src {
         TargetSource::Mechanism(p) => {
-            let m = crate::motion::Motion::from_mechanism_file(p).map_err(err)?;
-            Ok(TargetLaw::from_motion(&m, mechanism_scale_mm(p)?))
+            let (mechanism, motion) = crate::rig::target::load_mechanism(p).map_err(err)?;
+            Ok(TargetLaw::from_motion(&motion, mechanism.scale_mm))
         }
         TargetSource::Motion(p) => {
-            let m = crate::motion::Motion::from_file(p).map_err(err)?;
-            Ok(TargetLaw::from_motion(&m, DEFAULT_SCALE_MM))
+            let motion = crate::rig::target::load_motion(p).map_err(err)?;
+            Ok(TargetLaw::from_motion(&motion, DEFAULT_SCALE_MM))
         }
     }
 }

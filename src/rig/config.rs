@@ -607,6 +607,39 @@ impl RigConfig {
         r
     }
 
+    /// What the rig lacks to measure a follower of `class`, or `None` when it can: the
+    /// sensors the analysis compares with the target — an IMU for 3R, a rotary (`rz`)
+    /// sensor for 1R and 1R1T, and a linear (`tz`) one as well for 1R1T.
+    pub fn missing_sensors(&self, class: crate::motion::MotionClass) -> Option<String> {
+        use crate::motion::MotionClass;
+        let has = |dof: Dof| self.sensors.iter().any(|s| s.dof() == Some(dof));
+        let has_imu = self
+            .sensors
+            .iter()
+            .any(|s| matches!(s, SensorConfig::Imu(_)));
+        let mut missing = Vec::new();
+        match class {
+            MotionClass::R3 if !has_imu => {
+                missing.push("an orientation sensor (`kind = \"imu\"`) on the follower")
+            }
+            MotionClass::R3 => {}
+            MotionClass::R1 | MotionClass::R1T1 => {
+                if !has(Dof::Rz) {
+                    missing.push("a rotary sensor (`dof = \"rz\"` or a follower servo)");
+                }
+                if class == MotionClass::R1T1 && !has(Dof::Tz) {
+                    missing.push("a linear sensor (`dof = \"tz\"`) for the height");
+                }
+            }
+        }
+        (!missing.is_empty()).then(|| {
+            format!(
+                "it has no {} (rigs/README.md lists the sensors each class needs)",
+                missing.join(" and no ")
+            )
+        })
+    }
+
     /// The port with this name.
     pub fn port(&self, name: &str) -> Option<&PortConfig> {
         self.ports.iter().find(|p| p.name == name)

@@ -16,14 +16,14 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime};
 
-use sha2::{Digest, Sha256};
-
 use crate::motion::{Motion, MotionClass};
 use crate::rig::backend::{Bench, Sample};
 use crate::rig::config::{Dof, HomeMethod, RigConfig, SensorConfig};
 use crate::rig::recording::{
-    utc_dir_stamp, Phase, RecordingMeta, RecordingWriter, Row, SessionInfo, TargetRef,
+    utc_dir_stamp, Phase, RecordingMeta, RecordingWriter, Row, SessionInfo,
 };
+use crate::rig::target::check_measurable;
+pub use crate::rig::target::{Target, TargetSpec};
 use crate::rig::RigError;
 
 /// How long the session waits for samples before declaring the stream stalled: 8 s,
@@ -63,61 +63,6 @@ pub const DEFAULT_SETTLE_CYCLES: u32 = 1;
 /// Extra time granted on top of the planned run duration before `max_run_s` is checked
 /// up front (ramps, settle, stop): 20 %.
 pub const RUN_TIME_MARGIN: f64 = 1.2;
-
-/// What the session measures against.
-#[derive(Debug, Clone, PartialEq)]
-pub enum TargetSpec {
-    /// A `mechanism.json` or the directory holding it.
-    Mechanism(PathBuf),
-    /// A motion file (`.toml` keyframes or `.csv` dense).
-    Motion(PathBuf),
-}
-
-/// A loaded target: the motion law and its reference for the sidecar.
-#[derive(Debug, Clone)]
-pub struct Target {
-    /// The law.
-    pub motion: Motion,
-    /// Reference written into the recording.
-    pub reference: TargetRef,
-}
-
-impl TargetSpec {
-    /// Load the motion and hash the file.
-    pub fn load(&self) -> Result<Target, RigError> {
-        let (kind, path, motion) = match self {
-            TargetSpec::Mechanism(p) => ("mechanism", p, Motion::from_mechanism_file(p)),
-            TargetSpec::Motion(p) => ("motion", p, Motion::from_file(p)),
-        };
-        let motion = motion.map_err(|e| RigError::Target {
-            path: path.clone(),
-            message: e.to_string(),
-        })?;
-        let file = if path.is_dir() {
-            path.join("mechanism.json")
-        } else {
-            path.clone()
-        };
-        let bytes = std::fs::read(&file).map_err(|e| RigError::Target {
-            path: file.clone(),
-            message: e.to_string(),
-        })?;
-        let sha256 = Sha256::digest(&bytes)
-            .iter()
-            .map(|b| format!("{b:02x}"))
-            .collect();
-        Ok(Target {
-            reference: TargetRef {
-                kind: kind.into(),
-                path: path.clone(),
-                sha256,
-                class: motion.class().to_string(),
-                name: motion.name().to_string(),
-            },
-            motion,
-        })
-    }
-}
 
 /// Live progress of a run.
 #[derive(Debug, Clone, PartialEq)]
@@ -214,6 +159,7 @@ pub fn measure(opts: &mut MeasureOptions) -> Result<MeasureOutcome, RigError> {
     rig.apply_port_overrides(&opts.ports)?;
     let target = opts.target.load()?;
     check_plan(&rig, opts)?;
+    check_measurable(&rig, target.motion.class())?;
     let mut bench = crate::rig::backend::open(&rig)?;
     run_session(bench.as_mut(), &rig, &target, opts)
 }
@@ -375,6 +321,7 @@ fn run_inner(
     target: &Target,
     opts: &mut MeasureOptions,
 ) -> Result<MeasureOutcome, RigError> {
+    check_measurable(rig, target.motion.class())?;
     if bench.value_count() != rig.sensor_columns().len() {
         return Err(RigError::Setup(format!(
             "the backend delivers {} sensor values but the rig declares {} columns",
