@@ -118,6 +118,7 @@ fn options(rig: &str, ports: Vec<String>, target: TargetSpec, out: &Path) -> Mea
         settle_cycles: 1,
         reverse: false,
         out_dir: Some(out.to_path_buf()),
+        replace: false,
         cancel: Arc::new(AtomicBool::new(false)),
         progress: None,
     }

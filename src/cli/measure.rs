@@ -18,6 +18,9 @@ pub const EXIT_DISCONNECTED: u8 = 5;
 pub const EXIT_INCOMPLETE: u8 = 4;
 /// Exit code after Ctrl-C (the shell convention 128 + SIGINT).
 pub const EXIT_CANCELLED: u8 = 130;
+/// Exit code when the run finished but its data is degraded (too many samples missing; the
+/// recording's sidecar says why and the analysis gives only what the data supports).
+pub const EXIT_DEGRADED: u8 = 6;
 
 /// Arguments of `mpc-rig measure`.
 #[derive(Debug, Args)]
@@ -51,9 +54,13 @@ pub struct MeasureArgs {
     /// Also run the same cycles in reverse (for backlash).
     #[arg(long)]
     pub reverse: bool,
-    /// Recording directory (default `out/measure/<UTC timestamp>`).
+    /// Recording directory (default: a new `out/measure/<UTC timestamp>`). A directory that
+    /// already holds a recording is refused unless --replace is given.
     #[arg(short, long, value_name = "DIR")]
     pub output: Option<PathBuf>,
+    /// Replace the recording already in the -o directory (its CSV, sidecar and report).
+    #[arg(long, requires = "output")]
+    pub replace: bool,
     /// Do not analyse the recording at the end (run `mpc-rig analyze DIR` later).
     #[arg(long)]
     pub no_analysis: bool,
@@ -91,6 +98,7 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
         settle_cycles: args.settle,
         reverse: args.reverse,
         out_dir: args.output.clone(),
+        replace: args.replace,
         cancel,
         progress: Some(Box::new(move |p: &Progress| {
             if tty {
@@ -133,11 +141,23 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
         }
     }
     let (code, what) = match &outcome.end {
-        EndReason::Finished => return Ok(analysis_code),
+        EndReason::Finished => match &outcome.meta.degraded {
+            None => return Ok(analysis_code),
+            Some(why) => {
+                return Err(ExitStatusError {
+                    code: EXIT_DEGRADED,
+                    message: format!(
+                    "run degraded: {why}; the recording in {} is kept (complete, marked degraded)",
+                    outcome.dir.display()
+                ),
+                }
+                .into())
+            }
+        },
         EndReason::Cancelled => (EXIT_CANCELLED, "cancelled".to_string()),
         // The end reason's own text starts with "disconnected": give its message once.
         EndReason::Disconnected(m) => (EXIT_DISCONNECTED, format!("device disconnected ({m})")),
-        EndReason::MaxRunTime | EndReason::Error(_) => (
+        EndReason::MaxRunTime | EndReason::DiskFull(_) | EndReason::Error(_) => (
             EXIT_INCOMPLETE,
             format!("run stopped early ({})", outcome.end),
         ),

@@ -20,7 +20,8 @@ use crate::motion::{Motion, MotionClass};
 use crate::rig::backend::{Bench, Sample};
 use crate::rig::config::{Dof, HomeMethod, RigConfig, SensorConfig};
 use crate::rig::recording::{
-    utc_dir_stamp, Phase, RecordingMeta, RecordingWriter, Row, SessionInfo,
+    utc_dir_stamp, Claim, Existing, Phase, RecordingError, RecordingMeta, RecordingWriter, Row,
+    SessionInfo,
 };
 use crate::rig::target::check_measurable;
 pub use crate::rig::target::{Target, TargetSpec};
@@ -55,6 +56,17 @@ pub const REST_WINDOW: Duration = Duration::from_millis(150);
 /// events exactly at a cycle boundary (a follower crossing 0° at φ = 360°·k) lie inside the
 /// labelled samples. 10° is several samples even at high speed and far less than a cycle.
 pub const PHASE_MARGIN_DEG: f64 = 10.0;
+
+/// Where recordings go without `-o`: a new folder per run named by its UTC start time
+/// (`out/measure/20261122T055901Z`, then `…-2` for a second run in the same second).
+pub const DEFAULT_OUT_PARENT: &str = "out/measure";
+
+/// A finished run whose recording misses more than this fraction of the samples its rate
+/// promises is marked degraded (sidecar `degraded`, exit code 6): 10 %. Below it the gaps
+/// are the odd lost frame; above it whole stretches of every cycle are missing, so cycle
+/// statistics and timing ratios no longer rest on the data (a stepper link with 1 % of its
+/// bytes corrupted loses 72 % of the samples).
+pub const DEGRADED_MISSING_FRACTION: f64 = 0.1;
 
 /// Default settle cycles before the measured ones: one revolution lets the mechanism
 /// take up its backlash and the speed settle.
@@ -105,8 +117,12 @@ pub struct MeasureOptions {
     pub settle_cycles: u32,
     /// Also run in reverse.
     pub reverse: bool,
-    /// Recording directory; default `out/measure/<UTC timestamp>`.
+    /// Recording directory; default a new `out/measure/<UTC timestamp>` folder
+    /// ([`DEFAULT_OUT_PARENT`]). A folder that already holds a recording is refused unless
+    /// `replace` is set; one another session is recording into is always refused.
     pub out_dir: Option<PathBuf>,
+    /// Replace a recording already in `out_dir` (`measure --replace`).
+    pub replace: bool,
     /// Set to stop early (Ctrl-C); the recording is kept, marked incomplete.
     pub cancel: Arc<AtomicBool>,
     /// Called with live progress about every [`PROGRESS_INTERVAL`].
@@ -137,6 +153,9 @@ pub enum EndReason {
     Disconnected(String),
     /// The run exceeded `safety.max_run_s`.
     MaxRunTime,
+    /// The recording's disk filled up (the file being written); the motor was stopped and
+    /// the sidecar describes the rows on disk.
+    DiskFull(String),
     /// Another error during the run.
     Error(String),
 }
@@ -148,6 +167,7 @@ impl std::fmt::Display for EndReason {
             EndReason::Cancelled => write!(f, "cancelled"),
             EndReason::Disconnected(m) => write!(f, "disconnected: {m}"),
             EndReason::MaxRunTime => write!(f, "stopped: safety.max_run_s reached"),
+            EndReason::DiskFull(path) => write!(f, "disk full: {path}"),
             EndReason::Error(m) => write!(f, "error: {m}"),
         }
     }
@@ -160,8 +180,29 @@ pub fn measure(opts: &mut MeasureOptions) -> Result<MeasureOutcome, RigError> {
     let target = opts.target.load()?;
     check_plan(&rig, opts)?;
     check_measurable(&rig, target.motion.class())?;
+    let claim = claim_folder(opts)?;
     let mut bench = crate::rig::backend::open(&rig)?;
-    run_session(bench.as_mut(), &rig, &target, opts)
+    run_claimed(bench.as_mut(), &rig, &target, opts, claim)
+}
+
+/// Claim the run's recording folder (`-o` or a new default one) before any hardware is
+/// touched: a folder being recorded into, or holding a recording not to be replaced, is
+/// refused here.
+fn claim_folder(opts: &MeasureOptions) -> Result<Claim, RigError> {
+    Ok(match &opts.out_dir {
+        Some(dir) => Claim::folder(
+            dir,
+            if opts.replace {
+                Existing::Replace
+            } else {
+                Existing::Refuse
+            },
+        )?,
+        None => Claim::unique(
+            Path::new(DEFAULT_OUT_PARENT),
+            &utc_dir_stamp(SystemTime::now()),
+        )?,
+    })
 }
 
 /// Refuse plans that break the rig's limits before touching the hardware.
@@ -192,13 +233,6 @@ pub fn check_plan(rig: &RigConfig, opts: &MeasureOptions) -> Result<(), RigError
         )));
     }
     Ok(())
-}
-
-/// Default recording directory for a run starting now.
-pub fn default_out_dir() -> PathBuf {
-    Path::new("out")
-        .join("measure")
-        .join(utc_dir_stamp(SystemTime::now()))
 }
 
 /// Where the run is, from the driver angle travelled.
@@ -299,7 +333,25 @@ pub fn run_session(
     target: &Target,
     opts: &mut MeasureOptions,
 ) -> Result<MeasureOutcome, RigError> {
-    let result = run_inner(bench, rig, target, opts);
+    let claim = claim_folder(opts);
+    match claim {
+        Ok(claim) => run_claimed(bench, rig, target, opts, claim),
+        Err(e) => {
+            let _ = bench.shutdown();
+            Err(e)
+        }
+    }
+}
+
+/// [`run_session`] into a folder already claimed.
+fn run_claimed(
+    bench: &mut (dyn Bench + Send),
+    rig: &RigConfig,
+    target: &Target,
+    opts: &mut MeasureOptions,
+    claim: Claim,
+) -> Result<MeasureOutcome, RigError> {
+    let result = run_inner(bench, rig, target, opts, claim);
     let shutdown = bench.shutdown();
     match (result, shutdown) {
         (Ok(o), Ok(())) => Ok(o),
@@ -320,6 +372,7 @@ fn run_inner(
     rig: &RigConfig,
     target: &Target,
     opts: &mut MeasureOptions,
+    claim: Claim,
 ) -> Result<MeasureOutcome, RigError> {
     check_measurable(rig, target.motion.class())?;
     if bench.value_count() != rig.sensor_columns().len() {
@@ -329,7 +382,6 @@ fn run_inner(
             rig.sensor_columns().len()
         )));
     }
-    let dir = opts.out_dir.clone().unwrap_or_else(default_out_dir);
     let session = SessionInfo {
         speed_rpm: opts.speed_rpm,
         cycles: opts.cycles,
@@ -343,18 +395,29 @@ fn run_inner(
         target.reference.clone(),
         session,
     );
-    let mut writer = RecordingWriter::create(&dir, meta)?;
+    let mut writer = RecordingWriter::create(claim, meta)?;
+    let dir = writer.dir().to_path_buf();
     let start = Instant::now();
     // Errors from here on end the run but keep the recording.
-    let end = match drive(bench, rig, target, opts, &mut writer, start) {
+    let mut end = match drive(bench, rig, target, opts, &mut writer, start) {
         Ok(end) => end,
-        Err(RigError::Disconnected { path, message }) => {
-            EndReason::Disconnected(format!("{}: {message}", path.display()))
+        Err(e) => {
+            // Stop the motor before anything else (the recording is finished next).
+            bench.stop().ok();
+            end_reason_of(e)
         }
-        Err(e) => EndReason::Error(e.to_string()),
     };
+    set_link_counts(&mut writer, bench);
+    // Write what is buffered now, so a disk that fills at the very end is the end reason.
+    if let Err(e) = writer.flush() {
+        if end == EndReason::Finished {
+            end = end_reason_of(e.into());
+        }
+    }
     let complete = end == EndReason::Finished;
-    writer.meta_mut().counts = merged_counts(writer.meta().counts.samples, bench);
+    if complete {
+        writer.meta_mut().degraded = degraded(&writer.meta().counts, rig.sampling.rate_hz);
+    }
     let meta = writer.finish(complete, &end.to_string())?;
     Ok(MeasureOutcome {
         dir,
@@ -364,10 +427,45 @@ fn run_inner(
     })
 }
 
-fn merged_counts(rows: u64, bench: &(dyn Bench + Send)) -> crate::rig::recording::Counts {
-    let mut c = bench.counts();
-    c.samples = rows;
-    c
+/// Why a run ended, from the error that ended it.
+fn end_reason_of(e: RigError) -> EndReason {
+    match e {
+        RigError::Disconnected { path, message } => {
+            EndReason::Disconnected(format!("{}: {message}", path.display()))
+        }
+        RigError::Recording(RecordingError::DiskFull { path }) => {
+            EndReason::DiskFull(path.display().to_string())
+        }
+        e => EndReason::Error(e.to_string()),
+    }
+}
+
+/// Why a finished run's data is degraded, if it is: more than
+/// [`DEGRADED_MISSING_FRACTION`] of the samples the rate promises are missing.
+fn degraded(c: &crate::rig::recording::Counts, rate_hz: f64) -> Option<String> {
+    let expected = c.samples + c.missing_samples;
+    let fraction = c.missing_samples as f64 / expected.max(1) as f64;
+    (fraction > DEGRADED_MISSING_FRACTION).then(|| {
+        format!(
+            "{:.0} % of the samples expected at {rate_hz} Hz are missing ({} in {} gaps); \
+             cycle and timing figures need most of every cycle",
+            fraction * 100.0,
+            c.missing_samples,
+            c.gaps
+        )
+    })
+}
+
+/// Copy the backend's link counts into the sidecar (the sample, gap and missing counts are
+/// the writer's own, from what is on disk).
+fn set_link_counts(writer: &mut RecordingWriter, bench: &(dyn Bench + Send)) {
+    let link = bench.counts();
+    let c = &mut writer.meta_mut().counts;
+    c.crc_errors = link.crc_errors;
+    c.reconnects = link.reconnects;
+    c.decode_errors = link.decode_errors;
+    c.link_gaps = link.gaps;
+    c.link_missing_samples = link.missing_samples;
 }
 
 fn drive(
@@ -462,11 +560,11 @@ fn drive(
             })?;
         }
         if writer.flush_due() {
-            writer.meta_mut().counts = merged_counts(writer.meta().counts.samples, bench);
+            set_link_counts(writer, bench);
             writer.flush()?;
         }
         if last_progress.elapsed() >= PROGRESS_INTERVAL {
-            let rows = writer.meta().counts.samples;
+            let rows = writer.rows_pushed();
             let dt = last_progress.elapsed().as_secs_f64();
             if let Some(cb) = opts.progress.as_mut() {
                 cb(&Progress {
@@ -475,7 +573,7 @@ fn drive(
                     cycles: opts.cycles,
                     samples: rows,
                     sample_rate_hz: (rows - rows_at_last_progress) as f64 / dt,
-                    gaps: bench.counts().gaps,
+                    gaps: writer.meta().counts.gaps,
                     error_deg,
                     elapsed_s: start.elapsed().as_secs_f64(),
                 });

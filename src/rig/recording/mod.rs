@@ -12,6 +12,13 @@
 //! short: [`RecordingReader`] drops such a line and reports it
 //! ([`Recording::truncated_last_line`]).
 //!
+//! The sidecar is true to what is on disk: `counts.samples`, `gaps` and `missing_samples`
+//! are counted by the writer from the rows it has written ([`missing_before`] at the
+//! session's nominal rate, the same for every backend), and [`CsvFingerprint`] (`csv`) holds
+//! the length and SHA-256 of the CSV it describes, which the reader checks. While a session
+//! records, the folder holds `recording.lock` (locked, with a disk-space reserve; removed at
+//! the end). A finished run whose data cannot support every figure carries `degraded`.
+//!
 //! This module owns the format only. It does not decide what goes into a row (the session
 //! does) and does not interpret sensor values (analysis does, with the rig calibration).
 
@@ -27,7 +34,7 @@ mod reader;
 mod writer;
 
 pub use reader::{Recording, RecordingReader, RowBuf};
-pub use writer::{RecordingWriter, Row};
+pub use writer::{Claim, Existing, RecordingWriter, Row, DISK_RESERVE_BYTES, LOCK_FILE};
 
 /// The `format` field of every sidecar this version writes.
 pub const RECORDING_FORMAT: &str = "mpcrig-recording/1";
@@ -136,6 +143,33 @@ pub enum RecordingError {
         /// What is wrong.
         message: String,
     },
+    /// The file system is full (or the user's quota is used up): the rows written before
+    /// are on disk, the sidecar says how many.
+    #[error("{path}: disk full")]
+    DiskFull {
+        /// The file being written.
+        path: PathBuf,
+    },
+    /// Another session holds the recording folder's lock.
+    #[error("{dir}: another session is recording into this folder")]
+    Locked {
+        /// The recording folder.
+        dir: PathBuf,
+    },
+    /// The folder already holds a recording.
+    #[error("{dir} already holds a recording; choose another folder, or replace it explicitly (measure --replace)")]
+    Exists {
+        /// The recording folder.
+        dir: PathBuf,
+    },
+    /// The CSV is not the one the sidecar describes.
+    #[error("{dir}: {CSV_FILE} does not belong to {SIDECAR_FILE}: {message}")]
+    Mismatch {
+        /// The recording folder.
+        dir: PathBuf,
+        /// What differs.
+        message: String,
+    },
     /// A row pushed to the writer has the wrong number of sensor values.
     #[error("row has {got} sensor values, the recording has {expected} sensor columns")]
     RowWidth {
@@ -146,10 +180,22 @@ pub enum RecordingError {
     },
 }
 
+/// An I/O error on `path`; a full file system (or quota) is [`RecordingError::DiskFull`].
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> RecordingError + '_ {
-    move |source| RecordingError::Io {
-        path: path.to_path_buf(),
-        source,
+    move |source| {
+        if matches!(
+            source.kind(),
+            std::io::ErrorKind::StorageFull | std::io::ErrorKind::QuotaExceeded
+        ) {
+            RecordingError::DiskFull {
+                path: path.to_path_buf(),
+            }
+        } else {
+            RecordingError::Io {
+                path: path.to_path_buf(),
+                source,
+            }
+        }
     }
 }
 
@@ -183,14 +229,18 @@ pub struct SessionInfo {
     pub sample_rate_hz: f64,
 }
 
-/// Link and sample counts.
+/// Sample and link counts.
+///
+/// `samples`, `gaps` and `missing_samples` describe the CSV as it is on disk (the writer
+/// counts them from the rows it has written, [`missing_before`]), for every backend; the
+/// others are the backend's view of its link.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Counts {
-    /// Rows written.
+    /// Rows in the CSV.
     pub samples: u64,
-    /// Sequence gaps seen (each may cover several samples).
+    /// Holes in the CSV's device time: steps longer than [`GAP_FACTOR`] sample periods.
     pub gaps: u64,
-    /// Samples lost in gaps.
+    /// Samples missing in those holes: round(step / period) − 1 each.
     pub missing_samples: u64,
     /// Frames rejected for a bad CRC.
     pub crc_errors: u64,
@@ -199,6 +249,44 @@ pub struct Counts {
     /// Bytes or frames that could not be decoded for other reasons.
     #[serde(default)]
     pub decode_errors: u64,
+    /// Losses the backend saw on its link (frame sequence gaps, failed bus transactions).
+    /// Not the same as `gaps`: a mixed bench bridges a bus gap by interpolation (no hole),
+    /// and a sample never taken (a late bus) is a hole but no link loss. Absent (0) in
+    /// recordings made before it was added.
+    #[serde(default)]
+    pub link_gaps: u64,
+    /// Samples the backend counted lost on its link.
+    #[serde(default)]
+    pub link_missing_samples: u64,
+}
+
+/// A step between consecutive rows' device times longer than this many sample periods is
+/// a hole (a gap) in the recording. Default 1.5: one lost sample doubles the step, while
+/// the jitter of a device clock read over USB or a 1 ms servo tick stays well below half a
+/// period.
+pub const GAP_FACTOR: f64 = 1.5;
+
+/// Samples missing between two rows `dt_us` apart at the nominal period `period_us`: 0 for
+/// a step up to [`GAP_FACTOR`] periods, else round(step / period) − 1. The one rule the
+/// writer's counts and the analysis' gap figures share.
+pub fn missing_before(dt_us: u64, period_us: f64) -> u64 {
+    let dt = dt_us as f64;
+    if period_us.is_nan() || period_us <= 0.0 || dt <= GAP_FACTOR * period_us {
+        0
+    } else {
+        ((dt / period_us).round() as u64).saturating_sub(1)
+    }
+}
+
+/// What the sidecar knew of the CSV when it was written: its first `bytes` bytes (always
+/// whole rows) and their SHA-256. The reader checks a CSV against it, so a sidecar is never
+/// read with another run's CSV.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct CsvFingerprint {
+    /// Bytes of the CSV (header and whole rows) on disk when the sidecar was written.
+    pub bytes: u64,
+    /// SHA-256 of those bytes, hex.
+    pub sha256: String,
 }
 
 /// Identity of the device(s) measured with.
@@ -253,6 +341,13 @@ pub struct RecordingMeta {
     pub counts: Counts,
     /// Every CSV column in order, with unit and sensor.
     pub columns: Vec<ColumnSpec>,
+    /// The CSV this sidecar belongs to (absent in recordings made before it was added).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub csv: Option<CsvFingerprint>,
+    /// Set when the session ran to the end but the data cannot support every figure (e.g.
+    /// most samples missing): why. Absent when the data is sound.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub degraded: Option<String>,
 }
 
 impl RecordingMeta {
@@ -276,6 +371,8 @@ impl RecordingMeta {
             session,
             counts: Counts::default(),
             columns,
+            csv: None,
+            degraded: None,
         }
     }
 

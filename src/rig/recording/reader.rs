@@ -1,13 +1,21 @@
 //! Reading a recording back: streaming row by row without per-row allocation
 //! ([`RecordingReader`]), or whole into memory column by column ([`Recording`]).
+//!
+//! Reading to the end also checks that the CSV belongs to its sidecar: the bytes the
+//! sidecar's [`super::CsvFingerprint`] describes must be there with that SHA-256, and a
+//! finished recording may have no rows beyond them (a crashed one may: they were written
+//! after its last sidecar). Sidecars from before the fingerprint are checked by their row
+//! count. So another run's sidecar, or an edited CSV, is an error, not a silent analysis.
 
 use std::fs::File;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 
+use sha2::{Digest, Sha256};
+
 use super::{
-    io_err, load_meta, Phase, RecordingError, RecordingMeta, CSV_FILE, FLAGS_COLUMN,
-    LEADING_COLUMNS,
+    io_err, load_meta, CsvFingerprint, Phase, RecordingError, RecordingMeta, CSV_FILE,
+    FLAGS_COLUMN, LEADING_COLUMNS,
 };
 
 /// One parsed CSV row, reused between calls to [`RecordingReader::next_row`].
@@ -30,12 +38,22 @@ pub struct RowBuf {
 /// Streams rows of a recording without per-row allocation.
 pub struct RecordingReader {
     path: PathBuf,
+    dir: PathBuf,
     reader: BufReader<File>,
     buf: Vec<u8>,
     line: usize,
     columns: Vec<String>,
     sensor_columns: usize,
     truncated: bool,
+    /// What the sidecar says of the CSV: its fingerprint, row count and completeness.
+    expect: (Option<CsvFingerprint>, u64, bool),
+    /// Hash of the bytes read so far, up to the fingerprint's length.
+    hasher: Sha256,
+    /// Bytes of whole lines read (header included).
+    read_bytes: u64,
+    /// Rows read, and rows read past the fingerprint's bytes.
+    rows: u64,
+    rows_beyond: u64,
 }
 
 impl RecordingReader {
@@ -47,6 +65,8 @@ impl RecordingReader {
         let mut reader = BufReader::with_capacity(1 << 20, file);
         let mut header = String::new();
         reader.read_line(&mut header).map_err(io_err(&path))?;
+        let mut hasher = Sha256::new();
+        hasher.update(header.as_bytes());
         let columns: Vec<String> = header.trim_end().split(',').map(str::to_string).collect();
         let expected: Vec<&str> = meta.columns.iter().map(|c| c.name.as_str()).collect();
         if columns != expected {
@@ -62,16 +82,23 @@ impl RecordingReader {
             });
         }
         let sensor_columns = meta.sensor_column_count();
+        let expect = (meta.csv.clone(), meta.counts.samples, meta.complete);
         Ok((
             meta,
             RecordingReader {
                 path,
+                dir: dir.to_path_buf(),
                 reader,
                 buf: Vec::with_capacity(256),
                 line: 1,
                 columns,
                 sensor_columns,
                 truncated: false,
+                expect,
+                hasher,
+                read_bytes: header.len() as u64,
+                rows: 0,
+                rows_beyond: 0,
             },
         ))
     }
@@ -86,7 +113,8 @@ impl RecordingReader {
         self.truncated
     }
 
-    /// Read the next row into `row`; `Ok(false)` at the end of the file.
+    /// Read the next row into `row`; `Ok(false)` at the end of the file, once the CSV has
+    /// been found to belong to the sidecar ([`RecordingError::Mismatch`] otherwise).
     pub fn next_row(&mut self, row: &mut RowBuf) -> Result<bool, RecordingError> {
         loop {
             self.buf.clear();
@@ -95,14 +123,17 @@ impl RecordingReader {
                 .read_until(b'\n', &mut self.buf)
                 .map_err(io_err(&self.path))?;
             if n == 0 {
+                self.check_belongs()?;
                 return Ok(false);
             }
             self.line += 1;
             if self.buf.last() != Some(&b'\n') {
                 // Cut short by a crash or unplug: drop it and say so.
                 self.truncated = true;
+                self.check_belongs()?;
                 return Ok(false);
             }
+            self.account_line();
             self.buf.pop();
             if self.buf.last() == Some(&b'\r') {
                 self.buf.pop();
@@ -113,6 +144,75 @@ impl RecordingReader {
             self.parse_line(row)?;
             return Ok(true);
         }
+    }
+
+    /// Hash a whole line read (up to the fingerprint's length) and count it.
+    fn account_line(&mut self) {
+        let limit = self.expect.0.as_ref().map_or(0, |f| f.bytes);
+        let before = self.read_bytes;
+        self.read_bytes += self.buf.len() as u64;
+        if before < limit {
+            let take = (limit - before).min(self.buf.len() as u64) as usize;
+            self.hasher.update(&self.buf[..take]);
+        } else {
+            self.rows_beyond += 1;
+        }
+        // Blank lines are skipped by the parser and are no rows.
+        if self.buf.iter().any(|&b| b != b'\n' && b != b'\r') {
+            self.rows += 1;
+        }
+    }
+
+    /// At the end of the file: does this CSV belong to the sidecar?
+    fn check_belongs(&self) -> Result<(), RecordingError> {
+        let mismatch = |message: String| {
+            Err(RecordingError::Mismatch {
+                dir: self.dir.clone(),
+                message,
+            })
+        };
+        let (fingerprint, counted, complete) = &self.expect;
+        match fingerprint {
+            Some(f) => {
+                if self.read_bytes < f.bytes {
+                    return mismatch(format!(
+                        "it holds {} bytes of whole rows, the sidecar describes {} (rows are \
+                         missing, or it is another run's CSV)",
+                        self.read_bytes, f.bytes
+                    ));
+                }
+                let hash: String = self
+                    .hasher
+                    .clone()
+                    .finalize()
+                    .iter()
+                    .map(|b| format!("{b:02x}"))
+                    .collect();
+                if hash != f.sha256 {
+                    return mismatch(format!(
+                        "its first {} bytes are not the ones the sidecar recorded (another \
+                         run's CSV, or an edited one)",
+                        f.bytes
+                    ));
+                }
+                if *complete && self.rows_beyond > 0 {
+                    return mismatch(format!(
+                        "{} rows follow the ones the finished recording's sidecar describes",
+                        self.rows_beyond
+                    ));
+                }
+            }
+            // A sidecar from before the fingerprint: the row count must fit.
+            None if (*complete && self.rows != *counted) || self.rows < *counted => {
+                return mismatch(format!(
+                    "it holds {} rows, the {} sidecar counts {counted}",
+                    self.rows,
+                    if *complete { "finished" } else { "unfinished" }
+                ));
+            }
+            None => {}
+        }
+        Ok(())
     }
 
     fn parse_line(&self, row: &mut RowBuf) -> Result<(), RecordingError> {

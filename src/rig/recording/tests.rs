@@ -56,7 +56,8 @@ fn meta() -> RecordingMeta {
 }
 
 fn write_rows(dir: &Path, n: u64) -> RecordingWriter {
-    let mut w = RecordingWriter::create(dir, meta()).unwrap();
+    let mut w =
+        RecordingWriter::create(Claim::folder(dir, Existing::Refuse).unwrap(), meta()).unwrap();
     for i in 0..n {
         let values = [i as f64 % 4096.0, 1.0, 0.0, 0.0, 0.0];
         w.push(&Row {
@@ -129,7 +130,9 @@ fn malformed_line_names_line_and_column() {
 #[test]
 fn writer_rejects_wrong_width() {
     let dir = tempfile::tempdir().unwrap();
-    let mut w = RecordingWriter::create(dir.path(), meta()).unwrap();
+    let mut w =
+        RecordingWriter::create(Claim::folder(dir.path(), Existing::Refuse).unwrap(), meta())
+            .unwrap();
     let e = w.push(&Row {
         device_time_us: 0,
         host_time_s: 0.0,

@@ -209,6 +209,7 @@ impl SampleStream for MixedBench {
             crc_errors: a.crc_errors + b.crc_errors,
             reconnects: a.reconnects + b.reconnects,
             decode_errors: a.decode_errors + b.decode_errors,
+            ..Counts::default()
         }
     }
 
