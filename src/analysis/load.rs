@@ -352,6 +352,7 @@ pub fn analyze_and_report(
         rows: loaded.rows,
         stale_rows: loaded.stale_rows,
         truncated_last_line: loaded.truncated_last_line,
+        degraded: loaded.meta.degraded.clone(),
         device_counts: serde_json::to_value(loaded.meta.counts).unwrap_or_default(),
         target_kind: src.kind().into(),
         target_path: src.path().to_path_buf(),
