@@ -3,7 +3,7 @@
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Arc;
 
 use anyhow::Context;
@@ -16,8 +16,32 @@ use crate::rig::session::{self, EndReason, MeasureOptions, Progress, TargetSpec}
 pub const EXIT_DISCONNECTED: u8 = 5;
 /// Exit code when the run stopped at `safety.max_run_s` or on another error mid-run.
 pub const EXIT_INCOMPLETE: u8 = 4;
-/// Exit code after Ctrl-C (the shell convention 128 + SIGINT).
+/// Exit code after Ctrl-C (the shell convention 128 + SIGINT); after SIGTERM or SIGHUP it
+/// is 128 plus that signal's number (143, 129), as if the signal had ended the process.
 pub const EXIT_CANCELLED: u8 = 130;
+
+/// The signals that stop a run like Ctrl-C — motor stopped, recording finished and marked
+/// `cancelled` — with their names: the terminal's interrupt, what `timeout` and service
+/// managers send, and a closed terminal.
+const STOP_SIGNALS: [(i32, &str); 3] = [
+    (signal_hook::consts::SIGINT, "SIGINT"),
+    (signal_hook::consts::SIGTERM, "SIGTERM"),
+    (signal_hook::consts::SIGHUP, "SIGHUP"),
+];
+
+/// Make every [`STOP_SIGNALS`] set `cancel` and remember which one came. A second signal
+/// while the motor is being stopped is ignored (the firmware watchdog and the servo's bus
+/// watchdog cover a host that dies; SIGKILL still ends it).
+fn stop_on_signals(cancel: &Arc<AtomicBool>) -> anyhow::Result<Arc<AtomicUsize>> {
+    let which = Arc::new(AtomicUsize::new(0));
+    for (signal, name) in STOP_SIGNALS {
+        // The signal's number first, so it is there when the session sees the flag.
+        signal_hook::flag::register_usize(signal, which.clone(), signal as usize)
+            .and_then(|_| signal_hook::flag::register(signal, cancel.clone()))
+            .with_context(|| format!("cannot install the {name} handler"))?;
+    }
+    Ok(which)
+}
 /// Exit code when the run finished but its data is degraded (too many samples missing; the
 /// recording's sidecar says why and the analysis gives only what the data supports).
 pub const EXIT_DEGRADED: u8 = 6;
@@ -80,13 +104,7 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
         (None, None) => anyhow::bail!("give the target with --mechanism PATH or --motion FILE"),
     };
     let cancel = Arc::new(AtomicBool::new(false));
-    {
-        let cancel = cancel.clone();
-        // A second Ctrl-C while shutting down is ignored; the firmware watchdog covers a
-        // host that dies.
-        ctrlc::set_handler(move || cancel.store(true, Ordering::Relaxed))
-            .context("cannot install the Ctrl-C handler")?;
-    }
+    let signal = stop_on_signals(&cancel)?;
     let tty = std::io::stderr().is_terminal();
     let mut last_line = std::time::Instant::now();
     let mut opts = MeasureOptions {
@@ -154,7 +172,13 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
                 .into())
             }
         },
-        EndReason::Cancelled => (EXIT_CANCELLED, "cancelled".to_string()),
+        EndReason::Cancelled => {
+            let number = signal.load(Ordering::SeqCst);
+            match STOP_SIGNALS.iter().find(|s| s.0 as usize == number) {
+                Some((n, name)) => (128 + *n as u8, format!("cancelled by {name}")),
+                None => (EXIT_CANCELLED, "cancelled".to_string()),
+            }
+        }
         // The end reason's own text starts with "disconnected": give its message once.
         EndReason::Disconnected(m) => (EXIT_DISCONNECTED, format!("device disconnected ({m})")),
         EndReason::MaxRunTime | EndReason::DiskFull(_) | EndReason::Error(_) => (

@@ -4,8 +4,9 @@
 //! reverse), the sample loop (recording every sample, counting cycles from the driver
 //! angle, live progress with the current error against the target law), the safety limits
 //! (speed, run time, sample stall) and the exit paths: on the planned end, an unplug, an
-//! error or a cancel (Ctrl-C) the motor is stopped, the hardware shut down and the
-//! recording finished — complete only in the first case. The firmware's dead-man watchdog
+//! error, a full disk or a cancel (the `cancel` flag: Ctrl-C, SIGTERM, SIGHUP in `measure`)
+//! the motor is stopped, the hardware shut down and the recording finished — complete only
+//! in the first case. The firmware's dead-man watchdog
 //! is the last line of defence if the host itself dies.
 //!
 //! It is generic over [`Bench`] and does not know which device it talks to; it does not
@@ -476,11 +477,19 @@ fn drive(
     writer: &mut RecordingWriter,
     start: Instant,
 ) -> Result<EndReason, RigError> {
+    // A cancel (a signal) during the setup must not start the motor.
+    if opts.cancel.load(Ordering::Relaxed) {
+        return Ok(EndReason::Cancelled);
+    }
     if rig.home.method == HomeMethod::ZeroHere {
         bench.zero()?;
     }
     bench.enable()?;
     bench.start_stream(rig.sampling.rate_hz)?;
+    if opts.cancel.load(Ordering::Relaxed) {
+        bench.stop_stream().ok();
+        return Ok(EndReason::Cancelled);
+    }
     bench.run_at(opts.speed_rpm)?;
     let mut plan = Plan {
         settle_deg: f64::from(opts.settle_cycles) * 360.0,
