@@ -101,6 +101,9 @@ pub struct LinkFaults {
     /// at factory defaults (torque off, the streamed block's indirect addresses unmapped,
     /// bus watchdog off), realtime tick restarting from 0.
     pub reboot_at_s: Option<f64>,
+    /// Dynamixel bus: every byte the host sends comes straight back to it before the
+    /// servos' replies, as through a half-duplex (RS-485) adapter without echo suppression.
+    pub echo: bool,
 }
 
 /// Imperfections of a simulated bench.
@@ -184,6 +187,10 @@ pub const FAULT_KEYS: &[(&str, &str)] = &[
     (
         "reboot_at_s",
         "Dynamixel bus: the driver reboots at this time, s (a brown-out)",
+    ),
+    (
+        "echo",
+        "Dynamixel bus: 1 echoes every byte the host sends (adapter without echo suppression)",
     ),
     (
         "protocol_version",
@@ -285,6 +292,13 @@ impl PlantConfig {
             "stall_at_s" => self.link.stall_at_s = Some(nonneg()?),
             "stall_s" => self.link.stall_s = nonneg()?,
             "reboot_at_s" => self.link.reboot_at_s = Some(nonneg()?),
+            "echo" => {
+                self.link.echo = match value {
+                    "1" | "true" => true,
+                    "0" | "false" => false,
+                    _ => return Err(fail("expected 1 or 0".into())),
+                }
+            }
             "protocol_version" => {
                 self.link.protocol_version = Some(
                     value

@@ -14,6 +14,7 @@
 //!
 //! Does not own the session, the recording, or the rig file's schema.
 
+pub mod echo;
 pub mod models;
 pub mod tick;
 pub mod worker;
@@ -47,9 +48,12 @@ pub const EXTENDED_POSITION_LIMIT: i64 = 1_048_575;
 /// different moments.
 pub const WATCHDOG_CHECK_FRACTION: f64 = 0.8;
 
-/// Attempts per command transaction before giving up. Default 3: a reply lost to line noise
-/// or a busy host is retried, a servo that is really gone fails within ~0.1 s at 57600 baud.
-pub const COMMAND_ATTEMPTS: u32 = 3;
+/// Attempts per command transaction before giving up. Default 8, so setup survives the
+/// noise the stream survives: with 1 % of the bytes corrupted (the stream runs on, losing
+/// about half its samples) a reply of 11–20 bytes is damaged one time in five to ten, so
+/// three attempts failed together about once per setup in a hundred (issue 16), eight once
+/// in millions. A servo that is really gone still fails within ~0.3 s at 57600 baud.
+pub const COMMAND_ATTEMPTS: u32 = 8;
 
 /// Bus watchdog unit (address 98), ms per count.
 pub const BUS_WATCHDOG_UNIT_MS: u32 = 20;
@@ -116,6 +120,8 @@ pub struct DynamixelBench {
     events: Receiver<Event>,
     thread: Option<JoinHandle<()>>,
     counts: Arc<Mutex<Counts>>,
+    /// Why the bus thread ended, when it ended on its own.
+    fatal: worker::Fatal,
     shared: Shared,
     device: DeviceInfo,
     lost: Option<String>,
@@ -191,6 +197,19 @@ impl DynamixelBench {
                     .join(", ")
             ))
         })?;
+        // dynamixel2 reads an echoed instruction as a reply and panics on it: refuse an
+        // echoing adapter before the library sees a byte (docs/faults.md).
+        if echo::port_echoes(path, driver.baud, driver.id)? {
+            return Err(RigError::WrongDevice {
+                path: path.to_path_buf(),
+                expected: crate::rig::error::NOT_THE_SERVOS,
+                detail: "it sends back every byte written to it (an RS-485 adapter without \
+                         echo suppression, or a loopback): use an adapter that suppresses its \
+                         own echo, such as a U2D2"
+                    .into(),
+            });
+        }
+        worker::quiet_caught_library_panics();
         let bus = DxlBus::open(path, driver.baud).map_err(|e| RigError::Open {
             path: path.to_path_buf(),
             message: e.to_string(),
@@ -213,9 +232,11 @@ impl DynamixelBench {
         let (etx, erx) = mpsc::channel();
         let counts = Arc::new(Mutex::new(Counts::default()));
         let wcounts = counts.clone();
+        let fatal = worker::Fatal::default();
+        let wfatal = fatal.clone();
         let thread = std::thread::Builder::new()
-            .name("dynamixel-bus".into())
-            .spawn(move || worker::run(bus, setup, rx, etx, wcounts))
+            .name(worker::THREAD_NAME.into())
+            .spawn(move || worker::run(bus, setup, rx, etx, wcounts, wfatal))
             .map_err(|e| RigError::Setup(format!("cannot start the Dynamixel bus thread: {e}")))?;
         let mut bench = DynamixelBench {
             path: path.to_path_buf(),
@@ -228,6 +249,7 @@ impl DynamixelBench {
             events: erx,
             thread: Some(thread),
             counts,
+            fatal,
             shared: Shared {
                 home_pulses: 0.0,
                 estop: false,
@@ -258,10 +280,7 @@ impl DynamixelBench {
         match call(&self.tx, move |b| with_retries(b, f)) {
             Some((Ok(v), _)) => Ok(v),
             Some((Err(e), attempts)) => Err(self.transfer_error(what, &e, attempts)),
-            None => Err(RigError::Disconnected {
-                path: self.path.clone(),
-                message: "the bus thread has ended".into(),
-            }),
+            None => Err(self.thread_ended()),
         }
     }
 
@@ -353,12 +372,7 @@ impl DynamixelBench {
                         ),
                     });
                 }
-                None => {
-                    return Err(RigError::Disconnected {
-                        path: self.path.clone(),
-                        message: "bus thread ended".into(),
-                    })
-                }
+                None => return Err(self.thread_ended()),
             };
             let model = ping.data.model;
             if role == "driver" && model != expected_model {
@@ -507,6 +521,19 @@ impl DynamixelBench {
             )));
         }
         Ok(units as i32)
+    }
+
+    /// The error for a bus thread that is gone, with its reason when it ended on its own.
+    fn thread_ended(&self) -> RigError {
+        RigError::Disconnected {
+            path: self.path.clone(),
+            message: self
+                .fatal
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .clone()
+                .unwrap_or_else(|| "the bus thread has ended".into()),
+        }
     }
 
     fn check_lost(&self) -> Result<(), RigError> {
@@ -733,10 +760,7 @@ impl SampleStream for DynamixelBench {
         }
         self.tx
             .send(Message::Start(Duration::from_secs_f64(1.0 / rate_hz)))
-            .map_err(|_| RigError::Disconnected {
-                path: self.path.clone(),
-                message: "bus thread ended".into(),
-            })
+            .map_err(|_| self.thread_ended())
     }
 
     fn stop_stream(&mut self) -> Result<(), RigError> {
@@ -761,12 +785,7 @@ impl SampleStream for DynamixelBench {
                 {
                     Ok(ev) => ev,
                     Err(mpsc::RecvTimeoutError::Timeout) => return Ok(()),
-                    Err(mpsc::RecvTimeoutError::Disconnected) => {
-                        return Err(RigError::Disconnected {
-                            path: self.path.clone(),
-                            message: "bus thread ended".into(),
-                        })
-                    }
+                    Err(mpsc::RecvTimeoutError::Disconnected) => return Err(self.thread_ended()),
                 }
             };
             match ev {
@@ -825,11 +844,17 @@ impl Drop for DynamixelBench {
 }
 
 /// Whether a failed transaction is worth repeating: no reply in time, or a reply damaged on
-/// the wire. A servo's own error reply (e.g. Access error) is not.
+/// the wire (including one `dynamixel2` panicked on). A servo's own error reply (e.g.
+/// Access error) is not.
 fn retryable(e: &dynamixel2::TransferError) -> bool {
     use dynamixel2::{ReadError, TransferError};
     match e {
-        TransferError::ReadError(ReadError::Io(io)) => io.kind() == std::io::ErrorKind::TimedOut,
+        TransferError::ReadError(ReadError::Io(io))
+            if io.kind() == std::io::ErrorKind::TimedOut =>
+        {
+            true
+        }
+        e if worker::is_library_panic(e) => true,
         TransferError::ReadError(ReadError::InvalidMessage(_)) => true,
         TransferError::ReadError(ReadError::BufferFull(_)) => true,
         _ => false,
@@ -844,7 +869,7 @@ fn with_retries<T>(
 ) -> (Result<T, dynamixel2::TransferError>, u32) {
     let mut attempt = 1;
     loop {
-        match f(bus) {
+        match worker::transaction(|| f(bus)) {
             Err(e) if retryable(&e) && attempt < COMMAND_ATTEMPTS => attempt += 1,
             r => return (r, attempt),
         }

@@ -1,6 +1,7 @@
 //! The simulated bus behind a pseudo-terminal: a thread that reads instruction packets from
 //! the pty master, lets the [`Bus`] answer them in real time, and writes status packets
-//! back, optionally paced at the control table's baud rate and with injected link faults.
+//! back, optionally paced at the control table's baud rate and with injected link faults
+//! (including an adapter that echoes what the host sends).
 //!
 //! The simulator keeps its own handle on the pty slave open, so a client closing and
 //! reopening the port (as hosts do between runs) never ends the simulation; a pty has no
@@ -154,6 +155,10 @@ impl Server {
                 match self.master.read(&mut buf) {
                     Ok(n) if n > 0 && silent => {}
                     Ok(n) if n > 0 => {
+                        if link.echo {
+                            // The adapter hands the host its own bytes back first.
+                            let _ = self.master.write(&buf[..n]);
+                        }
                         decoder.push(&buf[..n]);
                         last_byte = Instant::now();
                     }
