@@ -18,9 +18,8 @@ use crate::rig::config::{Dof as RigDof, SensorConfig};
 use crate::rig::recording::{flags, RecordingMeta, RecordingReader, RowBuf};
 
 /// An IMU quaternion whose norm is further than this from 1 is rejected as garbage rather
-/// than normalized. Default 0.1: fused-orientation IMUs report unit quaternions to a few
-/// 10⁻⁴ (BNO055 uses 2¹⁴ LSB per unit); anything 10 % off is a corrupted value.
-pub const QUATERNION_NORM_TOLERANCE: f64 = 0.1;
+/// than normalized: the rig's [`crate::rig::config::IMU_NORM_TOLERANCE`].
+pub use crate::rig::config::IMU_NORM_TOLERANCE as QUATERNION_NORM_TOLERANCE;
 
 /// What loading found besides the samples.
 #[derive(Debug, Clone)]

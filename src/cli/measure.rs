@@ -14,7 +14,8 @@ use crate::rig::session::{self, EndReason, MeasureOptions, Progress, TargetSpec}
 
 /// Exit code when the device disconnected during the run (recording kept, incomplete).
 pub const EXIT_DISCONNECTED: u8 = 5;
-/// Exit code when the run stopped at `safety.max_run_s` or on another error mid-run.
+/// Exit code when the run stopped early: `safety.max_run_s`, a stalled driver, a jammed
+/// mechanism, a full disk, or another error mid-run.
 pub const EXIT_INCOMPLETE: u8 = 4;
 /// Exit code after Ctrl-C (the shell convention 128 + SIGINT); after SIGTERM or SIGHUP it
 /// is 128 plus that signal's number (143, 129), as if the signal had ended the process.
@@ -181,7 +182,11 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
         }
         // The end reason's own text starts with "disconnected": give its message once.
         EndReason::Disconnected(m) => (EXIT_DISCONNECTED, format!("device disconnected ({m})")),
-        EndReason::MaxRunTime | EndReason::DiskFull(_) | EndReason::Error(_) => (
+        EndReason::MaxRunTime
+        | EndReason::DiskFull(_)
+        | EndReason::DriverStalled(_)
+        | EndReason::Jammed { .. }
+        | EndReason::Error(_) => (
             EXIT_INCOMPLETE,
             format!("run stopped early ({})", outcome.end),
         ),

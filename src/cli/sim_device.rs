@@ -82,7 +82,8 @@ pub struct SimDynamixelArgs {
     pub target: TargetArgs,
     /// Plant imperfection or link fault, `key=value`, repeatable (e.g. backlash_deg=0.5,
     /// gain_error=0.01, encoder_noise_counts=1, drop_prob=0.001, corrupt_prob=0.001,
-    /// disconnect_at_s=5, dropout_at_s=2, seed=7).
+    /// disconnect_at_s=5, dropout_at_s=2, driver_fault_at_s=2, driver_stall_at_s=2,
+    /// jam_at_s=2, echo=1, seed=7).
     #[arg(long = "fault", value_name = "KEY=VALUE")]
     pub faults: Vec<String>,
     /// ID of the driver servo.
@@ -114,7 +115,8 @@ pub struct SimStepperArgs {
     /// Plant imperfection or link fault, `key=value`, repeatable: backlash_deg,
     /// phase_lag_deg, gain_error, encoder_noise_counts, encoder_resolution, imu_noise_deg,
     /// imu_bias_deg, missed_step_prob, scale_mm, drop_prob, corrupt_prob, disconnect_at_s,
-    /// dropout_at_s, dropout_s, protocol_version, seed.
+    /// dropout_at_s, dropout_s, driver_fault_at_s, driver_stall_at_s, jam_at_s,
+    /// protocol_version, seed.
     #[arg(long = "fault", value_name = "KEY=VALUE")]
     pub faults: Vec<String>,
     /// Take the bench's mechanics (steps/rev, microsteps, gear, direction, fitted sensors)

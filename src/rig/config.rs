@@ -32,11 +32,28 @@ pub const DEFAULT_WATCHDOG_MS: u32 = 250;
 /// minutes covers many cycles at bench speeds and bounds an unattended run.
 pub const DEFAULT_MAX_RUN_S: f64 = 600.0;
 
+/// Default largest deviation of the follower from the target law before the session stops
+/// the motor as a jammed mechanism, degrees of follower rotation (`safety.
+/// max_follower_error_deg`): 20°. A printed mechanism with a few degrees of backlash and
+/// lag stays far below it even where the law is steep, while a follower that binds falls
+/// this far behind within a fraction of a driver turn.
+pub const DEFAULT_MAX_FOLLOWER_ERROR_DEG: f64 = 20.0;
+
+/// Profile Acceleration unit of an X-series servo in velocity-based profile mode, degrees
+/// per second squared at the servo shaft (214.577 rev/min², e-manual).
+pub const DYNAMIXEL_ACCEL_UNIT_DEG_S2: f64 = 214.577 * 360.0 / 3600.0;
+
 /// Largest gear ratio accepted (its inverse is the smallest), for either driver kind:
 /// 1000:1. Bench gearboxes and belts stay below 100:1; far beyond, a typo such as `1e9`
 /// makes every speed and step-rate figure derived from it meaningless. The firmware carries
 /// the ratio as a fraction of two 16-bit numbers, which this range always allows.
 pub const MAX_GEAR_RATIO: f64 = 1000.0;
+
+/// An IMU quaternion reading whose norm is further than this from 1 is garbage, not a
+/// rotation to normalize: 0.1. Fused-orientation IMUs report unit quaternions to a few
+/// 10⁻⁴ (the BNO055 uses 2¹⁴ LSB per unit); anything 10 % off is a corrupted value. Used by
+/// the live error and the analysis alike.
+pub const IMU_NORM_TOLERANCE: f64 = 0.1;
 
 /// Tolerance on the norm of a configured mounting quaternion: beyond it the file is
 /// rejected rather than silently normalized (a typo, not rounding).
@@ -522,6 +539,10 @@ pub struct SafetyConfig {
     /// Device dead-man watchdog period in ms.
     #[serde(default = "default_watchdog")]
     pub watchdog_ms: u32,
+    /// Largest follower deviation from the target (after the offset at the start is
+    /// removed), degrees, before the session stops the motor as a jammed mechanism.
+    #[serde(default = "default_max_follower_error")]
+    pub max_follower_error_deg: f64,
 }
 
 fn default_safety_rpm() -> f64 {
@@ -533,6 +554,9 @@ fn default_max_run() -> f64 {
 fn default_watchdog() -> u32 {
     DEFAULT_WATCHDOG_MS
 }
+fn default_max_follower_error() -> f64 {
+    DEFAULT_MAX_FOLLOWER_ERROR_DEG
+}
 
 impl Default for SafetyConfig {
     fn default() -> Self {
@@ -540,6 +564,7 @@ impl Default for SafetyConfig {
             max_speed_rpm: default_safety_rpm(),
             max_run_s: DEFAULT_MAX_RUN_S,
             watchdog_ms: DEFAULT_WATCHDOG_MS,
+            max_follower_error_deg: DEFAULT_MAX_FOLLOWER_ERROR_DEG,
         }
     }
 }
@@ -605,6 +630,18 @@ impl RigConfig {
         let mut r = self.clone();
         r.sensors.retain(|s| s.is_firmware() == firmware);
         r
+    }
+
+    /// The driver's acceleration limit in degrees per second squared of the driver shaft,
+    /// as the rig sets it (`max_accel` of a stepper; a Dynamixel's `profile_acceleration`
+    /// through [`DYNAMIXEL_ACCEL_UNIT_DEG_S2`] and the gear); `None` when unlimited.
+    pub fn driver_accel_deg_s2(&self) -> Option<f64> {
+        match &self.driver {
+            DriverConfig::StepperFirmware(s) => Some(s.max_accel),
+            DriverConfig::Dynamixel(d) => (d.profile_acceleration > 0).then(|| {
+                f64::from(d.profile_acceleration) * DYNAMIXEL_ACCEL_UNIT_DEG_S2 / d.gear_ratio
+            }),
+        }
     }
 
     /// What the rig lacks to measure a follower of `class`, or `None` when it can: the
@@ -947,6 +984,13 @@ impl RigConfig {
         }
         if self.safety.watchdog_ms < 20 || self.safety.watchdog_ms > 60_000 {
             return bad(f("watchdog_ms"), "must be in 20..=60000".into());
+        }
+        if !(pos(self.safety.max_follower_error_deg) && self.safety.max_follower_error_deg <= 180.0)
+        {
+            return bad(
+                f("max_follower_error_deg"),
+                "must be a number of degrees in (0, 180]".into(),
+            );
         }
         Ok(())
     }

@@ -70,6 +70,10 @@ pub mod flags {
     /// Mixed bench: no two bus samples close in time bracket this row, so its driver angle
     /// (and any follower servo values) are the nearest bus sample's, not interpolated.
     pub const DRIVER_HELD: u32 = 1 << 7;
+    /// The driver reports a hardware fault at this sample: a Dynamixel driver's alert bit
+    /// (a latched Hardware Error Status such as an overload), our firmware's emergency stop
+    /// on the board that turns the driver. The session stops on it.
+    pub const DRIVER_FAULT: u32 = 1 << 8;
 }
 
 /// Part of the run a sample belongs to.
@@ -348,6 +352,27 @@ pub struct RecordingMeta {
     /// most samples missing): why. Absent when the data is sound.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub degraded: Option<String>,
+    /// Set when the session stopped the motor because the driver or the mechanism did not
+    /// do what it should (a driver fault or stall, a jammed follower): where and why.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub safety_stop: Option<SafetyStop>,
+}
+
+/// Why and where the session stopped the motor on its own.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SafetyStop {
+    /// `driver fault`, `driver stall` or `jam`.
+    pub kind: String,
+    /// Device time of the first sample of the problem (the fault reported, the start of
+    /// the window in which the driver did not advance, the first row beyond the follower
+    /// limit), µs.
+    pub onset_device_time_us: u64,
+    /// Device time of the sample that decided the stop, µs.
+    pub detected_device_time_us: u64,
+    /// Driver angle at the onset, deg.
+    pub driver_angle_deg: f64,
+    /// What was seen, in words.
+    pub detail: String,
 }
 
 impl RecordingMeta {
@@ -373,6 +398,7 @@ impl RecordingMeta {
             columns,
             csv: None,
             degraded: None,
+            safety_stop: None,
         }
     }
 

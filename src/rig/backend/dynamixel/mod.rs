@@ -125,6 +125,8 @@ pub struct DynamixelBench {
     shared: Shared,
     device: DeviceInfo,
     lost: Option<String>,
+    /// The driver's hardware error, read once after its first reply with the alert bit.
+    fault: Option<String>,
     shut_down: bool,
 }
 
@@ -263,6 +265,7 @@ impl DynamixelBench {
                 ..Default::default()
             },
             lost: None,
+            fault: None,
             shut_down: false,
         };
         bench.identify(expected_model)?;
@@ -621,6 +624,24 @@ impl DynamixelBench {
     pub fn path(&self) -> &Path {
         &self.path
     }
+
+    /// The driver's Hardware Error Status in words (after it set the alert bit).
+    fn read_hardware_error(&self) -> String {
+        let id = self.driver.id;
+        match self.bus("read hardware error status", move |b| {
+            b.read_u8(id, HARDWARE_ERROR_STATUS).map(|r| r.data)
+        }) {
+            Ok(bits) => format!(
+                "driver ID {id} reports a hardware error: {} (status 0x{bits:02X}); it has \
+                 switched its torque off, power-cycle or reboot it after fixing the cause",
+                hardware_error_text(bits)
+            ),
+            Err(e) => format!(
+                "driver ID {id} reports a hardware error (alert bit); its Hardware Error \
+                 Status could not be read: {e}"
+            ),
+        }
+    }
 }
 
 impl Driver for DynamixelBench {
@@ -732,6 +753,10 @@ impl Driver for DynamixelBench {
         Ok(self.driver_deg(p))
     }
 
+    fn fault(&mut self) -> Option<String> {
+        self.fault.clone()
+    }
+
     fn shutdown(&mut self) -> Result<(), RigError> {
         if self.shut_down {
             return Ok(());
@@ -793,6 +818,12 @@ impl SampleStream for DynamixelBench {
                     let mut f = raw.flags;
                     if self.shared.estop {
                         f |= flags::ESTOP;
+                    }
+                    if raw.alert {
+                        f |= flags::DRIVER_FAULT;
+                        if self.fault.is_none() {
+                            self.fault = Some(self.read_hardware_error());
+                        }
                     }
                     if let Some(silent) = raw.resumed_after {
                         if self.rearm_after_silence(silent)? {

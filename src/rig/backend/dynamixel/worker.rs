@@ -69,7 +69,7 @@ pub struct RawSample {
     pub followers: Vec<i32>,
     /// [`flags`] bits decided by the worker (gap before, follower stale).
     pub flags: u32,
-    /// Whether any servo set the alert bit (a hardware error is latched).
+    /// Whether the driver set the alert bit in its reply (a hardware error is latched).
     pub alert: bool,
     /// On the first sample after failed reads: how long the bus was silent (the servos'
     /// bus watchdog may have stopped the driver meanwhile).
@@ -345,7 +345,9 @@ fn sample_once(
                     driver_reply_at = Some(Instant::now());
                 }
                 if let Some(k) = ids.iter().position(|&id| id == resp.motor_id) {
-                    alert |= resp.alert;
+                    if k == 0 {
+                        alert = resp.alert;
+                    }
                     blocks[k] = Some(resp.data.to_vec());
                 }
             }

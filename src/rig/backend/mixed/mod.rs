@@ -144,6 +144,9 @@ impl Driver for MixedBench {
     fn position_deg(&mut self) -> Result<f64, RigError> {
         self.bus.position_deg()
     }
+    fn fault(&mut self) -> Option<String> {
+        self.bus.fault()
+    }
     fn shutdown(&mut self) -> Result<(), RigError> {
         // The motor first; the board's stream after, whatever happened to the bus.
         let driver = self.bus.shutdown();

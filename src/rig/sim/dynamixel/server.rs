@@ -109,8 +109,18 @@ impl Server {
         let mut decoder = Decoder::new();
         let mut last_byte = Instant::now();
         let mut buf = [0u8; 4096];
+        let events = lock(&self.plant).config().events.clone();
         let mut pending_faults = self.options.hardware_faults.clone();
+        if let Some(at_s) = events.driver_fault_at_s {
+            pending_faults.push(HardwareFault {
+                at_s,
+                driver: true,
+                bits: super::control_table::hw_error::OVERLOAD,
+            });
+        }
         pending_faults.sort_by(|a, b| a.at_s.total_cmp(&b.at_s));
+        let mut stall_at = events.driver_stall_at_s;
+        let mut jam_at = events.jam_at_s;
         let end = loop {
             if self.stop.load(Ordering::Relaxed) {
                 break ServerEnd::Stopped;
@@ -135,6 +145,18 @@ impl Server {
                 if let Some(s) = bus.servo_mut(id) {
                     s.inject_hardware_error(f.bits);
                 }
+            }
+            if stall_at.is_some_and(|at| at <= t) {
+                // The driver's shaft is blocked; it reports nothing.
+                stall_at = None;
+                let mut bus = lock(&self.bus);
+                bus.advance(t);
+                bus.driver_mut().block();
+            }
+            if jam_at.is_some_and(|at| at <= t) {
+                jam_at = None;
+                lock(&self.bus).advance(t);
+                lock(&self.plant).jam();
             }
             if reboot_at.is_some_and(|at| at <= t) {
                 // A brown-out: the driver reboots by itself.

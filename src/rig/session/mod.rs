@@ -17,9 +17,13 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime};
 
-use crate::motion::{Motion, MotionClass};
+mod watch;
+
+pub use watch::{JAM_CONFIRM, STALL_GRACE, STALL_MIN_FRACTION, STALL_WINDOW};
+
 use crate::rig::backend::{Bench, Sample};
-use crate::rig::config::{Dof, HomeMethod, RigConfig, SensorConfig};
+use crate::rig::config::{HomeMethod, RigConfig};
+use crate::rig::recording::{flags, SafetyStop};
 use crate::rig::recording::{
     utc_dir_stamp, Claim, Existing, Phase, RecordingError, RecordingMeta, RecordingWriter, Row,
     SessionInfo,
@@ -27,6 +31,7 @@ use crate::rig::recording::{
 use crate::rig::target::check_measurable;
 pub use crate::rig::target::{Target, TargetSpec};
 use crate::rig::RigError;
+use watch::{ErrorProbe, Fired, JamWatch, StallWatch};
 
 /// How long the session waits for samples before declaring the stream stalled: 8 s,
 /// longer than a backend's reconnect window (5 s for the stepper firmware) plus its
@@ -157,6 +162,17 @@ pub enum EndReason {
     /// The recording's disk filled up (the file being written); the motor was stopped and
     /// the sidecar describes the rows on disk.
     DiskFull(String),
+    /// The driver did not follow its command: it reported a hardware fault or stopped
+    /// advancing (why, in words); the motor was stopped.
+    DriverStalled(String),
+    /// The follower deviated from the target beyond `safety.max_follower_error_deg`; the
+    /// motor was stopped.
+    Jammed {
+        /// Driver angle where the deviation began, deg.
+        driver_angle_deg: f64,
+        /// The follower's error there, deg.
+        error_deg: f64,
+    },
     /// Another error during the run.
     Error(String),
 }
@@ -169,6 +185,16 @@ impl std::fmt::Display for EndReason {
             EndReason::Disconnected(m) => write!(f, "disconnected: {m}"),
             EndReason::MaxRunTime => write!(f, "stopped: safety.max_run_s reached"),
             EndReason::DiskFull(path) => write!(f, "disk full: {path}"),
+            EndReason::DriverStalled(why) => write!(f, "driver stalled: {why}"),
+            EndReason::Jammed {
+                driver_angle_deg,
+                error_deg,
+            } => write!(
+                f,
+                "mechanism jammed: the follower was {error_deg:.1}° off the target at driver \
+                 angle {driver_angle_deg:.1}° (a binding mechanism, or a follower sensor whose \
+                 sign or scale does not match the rig file)"
+            ),
             EndReason::Error(m) => write!(f, "error: {m}"),
         }
     }
@@ -286,45 +312,6 @@ impl Plan {
             }
         }
     }
-}
-
-/// The live error display: measured follower angle against the target law.
-struct ErrorProbe {
-    column: usize,
-    sensor: SensorConfig,
-    offset: Option<f64>,
-}
-
-impl ErrorProbe {
-    fn new(rig: &RigConfig, motion: &Motion) -> Option<ErrorProbe> {
-        if motion.class() == MotionClass::R3 {
-            return None;
-        }
-        let mut column = 0;
-        for s in &rig.sensors {
-            if s.dof() == Some(Dof::Rz) && s.counts_per_rev().is_some() {
-                return Some(ErrorProbe {
-                    column,
-                    sensor: s.clone(),
-                    offset: None,
-                });
-            }
-            column += s.columns().len();
-        }
-        None
-    }
-
-    fn error_deg(&mut self, motion: &Motion, s: &Sample) -> Option<f64> {
-        let measured = self.sensor.to_physical(*s.values.get(self.column)?)?;
-        let target = motion.angle_z(s.driver_angle_deg / 360.0)?[0].to_degrees();
-        let raw = wrap180(measured - target);
-        let offset = *self.offset.get_or_insert(raw);
-        Some(wrap180(raw - offset))
-    }
-}
-
-fn wrap180(deg: f64) -> f64 {
-    (deg + 180.0).rem_euclid(360.0) - 180.0
 }
 
 /// Run the plan on an open bench and record it. Always shuts the bench down.
@@ -491,6 +478,11 @@ fn drive(
         return Ok(EndReason::Cancelled);
     }
     bench.run_at(opts.speed_rpm)?;
+    let mut stall = StallWatch::new(rig.driver_accel_deg_s2());
+    stall.commanded(opts.speed_rpm);
+    let mut jam = JamWatch::new(rig.safety.max_follower_error_deg);
+    // Set when a watch fired: the motor is stopped at once, the batch still recorded.
+    let mut stopping: Option<(EndReason, SafetyStop)> = None;
     let mut plan = Plan {
         settle_deg: f64::from(opts.settle_cycles) * 360.0,
         measure_deg: f64::from(opts.cycles) * 360.0,
@@ -547,6 +539,7 @@ fn drive(
                         plan.turn = Some(s.driver_angle_deg);
                         phase = Phase::Settle;
                         bench.run_at(-opts.speed_rpm)?;
+                        stall.commanded(-opts.speed_rpm);
                     }
                     Step::Done => {
                         done = true;
@@ -556,8 +549,16 @@ fn drive(
                     }
                 }
             }
-            if let Some(p) = probe.as_mut() {
-                error_deg = p.error_deg(&target.motion, s).or(error_deg);
+            let error = probe.as_mut().and_then(|p| p.error_deg(&target.motion, s));
+            error_deg = error.or(error_deg);
+            if !done && stopping.is_none() {
+                stopping = watch_sample(bench, s, error, &mut stall, &mut jam);
+                if stopping.is_some() {
+                    // Stop first; the rest of the batch is recorded after.
+                    bench.stop().ok();
+                    done = true;
+                    phase = Phase::Settle;
+                }
             }
             writer.push(&Row {
                 device_time_us: s.device_time_us,
@@ -592,7 +593,57 @@ fn drive(
         }
     }
     finish_tail(bench, writer, start)?;
-    Ok(EndReason::Finished)
+    Ok(match stopping {
+        Some((end, record)) => {
+            writer.meta_mut().safety_stop = Some(record);
+            end
+        }
+        None => EndReason::Finished,
+    })
+}
+
+/// Check one sample against the driver and mechanism watches: why to stop, if any.
+fn watch_sample(
+    bench: &mut (dyn Bench + Send),
+    s: &Sample,
+    error_deg: Option<f64>,
+    stall: &mut StallWatch,
+    jam: &mut JamWatch,
+) -> Option<(EndReason, SafetyStop)> {
+    let record = |kind: &str, fired: Fired, detail: String| SafetyStop {
+        kind: kind.into(),
+        onset_device_time_us: fired.onset_us,
+        detected_device_time_us: fired.decided_us,
+        driver_angle_deg: fired.onset_driver_deg,
+        detail,
+    };
+    if s.flags & flags::DRIVER_FAULT != 0 {
+        let why = bench
+            .fault()
+            .unwrap_or_else(|| "the driver reports a hardware fault".into());
+        let here = Fired {
+            onset_us: s.device_time_us,
+            onset_driver_deg: s.driver_angle_deg,
+            decided_us: s.device_time_us,
+        };
+        return Some((
+            EndReason::DriverStalled(why.clone()),
+            record("driver fault", here, why),
+        ));
+    }
+    if let Some((fired, why)) = stall.observe(s) {
+        return Some((
+            EndReason::DriverStalled(why.clone()),
+            record("driver stall", fired, why),
+        ));
+    }
+    let (fired, error) = jam.observe(s, error_deg?)?;
+    let end = EndReason::Jammed {
+        driver_angle_deg: fired.onset_driver_deg,
+        error_deg: error,
+    };
+    let detail = end.to_string();
+    Some((end, record("jam", fired, detail)))
 }
 
 /// After a stop command: keep recording until the driver is at rest (or [`STOP_WAIT`]),
@@ -691,13 +742,5 @@ mod tests {
             Step::Continue(Phase::Reverse, _)
         ));
         assert!(matches!(plan.step(top - 1080.0 - m), Step::Done));
-    }
-
-    /// Guards: wrapping of the displayed error.
-    #[test]
-    fn wrap_to_half_turn() {
-        assert_eq!(wrap180(190.0), -170.0);
-        assert_eq!(wrap180(-190.0), 170.0);
-        assert_eq!(wrap180(10.0), 10.0);
     }
 }
