@@ -549,8 +549,10 @@ fn drive(
                     }
                 }
             }
-            let error = probe.as_mut().and_then(|p| p.error_deg(&target.motion, s));
-            error_deg = error.or(error_deg);
+            let error = probe.as_mut().and_then(|p| p.error(&target.motion, s));
+            error_deg = error.map(|e| e.deg).or(error_deg);
+            // Only an error against the aligned target can tell a jam.
+            let error = error.filter(|e| e.aligned).map(|e| e.deg);
             if !done && stopping.is_none() {
                 stopping = watch_sample(bench, s, error, &mut stall, &mut jam);
                 if stopping.is_some() {

@@ -1,7 +1,8 @@
 //! What the session watches in every sample besides recording it: the follower's error
 //! against the target law (shown live, and a jammed mechanism when it grows beyond the
-//! rig's `safety.max_follower_error_deg`), and a driver that does not follow its command
-//! (a hardware fault it reports, or an angle that stops advancing).
+//! rig's `safety.max_follower_error_deg` once the target is aligned with the follower over
+//! the first driver revolution), and a driver that does not follow its command (a
+//! hardware fault it reports, or an angle that stops advancing).
 //!
 //! Owns the three detectors and their limits; the session decides what to do when one of
 //! them fires (stop the motor, record why). It does not talk to the bench.
@@ -46,6 +47,15 @@ pub const JAM_CONFIRM: Duration = Duration::from_millis(50);
 const NOT_FRESH: u32 =
     flags::IMU_STALE | flags::SENSOR_ERROR | flags::FOLLOWER_STALE | flags::DRIVER_HELD;
 
+/// Driver travel over which the probe aligns the target with the follower before it
+/// judges a jam: one revolution, so the whole law is seen once and the alignment is
+/// unambiguous. The settle cycle normally provides it.
+pub const ALIGN_TRAVEL_DEG: f64 = 360.0;
+
+/// Readings kept for the alignment: at most this many, spread over [`ALIGN_TRAVEL_DEG`]
+/// (one per 0.5° of driver angle), so the fit costs a few ms once.
+const ALIGN_POINTS: usize = 720;
+
 /// Where a follower reading comes from.
 enum Reading {
     /// A rotary sensor about z (1R, 1R1T): its column and calibration.
@@ -54,14 +64,44 @@ enum Reading {
     Imu(usize, ImuConfig),
 }
 
-/// The follower's error against the target law, with the offset of the first reading
-/// removed (sensor zero, the IMU's heading): degrees about z for a turning follower, the
-/// geodesic angle for a 3R one.
+/// One follower reading: an angle about z (deg, wrapping) or an orientation.
+#[derive(Debug, Clone, Copy)]
+enum Value {
+    Rz(f64),
+    Rotation(UnitQuaternion<f64>),
+}
+
+/// How the target is laid onto the follower: the driver-angle offset (a mechanism not at
+/// its zero when the run started, as after a previous run) and the sensor's offset (its
+/// zero; for an IMU, its world frame).
+#[derive(Debug, Clone, Copy)]
+struct Alignment {
+    driver_deg: f64,
+    rz_deg: f64,
+    world: UnitQuaternion<f64>,
+}
+
+/// The follower's error against the target law: degrees about z for a turning follower,
+/// the geodesic angle for a 3R one. Until the driver has travelled [`ALIGN_TRAVEL_DEG`]
+/// the error is relative to the first reading (shown, not judged); then the target is
+/// aligned with what was measured over that revolution (driver-angle and sensor offsets
+/// fitted, as the analysis does) and the error is one a jam can be judged by.
 pub struct ErrorProbe {
     reading: Reading,
-    /// Rz: the first raw difference (deg); 3R: the IMU world frame, from the first reading.
-    offset_deg: Option<f64>,
-    world: Option<UnitQuaternion<f64>>,
+    /// The first reading's offset to the unaligned target (display until aligned).
+    first: Option<Alignment>,
+    /// (driver deg, value) collected for the alignment, with the driver angle of the first.
+    collected: Vec<(f64, Value)>,
+    aligned: Option<Alignment>,
+}
+
+/// The probe's error at one sample.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FollowerError {
+    /// Degrees (signed about z, or a geodesic magnitude).
+    pub deg: f64,
+    /// The target has been aligned with the follower: a jam can be judged by it.
+    pub aligned: bool,
 }
 
 impl ErrorProbe {
@@ -84,8 +124,9 @@ impl ErrorProbe {
             if let Some(reading) = reading {
                 return Some(ErrorProbe {
                     reading,
-                    offset_deg: None,
-                    world: None,
+                    first: None,
+                    collected: Vec::with_capacity(ALIGN_POINTS + 1),
+                    aligned: None,
                 });
             }
             column += s.columns().len();
@@ -93,20 +134,10 @@ impl ErrorProbe {
         None
     }
 
-    /// The error at sample `s` (degrees, signed about z or a geodesic magnitude), `None`
-    /// when the sample holds no fresh follower reading.
-    pub fn error_deg(&mut self, motion: &Motion, s: &Sample) -> Option<f64> {
-        if s.flags & NOT_FRESH != 0 {
-            return None;
-        }
-        let t = s.driver_angle_deg / 360.0;
+    fn value(&self, s: &Sample) -> Option<Value> {
         match &self.reading {
             Reading::Rz(column, sensor) => {
-                let measured = sensor.to_physical(*s.values.get(*column)?)?;
-                let target = motion.angle_z(t)?[0].to_degrees();
-                let raw = wrap180(measured - target);
-                let offset = *self.offset_deg.get_or_insert(raw);
-                Some(wrap180(raw - offset))
+                Some(Value::Rz(sensor.to_physical(*s.values.get(*column)?)?))
             }
             Reading::Imu(column, imu) => {
                 let v = s.values.get(*column..*column + 4)?;
@@ -115,13 +146,113 @@ impl ErrorProbe {
                 if !norm.is_finite() || (norm - 1.0).abs() > IMU_NORM_TOLERANCE {
                     return None;
                 }
-                let measured = imu.follower_rotation(UnitQuaternion::from_quaternion(q));
-                let target = motion.sample(t).rotation;
-                let world = *self.world.get_or_insert(measured * target.inverse());
-                Some((world * target).angle_to(&measured).to_degrees())
+                Some(Value::Rotation(
+                    imu.follower_rotation(UnitQuaternion::from_quaternion(q)),
+                ))
             }
         }
     }
+
+    /// The error at sample `s`, `None` when the sample holds no fresh follower reading.
+    pub fn error(&mut self, motion: &Motion, s: &Sample) -> Option<FollowerError> {
+        if s.flags & NOT_FRESH != 0 {
+            return None;
+        }
+        let value = self.value(s)?;
+        let phi = s.driver_angle_deg;
+        if self.aligned.is_none() {
+            let start = self.collected.first().map_or(phi, |c| c.0);
+            let spacing = ALIGN_TRAVEL_DEG / ALIGN_POINTS as f64;
+            if self
+                .collected
+                .last()
+                .is_none_or(|c| (phi - c.0).abs() >= spacing)
+            {
+                self.collected.push((phi, value));
+            }
+            if (phi - start).abs() >= ALIGN_TRAVEL_DEG {
+                self.aligned = Some(fit(motion, &self.collected));
+                self.collected = Vec::new();
+            }
+        }
+        let alignment = match self.aligned {
+            Some(a) => a,
+            None => *self
+                .first
+                .get_or_insert_with(|| offsets(motion, &[(phi, value)], 0.0).0),
+        };
+        Some(FollowerError {
+            deg: error_deg(motion, phi, value, &alignment),
+            aligned: self.aligned.is_some(),
+        })
+    }
+}
+
+/// The target at driver angle `phi` (deg) under `a`, against `value`: degrees.
+fn error_deg(motion: &Motion, phi: f64, value: Value, a: &Alignment) -> f64 {
+    let t = (phi + a.driver_deg) / 360.0;
+    match value {
+        Value::Rz(measured) => {
+            let target = motion.angle_z(t).map_or(0.0, |v| v[0].to_degrees());
+            wrap180(measured - target - a.rz_deg)
+        }
+        Value::Rotation(q) => (a.world * motion.sample(t).rotation)
+            .angle_to(&q)
+            .to_degrees(),
+    }
+}
+
+/// The sensor offsets that best lay the target, shifted by `driver_deg`, onto `points`
+/// (circular mean about z; chordal mean rotation for an IMU), and the sum of squared
+/// errors left.
+fn offsets(motion: &Motion, points: &[(f64, Value)], driver_deg: f64) -> (Alignment, f64) {
+    let mut a = Alignment {
+        driver_deg,
+        rz_deg: 0.0,
+        world: UnitQuaternion::identity(),
+    };
+    let (mut sin, mut cos) = (0.0, 0.0);
+    let mut sum = Quaternion::new(0.0, 0.0, 0.0, 0.0);
+    for &(phi, value) in points {
+        let t = (phi + driver_deg) / 360.0;
+        match value {
+            Value::Rz(measured) => {
+                let target = motion.angle_z(t).map_or(0.0, |v| v[0].to_degrees());
+                let r = (measured - target).to_radians();
+                sin += r.sin();
+                cos += r.cos();
+            }
+            Value::Rotation(q) => {
+                let w = (q * motion.sample(t).rotation.inverse()).into_inner();
+                // q and −q are one rotation: add them on one side.
+                let w = if w.dot(&sum) < 0.0 { -w } else { w };
+                sum += w;
+            }
+        }
+    }
+    a.rz_deg = sin.atan2(cos).to_degrees();
+    if sum.norm() > 0.0 {
+        a.world = UnitQuaternion::from_quaternion(sum);
+    }
+    let cost = points
+        .iter()
+        .map(|&(phi, value)| error_deg(motion, phi, value, &a).powi(2))
+        .sum();
+    (a, cost)
+}
+
+/// The driver-angle offset (a 1° grid, then 0.05° about the best) and sensor offsets that
+/// best lay the target onto `points`.
+fn fit(motion: &Motion, points: &[(f64, Value)]) -> Alignment {
+    let best = |candidates: &mut dyn Iterator<Item = f64>| {
+        candidates
+            .map(|d| offsets(motion, points, d))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(a, _)| a)
+    };
+    let coarse = best(&mut (0..360).map(f64::from)).map_or(0.0, |a| a.driver_deg);
+    best(&mut (-20..=20).map(|k| coarse + f64::from(k) * 0.05))
+        .unwrap_or_else(|| offsets(motion, points, coarse).0)
 }
 
 /// Map degrees to [−180, 180).
@@ -318,6 +449,55 @@ mod tests {
         for _ in 0..2000 {
             t += 1000;
             assert!(w.observe(&sample(t, angle, 0)).is_none());
+        }
+    }
+
+    /// Guards the alignment (issue 16's jam watch must not take a mechanism that was not at
+    /// its zero, as after a previous run, for a jam): readings of the 2:1 half-turn law
+    /// taken 97° of driver angle ahead, through a sensor 30° off its zero, show errors of
+    /// tens of degrees against the unaligned target, but none beyond 0.1° once the probe
+    /// has seen one revolution; a 3R law with a tilted IMU world frame likewise.
+    #[test]
+    fn the_probe_aligns_a_shifted_target_before_judging() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        for (motion, rig) in [
+            ("half-turn-2to1", "sim-stepper"),
+            ("figure-eight", "sim-stepper-imu"),
+        ] {
+            let motion =
+                Motion::from_file(&root.join(format!("data/motions/{motion}.toml"))).unwrap();
+            let rig = RigConfig::load(&root.join(format!("rigs/{rig}.toml"))).unwrap();
+            let mut probe = ErrorProbe::new(&rig, &motion).unwrap();
+            let world = UnitQuaternion::from_euler_angles(0.3, -0.2, 1.1);
+            let reading = |phi: f64| -> Vec<f64> {
+                let t = (phi + 97.0) / 360.0;
+                if motion.class() == MotionClass::R3 {
+                    let q = world * motion.sample(t).rotation;
+                    vec![q.w, q.i, q.j, q.k]
+                } else {
+                    let deg = motion.angle_z(t).unwrap()[0].to_degrees() + 30.0;
+                    vec![(deg / 360.0 * 4096.0).round().rem_euclid(4096.0)]
+                }
+            };
+            let (mut unaligned, mut aligned) = (0.0f64, 0.0f64);
+            for i in 0..3000 {
+                let phi = i as f64 * 0.25;
+                let s = Sample {
+                    device_time_us: i * 1000,
+                    driver_angle_deg: phi,
+                    values: reading(phi),
+                    flags: 0,
+                    host_instant: None,
+                };
+                let e = probe.error(&motion, &s).unwrap();
+                if e.aligned {
+                    aligned = aligned.max(e.deg.abs());
+                } else {
+                    unaligned = unaligned.max(e.deg.abs());
+                }
+            }
+            assert!(unaligned > 20.0, "{unaligned}");
+            assert!(aligned < 0.1, "{aligned}");
         }
     }
 

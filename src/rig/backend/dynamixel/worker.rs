@@ -455,6 +455,20 @@ pub fn call<T: Send + 'static>(
 mod tests {
     use super::*;
 
+    /// Guards the last resort against `dynamixel2`'s panics: a transaction that panics
+    /// comes back as an error marked as the library's panic, with its message, which the
+    /// backend retries like a damaged reply, and the thread goes on.
+    #[test]
+    fn a_panicking_transaction_is_a_failed_one() {
+        let r: Result<(), TransferError> =
+            transaction(|| panic!("slice index starts at 9 but ends at 8"));
+        let e = r.unwrap_err();
+        assert!(is_library_panic(&e), "{e}");
+        assert!(e.to_string().contains("starts at 9"), "{e}");
+        let ok: Result<u8, TransferError> = transaction(|| Ok(7));
+        assert_eq!(ok.unwrap(), 7);
+    }
+
     /// The block as a servo sends it, preceded by the status error byte.
     fn block(tick: u16, velocity: i32, moving: u8, position: i32) -> Vec<u8> {
         let mut b = vec![0x80]; // error field with the alert bit: the worst case
