@@ -368,11 +368,17 @@ impl RecordingWriter {
         // Cut a partial row away so the CSV ends where the sidecar says.
         let _ = self.file.set_len(self.on_disk);
         let err = io_err(&self.csv_path)(e);
-        if matches!(err, RecordingError::DiskFull { .. }) {
+        self.note_failure(&err);
+        Err(err)
+    }
+
+    /// After a failed write: on a full disk, stop writing rows and give up the reserve so
+    /// the final sidecar fits.
+    fn note_failure(&mut self, err: &RecordingError) {
+        if matches!(err, RecordingError::DiskFull { .. }) && !self.disk_full {
             self.disk_full = true;
             let _ = self.lock.set_len(0);
         }
-        Err(err)
     }
 
     fn write_sidecar(&mut self) -> Result<(), RecordingError> {
@@ -396,13 +402,10 @@ impl RecordingWriter {
         let written = std::fs::write(&tmp, json)
             .map_err(io_err(&tmp))
             .and_then(|()| std::fs::rename(&tmp, &path).map_err(io_err(&path)));
-        if written.is_err() {
+        if let Err(e) = &written {
             // Never leave a half-written temporary behind; the previous sidecar stays.
             let _ = std::fs::remove_file(&tmp);
-            if matches!(written, Err(RecordingError::DiskFull { .. })) && !self.disk_full {
-                self.disk_full = true;
-                let _ = self.lock.set_len(0);
-            }
+            self.note_failure(e);
         }
         written
     }

@@ -2,12 +2,13 @@
 //!
 //! Owns the run plan (zero/home, settle cycle(s), N forward cycles, optionally the same in
 //! reverse), the sample loop (recording every sample, counting cycles from the driver
-//! angle, live progress with the current error against the target law), the safety limits
-//! (speed, run time, sample stall) and the exit paths: on the planned end, an unplug, an
-//! error, a full disk or a cancel (the `cancel` flag: Ctrl-C, SIGTERM, SIGHUP in `measure`)
-//! the motor is stopped, the hardware shut down and the recording finished — complete only
-//! in the first case. The firmware's dead-man watchdog
-//! is the last line of defence if the host itself dies.
+//! angle, live progress with the current error against the target law), the recording
+//! folder's claim, the safety limits (speed, run time, sample stall, and the [`watch`]es on
+//! every sample: a driver fault or stall, a jammed mechanism) and the exit paths: on the
+//! planned end, an unplug, an error, a full disk, a watch firing or a cancel (the `cancel`
+//! flag: Ctrl-C, SIGTERM, SIGHUP in `measure`) the motor is stopped, the hardware shut down
+//! and the recording finished — complete only in the first case. The firmware's dead-man
+//! watchdog is the last line of defence if the host itself dies.
 //!
 //! It is generic over [`Bench`] and does not know which device it talks to; it does not
 //! analyse the recording (the caller runs [`crate::analysis`] afterwards).
@@ -17,16 +18,13 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime};
 
-mod watch;
-
-pub use watch::{JAM_CONFIRM, STALL_GRACE, STALL_MIN_FRACTION, STALL_WINDOW};
+pub mod watch;
 
 use crate::rig::backend::{Bench, Sample};
 use crate::rig::config::{HomeMethod, RigConfig};
-use crate::rig::recording::{flags, SafetyStop};
 use crate::rig::recording::{
-    utc_dir_stamp, Claim, Existing, Phase, RecordingError, RecordingMeta, RecordingWriter, Row,
-    SessionInfo,
+    flags, utc_dir_stamp, Claim, Existing, Phase, RecordingError, RecordingMeta, RecordingWriter,
+    Row, SafetyStop, SessionInfo,
 };
 use crate::rig::target::check_measurable;
 pub use crate::rig::target::{Target, TargetSpec};
@@ -95,10 +93,11 @@ pub struct Progress {
     pub samples: u64,
     /// Sample rate over the last progress interval, Hz.
     pub sample_rate_hz: f64,
-    /// Sequence gaps so far.
+    /// Holes in the recording so far (as of its last write to disk).
     pub gaps: u64,
-    /// Current follower error against the target (deg), when a rotary sensor measures the
-    /// follower of a 1R/1R1T motion; the constant offset at the start is removed.
+    /// Current follower error against the target (deg; geodesic for 3R), when the rig has
+    /// the sensor for it: relative to the first reading during the first driver
+    /// revolution, against the aligned target after it ([`watch::ErrorProbe`]).
     pub error_deg: Option<f64>,
     /// Seconds since the start.
     pub elapsed_s: f64,

@@ -280,7 +280,8 @@ impl DynamixelBench {
         what: &str,
         f: impl Fn(&mut DxlBus) -> Result<T, dynamixel2::TransferError> + Send + 'static,
     ) -> Result<T, RigError> {
-        match call(&self.tx, move |b| with_retries(b, f)) {
+        let pause = self.retry_pause();
+        match call(&self.tx, move |b| with_retries(b, pause, f)) {
             Some((Ok(v), _)) => Ok(v),
             Some((Err(e), attempts)) => Err(self.transfer_error(what, &e, attempts)),
             None => Err(self.thread_ended()),
@@ -338,7 +339,8 @@ impl DynamixelBench {
             .collect();
         let mut firmware = Vec::new();
         for (id, role) in ids {
-            let ping = call(&self.tx, move |b| with_retries(b, |b| b.ping(id)).0);
+            let pause = self.retry_pause();
+            let ping = call(&self.tx, move |b| with_retries(b, pause, |b| b.ping(id)).0);
             let ping = match ping {
                 Some(Ok(p)) => p,
                 Some(Err(e)) => {
@@ -625,6 +627,15 @@ impl DynamixelBench {
         &self.path
     }
 
+    /// The wait before retrying a failed command: as long as the streamed replies of every
+    /// servo take at the factory return delay ([`worker::quiet_time`]).
+    fn retry_pause(&self) -> Duration {
+        worker::quiet_time(
+            worker::reply_latency(worker::FACTORY_RETURN_DELAY, self.driver.baud),
+            1 + self.followers.len(),
+        )
+    }
+
     /// The driver's Hardware Error Status in words (after it set the alert bit).
     fn read_hardware_error(&self) -> String {
         let id = self.driver.id;
@@ -892,16 +903,22 @@ fn retryable(e: &dynamixel2::TransferError) -> bool {
     }
 }
 
-/// Run `f` up to [`COMMAND_ATTEMPTS`] times while it fails retryably; returns the last result
-/// and the number of attempts made.
+/// Run `f` up to [`COMMAND_ATTEMPTS`] times while it fails retryably, waiting `pause`
+/// before each new attempt so late replies (of this transaction or of a sync read just
+/// before it) arrive and are discarded rather than read as its answer; returns the last
+/// result and the number of attempts made.
 fn with_retries<T>(
     bus: &mut DxlBus,
+    pause: Duration,
     f: impl Fn(&mut DxlBus) -> Result<T, dynamixel2::TransferError>,
 ) -> (Result<T, dynamixel2::TransferError>, u32) {
     let mut attempt = 1;
     loop {
         match worker::transaction(|| f(bus)) {
-            Err(e) if retryable(&e) && attempt < COMMAND_ATTEMPTS => attempt += 1,
+            Err(e) if retryable(&e) && attempt < COMMAND_ATTEMPTS => {
+                attempt += 1;
+                std::thread::sleep(pause);
+            }
             r => return (r, attempt),
         }
     }

@@ -121,7 +121,7 @@ pub struct WorkerSetup {
 const RETURN_DELAY_TIME: u16 = 9;
 
 /// Factory Return Delay Time, counts of 2 µs.
-const FACTORY_RETURN_DELAY: u8 = 250;
+pub const FACTORY_RETURN_DELAY: u8 = 250;
 
 /// Time from the driver latching a streamed sample to its reply having crossed the wire:
 /// the return delay plus the status packet (11 framing bytes and the block) at 10 bits
