@@ -20,6 +20,9 @@ pub const EXIT_INCOMPLETE: u8 = 4;
 /// Exit code after Ctrl-C (the shell convention 128 + SIGINT); after SIGTERM or SIGHUP it
 /// is 128 plus that signal's number (143, 129), as if the signal had ended the process.
 pub const EXIT_CANCELLED: u8 = 130;
+/// Exit code when the run finished but its data is degraded (too many samples missing; the
+/// recording's sidecar says why and the analysis gives only what the data supports).
+pub const EXIT_DEGRADED: u8 = 6;
 
 /// The signals that stop a run like Ctrl-C — motor stopped, recording finished and marked
 /// `cancelled` — with their names: the terminal's interrupt, what `timeout` and service
@@ -43,9 +46,6 @@ fn stop_on_signals(cancel: &Arc<AtomicBool>) -> anyhow::Result<Arc<AtomicUsize>>
     }
     Ok(which)
 }
-/// Exit code when the run finished but its data is degraded (too many samples missing; the
-/// recording's sidecar says why and the analysis gives only what the data supports).
-pub const EXIT_DEGRADED: u8 = 6;
 
 /// Arguments of `mpc-rig measure`.
 #[derive(Debug, Args)]
@@ -159,46 +159,45 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
             ),
         }
     }
-    let (code, what) = match &outcome.end {
+    let dir = outcome.dir.display();
+    let incomplete = |code: u8, what: String| {
+        (
+            code,
+            format!("{what}; the recording in {dir} is kept and marked incomplete"),
+        )
+    };
+    let (code, message) = match &outcome.end {
         EndReason::Finished => match &outcome.meta.degraded {
             None => return Ok(analysis_code),
-            Some(why) => {
-                return Err(ExitStatusError {
-                    code: EXIT_DEGRADED,
-                    message: format!(
-                    "run degraded: {why}; the recording in {} is kept (complete, marked degraded)",
-                    outcome.dir.display()
+            Some(why) => (
+                EXIT_DEGRADED,
+                format!(
+                    "run degraded: {why}; the recording in {dir} is kept (complete, marked \
+                     degraded)"
                 ),
-                }
-                .into())
-            }
+            ),
         },
         EndReason::Cancelled => {
             let number = signal.load(Ordering::SeqCst);
             match STOP_SIGNALS.iter().find(|s| s.0 as usize == number) {
-                Some((n, name)) => (128 + *n as u8, format!("cancelled by {name}")),
-                None => (EXIT_CANCELLED, "cancelled".to_string()),
+                Some((n, name)) => incomplete(128 + *n as u8, format!("cancelled by {name}")),
+                None => incomplete(EXIT_CANCELLED, "cancelled".into()),
             }
         }
         // The end reason's own text starts with "disconnected": give its message once.
-        EndReason::Disconnected(m) => (EXIT_DISCONNECTED, format!("device disconnected ({m})")),
+        EndReason::Disconnected(m) => {
+            incomplete(EXIT_DISCONNECTED, format!("device disconnected ({m})"))
+        }
         EndReason::MaxRunTime
         | EndReason::DiskFull(_)
         | EndReason::DriverStalled(_)
         | EndReason::Jammed { .. }
-        | EndReason::Error(_) => (
+        | EndReason::Error(_) => incomplete(
             EXIT_INCOMPLETE,
             format!("run stopped early ({})", outcome.end),
         ),
     };
-    Err(ExitStatusError {
-        code,
-        message: format!(
-            "{what}; the recording in {} is kept and marked incomplete",
-            outcome.dir.display()
-        ),
-    }
-    .into())
+    Err(ExitStatusError { code, message }.into())
 }
 
 fn progress_line(p: &Progress) -> String {

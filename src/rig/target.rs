@@ -99,12 +99,7 @@ pub fn load_mechanism(path: &Path) -> Result<(Mechanism, Motion), RigError> {
         path: file.clone(),
         message,
     };
-    // The synthesis errors name the file themselves; keep only what is wrong.
-    let m = Mechanism::load(path).map_err(|e| {
-        let text = e.to_string();
-        let prefix = format!("{}: ", file.display());
-        refuse(text.strip_prefix(&prefix).unwrap_or(&text).to_string())
-    })?;
+    let m = Mechanism::load(path).map_err(|e| refuse(without_path(&e.to_string(), &file)))?;
     if m.solve.partial {
         return Err(refuse(
             "a partial design (written after a cancelled or failed synthesis, not accepted); \
@@ -127,6 +122,19 @@ pub fn load_mechanism(path: &Path) -> Result<(Mechanism, Motion), RigError> {
     }
     let motion = Motion::from_mechanism_file(path).map_err(|e| refuse(e.to_string()))?;
     Ok((m, motion))
+}
+
+/// A message of the synthesis module without the file it starts with (`PATH: field …` or
+/// `PATH:LINE:COL: …`, whose parser message says where again): the refusal names the file
+/// once.
+fn without_path(text: &str, file: &Path) -> String {
+    match text.strip_prefix(&file.display().to_string()) {
+        Some(rest) => rest
+            .trim_start_matches(|c: char| c == ':' || c.is_ascii_digit())
+            .trim_start()
+            .to_string(),
+        None => text.to_string(),
+    }
 }
 
 /// Refuse a target class the rig's sensors cannot measure, before anything moves: a 3R
