@@ -4,40 +4,19 @@
 //! 80-sample hole; with `drop_prob = 0.01` the sidecar said 34 gaps, the CSV had 71; a
 //! stepper run with 72 % of its samples missing was "complete" with a timing ratio).
 
-use std::path::{Path, PathBuf};
-use std::sync::atomic::AtomicBool;
-use std::sync::Arc;
+use std::path::Path;
 
-use mpc_rig::motion::Motion;
 use mpc_rig::rig::config::RigConfig;
 use mpc_rig::rig::recording::{missing_before, Recording};
-use mpc_rig::rig::session::{measure, EndReason, MeasureOptions, TargetSpec};
-use mpc_rig::rig::sim::dynamixel::{self, MotionTarget, SimDynamixelOptions};
+use mpc_rig::rig::session::{measure, EndReason};
+use mpc_rig::rig::sim::mixed;
 use mpc_rig::rig::sim::plant::PlantConfig;
-use mpc_rig::rig::sim::{mixed, stepper};
 
 mod support;
 use support::SimChild;
-
-fn repo(p: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join(p)
-}
-
-fn options(rig: &str, ports: Vec<String>, motion: &str, out: &Path, speed: f64) -> MeasureOptions {
-    MeasureOptions {
-        rig_path: repo(rig),
-        ports,
-        target: TargetSpec::Motion(repo(motion)),
-        speed_rpm: speed,
-        cycles: 1,
-        settle_cycles: 1,
-        reverse: false,
-        out_dir: Some(out.to_path_buf()),
-        replace: false,
-        cancel: Arc::new(AtomicBool::new(false)),
-        progress: None,
-    }
-}
+#[path = "support/bench.rs"]
+mod bench;
+use bench::{dxl_sim, motion, options, repo, stepper_sim};
 
 /// Holes in the CSV's device time at the recording's nominal rate: (gaps, missing).
 fn holes_on_disk(rec: &Recording) -> (u64, u64) {
@@ -62,23 +41,16 @@ fn assert_counts_match_disk(dir: &Path) -> (u64, u64) {
 /// disk, counted exactly in the sidecar.
 #[test]
 fn stepper_counts_match_the_csv() {
-    let sim = stepper::spawn(stepper::SimStepperOptions {
-        target: Motion::from_file(&repo("data/motions/half-turn-2to1.toml")).unwrap(),
-        plant: PlantConfig::from_faults(&["drop_prob=0.002", "seed=5"]).unwrap(),
-        mechanics: stepper::Mechanics::default(),
-        link: None,
-        driver: None,
-    })
-    .unwrap();
+    let sim = stepper_sim("half-turn-2to1", &["drop_prob=0.002", "seed=5"]);
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("rec");
     let mut o = options(
         "rigs/sim-stepper.toml",
         vec![sim.path().display().to_string()],
-        "data/motions/half-turn-2to1.toml",
+        "half-turn-2to1",
         &dir,
-        90.0,
     );
+    o.speed_rpm = 90.0;
     let out = measure(&mut o).unwrap();
     assert_eq!(out.end, EndReason::Finished);
     let (gaps, _) = assert_counts_match_disk(&dir);
@@ -90,23 +62,18 @@ fn stepper_counts_match_the_csv() {
 /// hole on disk is counted, for each.
 #[test]
 fn dynamixel_counts_match_the_csv() {
-    let motion = Motion::from_file(&repo("data/motions/half-turn-2to1.toml")).unwrap();
     let tmp = tempfile::tempdir().unwrap();
     for (faults, name) in [
         (&["dropout_at_s=1.5", "dropout_s=1.0"][..], "dropout"),
         (&["drop_prob=0.01", "seed=3"][..], "drops"),
     ] {
-        let mut opts =
-            SimDynamixelOptions::new(Arc::new(MotionTarget::new(motion.clone()).unwrap()));
-        opts.plant = PlantConfig::from_faults(faults).unwrap();
-        let sim = dynamixel::spawn(opts).unwrap();
+        let sim = dxl_sim("half-turn-2to1", faults);
         let dir = tmp.path().join(name);
         let mut o = options(
             "rigs/sim-dynamixel.toml",
             vec![sim.path().display().to_string()],
-            "data/motions/half-turn-2to1.toml",
+            "half-turn-2to1",
             &dir,
-            40.0,
         );
         let out = measure(&mut o).unwrap();
         assert_eq!(out.end, EndReason::Finished, "{name}");
@@ -126,10 +93,9 @@ fn dynamixel_counts_match_the_csv() {
 #[test]
 fn mixed_counts_match_the_csv() {
     let rig = RigConfig::load(&repo("rigs/sim-dynamixel-1r1t.toml")).unwrap();
-    let motion = Motion::from_file(&repo("data/motions/screw-bob.toml")).unwrap();
     let sim = mixed::spawn_with(
         &rig,
-        motion,
+        motion("screw-bob"),
         PlantConfig::default(),
         PlantConfig::from_faults(&["drop_prob=0.002", "seed=9"]).unwrap(),
     )
@@ -139,9 +105,8 @@ fn mixed_counts_match_the_csv() {
     let mut o = options(
         "rigs/sim-dynamixel-1r1t.toml",
         sim.port_overrides(),
-        "data/motions/screw-bob.toml",
+        "screw-bob",
         &dir,
-        40.0,
     );
     let out = measure(&mut o).unwrap();
     assert_eq!(out.end, EndReason::Finished);

@@ -7,21 +7,16 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::sync::atomic::AtomicBool;
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use mpc_rig::motion::Motion;
 use mpc_rig::rig::recording::{Recording, RecordingError, LOCK_FILE, SIDECAR_FILE};
-use mpc_rig::rig::session::{measure, EndReason, MeasureOptions, MeasureOutcome, TargetSpec};
-use mpc_rig::rig::sim::dynamixel::{self, MotionTarget, SimDynamixelOptions};
-use mpc_rig::rig::sim::plant::PlantConfig;
-use mpc_rig::rig::sim::stepper::{self, Mechanics, SimHandle, SimStepperOptions};
+use mpc_rig::rig::session::{measure, EndReason, MeasureOptions, MeasureOutcome};
+use mpc_rig::rig::sim::stepper::SimHandle;
 use mpc_rig::rig::RigError;
 
-fn repo(p: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join(p)
-}
+#[path = "support/bench.rs"]
+mod bench;
+use bench::{dxl_sim, repo};
 
 fn motion_path() -> PathBuf {
     repo("data/motions/half-turn-2to1.toml")
@@ -32,30 +27,22 @@ fn bin() -> Command {
 }
 
 fn stepper_sim() -> SimHandle {
-    stepper::spawn(SimStepperOptions {
-        target: Motion::from_file(&motion_path()).unwrap(),
-        plant: PlantConfig::default(),
-        mechanics: Mechanics::default(),
-        link: None,
-        driver: None,
-    })
-    .unwrap()
+    bench::stepper_sim::<&str>("half-turn-2to1", &[])
 }
 
+/// A session of `cycles` at 60 rpm through `port` into `out` (a new default folder when
+/// `None`).
 fn options(rig: &str, port: &Path, out: Option<&Path>, cycles: u32) -> MeasureOptions {
-    MeasureOptions {
-        rig_path: repo(rig),
-        ports: vec![port.display().to_string()],
-        target: TargetSpec::Motion(motion_path()),
-        speed_rpm: 60.0,
-        cycles,
-        settle_cycles: 1,
-        reverse: false,
-        out_dir: out.map(Path::to_path_buf),
-        replace: false,
-        cancel: Arc::new(AtomicBool::new(false)),
-        progress: None,
-    }
+    let mut o = bench::options(
+        rig,
+        vec![port.display().to_string()],
+        "half-turn-2to1",
+        out.unwrap_or(Path::new("unused")),
+    );
+    o.out_dir = out.map(Path::to_path_buf);
+    o.speed_rpm = 60.0;
+    o.cycles = cycles;
+    o
 }
 
 fn run(rig: &str, port: &Path, out: &Path) -> MeasureOutcome {
@@ -176,11 +163,7 @@ fn runs_without_an_output_folder_get_one_each() {
 #[test]
 fn analyze_refuses_a_sidecar_of_another_run() {
     let sim = stepper_sim();
-    let motion = Motion::from_file(&motion_path()).unwrap();
-    let dxl = dynamixel::spawn(SimDynamixelOptions::new(Arc::new(
-        MotionTarget::new(motion).unwrap(),
-    )))
-    .unwrap();
+    let dxl = dxl_sim::<&str>("half-turn-2to1", &[]);
     let tmp = tempfile::tempdir().unwrap();
     let a = tmp.path().join("a");
     let b = tmp.path().join("b");

@@ -5,21 +5,17 @@
 //! end the run within 0.5 s with the reason named, the driver angle recorded in the
 //! sidecar's `safety_stop`, the recording kept, and the motor stopped.
 
-use std::path::{Path, PathBuf};
-use std::sync::atomic::AtomicBool;
-use std::sync::Arc;
+use std::path::Path;
 
-use mpc_rig::motion::Motion;
 use mpc_rig::rig::config::RigConfig;
 use mpc_rig::rig::recording::{flags, Recording, SafetyStop};
-use mpc_rig::rig::session::{measure, EndReason, MeasureOptions, TargetSpec};
-use mpc_rig::rig::sim::dynamixel::{self, MotionTarget, SimDynamixelOptions};
+use mpc_rig::rig::session::{measure, EndReason};
+use mpc_rig::rig::sim::mixed;
 use mpc_rig::rig::sim::plant::PlantConfig;
-use mpc_rig::rig::sim::{mixed, stepper};
 
-fn repo(p: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join(p)
-}
+#[path = "support/bench.rs"]
+mod bench;
+use bench::{motion, options, repo};
 
 /// The fault injected 2 s after the simulator starts: well into the run (setup takes a
 /// fraction of a second, the plan several seconds).
@@ -28,20 +24,10 @@ const AT: &str = "2.0";
 /// How soon after its onset a problem must have stopped the run, device time.
 const STOP_WITHIN_US: u64 = 500_000;
 
-fn session(rig: &str, ports: Vec<String>, motion: &str, out: &Path) -> EndReason {
-    let mut o = MeasureOptions {
-        rig_path: repo(rig),
-        ports,
-        target: TargetSpec::Motion(repo(motion)),
-        speed_rpm: 40.0,
-        cycles: 3,
-        settle_cycles: 1,
-        reverse: false,
-        out_dir: Some(out.to_path_buf()),
-        replace: false,
-        cancel: Arc::new(AtomicBool::new(false)),
-        progress: None,
-    };
+/// A session of three cycles at 40 rpm; how it ended.
+fn session(rig: &str, ports: Vec<String>, motion_name: &str, out: &Path) -> EndReason {
+    let mut o = options(rig, ports, motion_name, out);
+    o.cycles = 3;
     measure(&mut o).expect("the session runs").end
 }
 
@@ -71,31 +57,38 @@ fn driver_stopped_at(rec: &Recording) -> u64 {
     rec.device_time_us[i]
 }
 
-fn stepper_sim(fault: &str) -> stepper::SimHandle {
-    stepper::spawn(stepper::SimStepperOptions {
-        target: Motion::from_file(&repo("data/motions/half-turn-2to1.toml")).unwrap(),
-        plant: PlantConfig::from_faults(&[format!("{fault}={AT}")]).unwrap(),
-        mechanics: stepper::Mechanics::default(),
-        link: None,
-        driver: None,
-    })
-    .unwrap()
+/// `fault` at [`AT`].
+fn at(fault: &str) -> [String; 1] {
+    [format!("{fault}={AT}")]
 }
 
-fn dxl_sim(fault: &str) -> dynamixel::SimDynamixelHandle {
-    let motion = Motion::from_file(&repo("data/motions/half-turn-2to1.toml")).unwrap();
-    let mut o = SimDynamixelOptions::new(Arc::new(MotionTarget::new(motion).unwrap()));
-    o.plant = PlantConfig::from_faults(&[format!("{fault}={AT}")]).unwrap();
-    dynamixel::spawn(o).unwrap()
+/// A session on a simulated stepper bench with `fault`: how it ended, and the folder
+/// holding its recording. Checks that the motor ended disabled and still.
+fn stepper_run(fault: &str) -> (EndReason, tempfile::TempDir) {
+    let sim = bench::stepper_sim("half-turn-2to1", &at(fault));
+    let tmp = tempfile::tempdir().unwrap();
+    let end = session(
+        "rigs/sim-stepper.toml",
+        vec![sim.path().display().to_string()],
+        "half-turn-2to1",
+        tmp.path(),
+    );
+    std::thread::sleep(std::time::Duration::from_millis(100));
+    let status = sim.stop().unwrap();
+    assert!(!status.enabled && !status.moving, "{fault}: {status:?}");
+    (end, tmp)
+}
+
+fn dxl_sim(fault: &str) -> mpc_rig::rig::sim::dynamixel::SimDynamixelHandle {
+    bench::dxl_sim("half-turn-2to1", &at(fault))
 }
 
 fn mixed_sim(fault: &str) -> mixed::SimMixedHandle {
     let rig = RigConfig::load(&repo("rigs/sim-dynamixel-imu.toml")).unwrap();
-    let motion = Motion::from_file(&repo("data/motions/cone-sweep.toml")).unwrap();
     mixed::spawn(
         &rig,
-        motion,
-        PlantConfig::from_faults(&[format!("{fault}={AT}")]).unwrap(),
+        motion("cone-sweep"),
+        PlantConfig::from_faults(&at(fault)).unwrap(),
     )
     .unwrap()
 }
@@ -104,14 +97,7 @@ fn mixed_sim(fault: &str) -> mixed::SimMixedHandle {
 /// stop, which the session names at once; the motor ends disabled and still.
 #[test]
 fn stepper_driver_fault_is_named_and_stops_the_run() {
-    let sim = stepper_sim("driver_fault_at_s");
-    let tmp = tempfile::tempdir().unwrap();
-    let end = session(
-        "rigs/sim-stepper.toml",
-        vec![sim.path().display().to_string()],
-        "data/motions/half-turn-2to1.toml",
-        tmp.path(),
-    );
+    let (end, tmp) = stepper_run("driver_fault_at_s");
     assert!(
         matches!(&end, EndReason::DriverStalled(m) if m.contains("emergency stop")),
         "{end}"
@@ -123,9 +109,6 @@ fn stepper_driver_fault_is_named_and_stops_the_run() {
         .position(|f| f & flags::DRIVER_FAULT != 0)
         .expect("the fault is flagged in the rows");
     assert_eq!(stop.onset_device_time_us, rec.device_time_us[first]);
-    std::thread::sleep(std::time::Duration::from_millis(100));
-    let status = sim.stop().unwrap();
-    assert!(!status.enabled && !status.moving, "{status:?}");
 }
 
 /// Guards the stepper bench's blind spot and its cover: a blocked shaft loses every step
@@ -134,34 +117,17 @@ fn stepper_driver_fault_is_named_and_stops_the_run() {
 /// target, recording the driver angle there.
 #[test]
 fn stepper_blocked_shaft_is_caught_by_the_follower() {
-    let sim = stepper_sim("driver_stall_at_s");
-    let tmp = tempfile::tempdir().unwrap();
-    let end = session(
-        "rigs/sim-stepper.toml",
-        vec![sim.path().display().to_string()],
-        "data/motions/half-turn-2to1.toml",
-        tmp.path(),
-    );
+    let (end, tmp) = stepper_run("driver_stall_at_s");
     assert!(matches!(end, EndReason::Jammed { .. }), "{end}");
     let (_, stop) = stopped_recording(tmp.path(), "jam");
     assert!(stop.detected_device_time_us - stop.onset_device_time_us <= STOP_WITHIN_US);
-    std::thread::sleep(std::time::Duration::from_millis(100));
-    let status = sim.stop().unwrap();
-    assert!(!status.enabled && !status.moving, "{status:?}");
 }
 
 /// Guards the jam on the stepper bench: the follower binds while the driver turns on; the
 /// run stops with the driver angle where the follower left the target.
 #[test]
 fn stepper_jam_stops_the_run_at_its_driver_angle() {
-    let sim = stepper_sim("jam_at_s");
-    let tmp = tempfile::tempdir().unwrap();
-    let end = session(
-        "rigs/sim-stepper.toml",
-        vec![sim.path().display().to_string()],
-        "data/motions/half-turn-2to1.toml",
-        tmp.path(),
-    );
+    let (end, tmp) = stepper_run("jam_at_s");
     let EndReason::Jammed {
         driver_angle_deg, ..
     } = end
@@ -173,9 +139,6 @@ fn stepper_jam_stops_the_run_at_its_driver_angle() {
     assert!(stop.detected_device_time_us - stop.onset_device_time_us <= STOP_WITHIN_US);
     // The motor was stopped right after: it was at rest within 0.5 s (plus its ramp down).
     assert!(driver_stopped_at(&rec) - stop.detected_device_time_us <= STOP_WITHIN_US);
-    std::thread::sleep(std::time::Duration::from_millis(100));
-    let status = sim.stop().unwrap();
-    assert!(!status.enabled && !status.moving, "{status:?}");
 }
 
 /// Guards the Dynamixel bench, each fault on a bench of its own: an overload (the issue's
@@ -203,7 +166,7 @@ fn dynamixel_faults_stalls_and_jams_stop_the_run() {
         let end = session(
             "rigs/sim-dynamixel.toml",
             vec![sim.path().display().to_string()],
-            "data/motions/half-turn-2to1.toml",
+            "half-turn-2to1",
             tmp.path(),
         );
         assert!(check(&end), "{fault}: {end}");
@@ -242,7 +205,7 @@ fn mixed_faults_stalls_and_jams_stop_the_run() {
         let end = session(
             "rigs/sim-dynamixel-imu.toml",
             sim.port_overrides(),
-            "data/motions/cone-sweep.toml",
+            "cone-sweep",
             tmp.path(),
         );
         let (rec, stop) = stopped_recording(tmp.path(), kind);

@@ -4,24 +4,21 @@
 //! mixed benches: the motor ends stopped, the recording is finished as `cancelled` with
 //! every row flushed (down to the driver at rest), and the exit code is 128 + the signal.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Stdio};
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
 
-use mpc_rig::motion::Motion;
 use mpc_rig::rig::config::RigConfig;
 use mpc_rig::rig::recording::{load_meta, Recording};
-use mpc_rig::rig::sim::dynamixel::{self, MotionTarget, SimDynamixelOptions};
+use mpc_rig::rig::sim::mixed;
 use mpc_rig::rig::sim::plant::PlantConfig;
-use mpc_rig::rig::sim::{mixed, stepper};
 
-fn repo(p: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join(p)
-}
+#[path = "support/bench.rs"]
+mod bench;
+use bench::{dxl_sim, motion, repo, stepper_sim};
 
 /// Run `measure` with `rig`, `ports` and `motion` into `dir`, send `signal` once a second of
 /// rows is on disk, and return the exit code and standard error.
@@ -80,22 +77,11 @@ fn assert_cancelled_recording(dir: &Path) {
     );
 }
 
-fn half_turn() -> Motion {
-    Motion::from_file(&repo("data/motions/half-turn-2to1.toml")).unwrap()
-}
-
 /// Guards SIGTERM on the stepper bench: exit 143, recording cancelled and flushed, the
 /// simulated motor disabled and still.
 #[test]
 fn sigterm_stops_a_stepper_run_like_ctrl_c() {
-    let sim = stepper::spawn(stepper::SimStepperOptions {
-        target: half_turn(),
-        plant: PlantConfig::default(),
-        mechanics: stepper::Mechanics::default(),
-        link: None,
-        driver: None,
-    })
-    .unwrap();
+    let sim = stepper_sim::<&str>("half-turn-2to1", &[]);
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("rec");
     let (code, stderr) = measure_then_signal(
@@ -117,10 +103,7 @@ fn sigterm_stops_a_stepper_run_like_ctrl_c() {
 /// and flushed, the driver servo's torque off and its velocity 0.
 #[test]
 fn sighup_stops_a_dynamixel_run_like_ctrl_c() {
-    let sim = dynamixel::spawn(SimDynamixelOptions::new(Arc::new(
-        MotionTarget::new(half_turn()).unwrap(),
-    )))
-    .unwrap();
+    let sim = dxl_sim::<&str>("half-turn-2to1", &[]);
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("rec");
     let (code, stderr) = measure_then_signal(
@@ -143,8 +126,7 @@ fn sighup_stops_a_dynamixel_run_like_ctrl_c() {
 #[test]
 fn sigterm_stops_a_mixed_run_like_ctrl_c() {
     let rig = RigConfig::load(&repo("rigs/sim-dynamixel-imu.toml")).unwrap();
-    let motion = Motion::from_file(&repo("data/motions/cone-sweep.toml")).unwrap();
-    let sim = mixed::spawn(&rig, motion, PlantConfig::default()).unwrap();
+    let sim = mixed::spawn(&rig, motion("cone-sweep"), PlantConfig::default()).unwrap();
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("rec");
     let (code, stderr) = measure_then_signal(

@@ -5,23 +5,19 @@
 //! and mixed benches, which must see no motion at all.
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::AtomicBool;
-use std::sync::Arc;
 
 use serde_json::{json, Value};
 
 use mpc_rig::analysis::{load_target, TargetSource};
-use mpc_rig::motion::Motion;
 use mpc_rig::rig::config::RigConfig;
 use mpc_rig::rig::session::{measure, MeasureOptions, TargetSpec};
-use mpc_rig::rig::sim::dynamixel::{self, MotionTarget, SimDynamixelOptions};
+use mpc_rig::rig::sim::mixed;
 use mpc_rig::rig::sim::plant::PlantConfig;
-use mpc_rig::rig::sim::{mixed, stepper};
 use mpc_rig::rig::RigError;
 
-fn repo(p: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join(p)
-}
+#[path = "support/bench.rs"]
+mod bench;
+use bench::{dxl_sim, motion, repo, stepper_sim};
 
 /// The accepted half-turn mechanism (N = 90, K = 4) the broken variants are made from.
 fn good_mechanism() -> Value {
@@ -108,24 +104,12 @@ fn broken_variants(dir: &Path) -> Vec<(PathBuf, &'static str)> {
         .collect()
 }
 
+/// Options of a session on `rig` towards `target` (30 rpm, one cycle).
 fn options(rig: &str, ports: Vec<String>, target: TargetSpec, out: &Path) -> MeasureOptions {
-    MeasureOptions {
-        rig_path: repo(rig),
-        ports,
-        target,
-        speed_rpm: 30.0,
-        cycles: 1,
-        settle_cycles: 1,
-        reverse: false,
-        out_dir: Some(out.to_path_buf()),
-        replace: false,
-        cancel: Arc::new(AtomicBool::new(false)),
-        progress: None,
-    }
-}
-
-fn half_turn() -> Motion {
-    Motion::from_file(&repo("data/motions/half-turn-2to1.toml")).unwrap()
+    let mut o = bench::options(rig, ports, "half-turn-2to1", out);
+    o.target = target;
+    o.speed_rpm = 30.0;
+    o
 }
 
 /// Guards the good fixture itself: it loads as a target, so the refusals below are the
@@ -151,20 +135,10 @@ fn the_accepted_mechanism_is_a_target() {
 fn broken_mechanisms_never_move_a_motor() {
     let tmp = tempfile::tempdir().unwrap();
     let variants = broken_variants(tmp.path());
-    let stepper_sim = stepper::spawn(stepper::SimStepperOptions {
-        target: half_turn(),
-        plant: PlantConfig::default(),
-        mechanics: stepper::Mechanics::default(),
-        link: None,
-        driver: None,
-    })
-    .unwrap();
-    let dxl_sim = dynamixel::spawn(SimDynamixelOptions::new(Arc::new(
-        MotionTarget::new(half_turn()).unwrap(),
-    )))
-    .unwrap();
+    let stepper_sim = stepper_sim::<&str>("half-turn-2to1", &[]);
+    let dxl_sim = dxl_sim::<&str>("half-turn-2to1", &[]);
     let mixed_rig = RigConfig::load(&repo("rigs/sim-dynamixel-1r1t.toml")).unwrap();
-    let screw = Motion::from_file(&repo("data/motions/screw-bob.toml")).unwrap();
+    let screw = motion("screw-bob");
     let mixed_sim = mixed::spawn(&mixed_rig, screw, PlantConfig::default()).unwrap();
     let benches = [
         (
@@ -239,20 +213,11 @@ fn sim_device_refuses_broken_mechanisms() {
 #[test]
 fn targets_the_rig_cannot_measure_are_refused_before_moving() {
     let tmp = tempfile::tempdir().unwrap();
-    let stepper_sim = stepper::spawn(stepper::SimStepperOptions {
-        target: half_turn(),
-        plant: PlantConfig::default(),
-        mechanics: stepper::Mechanics::default(),
-        link: None,
-        driver: None,
-    })
-    .unwrap();
-    let dxl_sim = dynamixel::spawn(SimDynamixelOptions::new(Arc::new(
-        MotionTarget::new(half_turn()).unwrap(),
-    )))
-    .unwrap();
+    let stepper_sim = stepper_sim::<&str>("half-turn-2to1", &[]);
+    let dxl_sim = dxl_sim::<&str>("half-turn-2to1", &[]);
     let imu_rig = RigConfig::load(&repo("rigs/sim-dynamixel-imu.toml")).unwrap();
-    let mixed_sim = mixed::spawn(&imu_rig, half_turn(), PlantConfig::default()).unwrap();
+    let mixed_sim =
+        mixed::spawn(&imu_rig, motion("half-turn-2to1"), PlantConfig::default()).unwrap();
     let cases = [
         (
             "rigs/sim-stepper.toml",
