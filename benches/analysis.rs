@@ -48,6 +48,7 @@ fn child(dir: &Path) {
         rows: loaded.rows,
         stale_rows: loaded.stale_rows,
         truncated_last_line: loaded.truncated_last_line,
+        degraded: None,
         device_counts: serde_json::json!({}),
         target_kind: "motion".into(),
         target_path: "data/motions/half-turn-2to1.toml".into(),

@@ -7,7 +7,7 @@ use std::hint::black_box;
 use std::path::Path;
 use std::time::Instant;
 
-use mpc_rig::motion::{Motion, DEFAULT_SAMPLES};
+use mpc_rig::motion::{spec::parse_spec, Motion, DEFAULT_SAMPLES};
 
 /// Calls per measurement: enough for a stable figure in well under a second per case.
 const CALLS: usize = 2_000_000;
@@ -68,5 +68,22 @@ fn main() {
             print!(" | angle_z() {angle_ns:5.1} ns");
         }
         println!();
+    }
+    println!("keyframe spec parsing (1R, one `[[key]]` table per key)");
+    for keys in [10_000usize, 40_000, 100_000] {
+        let mut text = String::from("class = \"1R\"\nnet_rotation = 360.0\n");
+        for i in 0..keys {
+            let t = i as f64 / keys as f64;
+            text.push_str(&format!("[[key]]\nt = {t}\nangle = {}\n", 360.0 * t));
+        }
+        let start = Instant::now();
+        let m = parse_spec(&text, None).expect("generated spec parses");
+        let ms = start.elapsed().as_secs_f64() * 1e3;
+        black_box(m);
+        println!(
+            "  {keys:>7} keys ({:5.1} MB): {ms:8.1} ms, {:6.2} ms per 1000 keys",
+            text.len() as f64 / 1e6,
+            ms / keys as f64 * 1e3
+        );
     }
 }

@@ -13,6 +13,7 @@ fn source() -> SourceInfo {
         rows: 0,
         stale_rows: 0,
         truncated_last_line: false,
+        degraded: None,
         device_counts: serde_json::json!({}),
         target_kind: "motion".into(),
         target_path: "synthetic".into(),

@@ -38,6 +38,7 @@ fn plant_backlash_and_lag_are_recovered_from_a_simulated_session() {
         settle_cycles: 1,
         reverse: true,
         out_dir: Some(rec.clone()),
+        replace: false,
         cancel: Arc::new(AtomicBool::new(false)),
         progress: None,
     };

@@ -48,8 +48,9 @@ fn sim_process(faults: &[&str]) -> SimChild {
 }
 
 /// Guards the lab user's command end to end: a forward and reverse session records every
-/// phase at the rig's rate without gaps, marks the recording complete, and the analysis at
-/// the end writes its report with a small error for an ideal plant.
+/// phase at the rig's rate without losing a bus transaction (a read that a loaded machine
+/// starts late leaves a one-sample hole, counted, but few), marks the recording complete,
+/// and the analysis at the end writes its report with a small error for an ideal plant.
 #[test]
 fn measure_cli_records_forward_and_reverse_and_analyses() {
     let sim = sim_process(&[]);
@@ -78,7 +79,9 @@ fn measure_cli_records_forward_and_reverse_and_analyses() {
     assert!(result.status.success(), "{stdout}\n{stderr}");
     let rec = Recording::load(&dir).expect("recording loads");
     assert!(rec.meta.complete);
-    assert_eq!(rec.meta.counts.gaps, 0, "{:?}", rec.meta.counts);
+    let c = rec.meta.counts;
+    assert_eq!(c.link_gaps, 0, "{c:?}");
+    assert!(c.missing_samples * 20 < c.samples, "{c:?}");
     assert_eq!(rec.meta.device.backend, "dynamixel");
     for phase in [Phase::Settle, Phase::Forward, Phase::Reverse] {
         assert!(rec.phase.contains(&phase), "no {phase:?} rows");
@@ -123,18 +126,12 @@ fn session_with_link_faults_survives_and_stops_the_motor() {
         settle_cycles: 1,
         reverse: false,
         out_dir: Some(dir.clone()),
+        replace: false,
         cancel: Arc::new(AtomicBool::new(false)),
         progress: None,
     };
-    // Setup talks to the servos before streaming: a corrupted reply there is a clear
-    // error, not a crash; the user runs again.
-    let outcome = match session::measure(&mut mopts) {
-        Ok(o) => o,
-        Err(e) => {
-            eprintln!("setup hit an injected fault ({e}); running again");
-            session::measure(&mut mopts).expect("second attempt")
-        }
-    };
+    // Setup retries damaged replies as the stream does: no second attempt needed.
+    let outcome = session::measure(&mut mopts).expect("setup survives the link faults");
     assert_eq!(outcome.end, EndReason::Finished);
     let rec = Recording::load(&dir).expect("recording loads");
     let c = rec.meta.counts;
@@ -171,6 +168,7 @@ fn brief_dropout_rearms_the_watchdog_and_finishes() {
         settle_cycles: 1,
         reverse: false,
         out_dir: Some(dir.clone()),
+        replace: false,
         cancel: Arc::new(AtomicBool::new(false)),
         progress: None,
     };

@@ -119,6 +119,66 @@ fn non_numbers() {
     );
 }
 
+/// Guards the physical bounds (issue 16): finite values no mechanism can have — an angle
+/// of 1e300°, a height of a million kilometres, an Euler angle of 1e300°, a dense row's
+/// height — are refused with file, line and field, and keys a quarter turn apart within
+/// 1e-300 of a period (an infinite velocity) are refused at the nearest key.
+#[test]
+fn non_physical_values() {
+    let e = error_of("angle-not-physical.toml");
+    assert!(matches!(e, MotionError::NotPhysical { .. }), "{e}");
+    assert_message(
+        "angle-not-physical.toml",
+        &e,
+        Some(11),
+        &["key[1].angle", "1e300 deg", "not a physical value"],
+    );
+    let e = error_of("height-not-physical.toml");
+    assert_message(
+        "height-not-physical.toml",
+        &e,
+        Some(12),
+        &["key[1].height", "1e11 model units"],
+    );
+    let e = error_of("euler-not-physical.toml");
+    assert_message(
+        "euler-not-physical.toml",
+        &e,
+        Some(11),
+        &["key[1].euler_zyx", "not a physical value"],
+    );
+    let e = error_of("dense-height-not-physical.csv");
+    assert_message(
+        "dense-height-not-physical.csv",
+        &e,
+        Some(4),
+        &["row 2.translation", "5e9 model units"],
+    );
+    let e = error_of("keys-too-close.toml");
+    assert_message(
+        "keys-too-close.toml",
+        &e,
+        Some(5),
+        &["not finite", "too close in time"],
+    );
+}
+
+/// Guards the size bound of keyframe specs (issue 16: 1.15 M keys in 65 MB took 2.4 GB
+/// and, before the line index, minutes): a spec larger than `MAX_SPEC_BYTES` is refused
+/// before it is parsed, naming the file and pointing to the dense format.
+#[test]
+fn oversized_spec_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("huge.toml");
+    let key = "[[key]]\nt = 0.0\nangle = 0.0\n";
+    let n = mpc_rig::motion::MAX_SPEC_BYTES / key.len() + 1;
+    let text = format!("class = \"1R\"\n{}", key.repeat(n));
+    std::fs::write(&path, text).unwrap();
+    let e = Motion::from_file(&path).unwrap_err().to_string();
+    assert!(e.contains("huge.toml:"), "{e}");
+    assert!(e.contains("dense file"), "{e}");
+}
+
 /// Guards the quaternion norm rule: beyond 1e-3 is an error; within it, a warning.
 #[test]
 fn quaternion_norms() {

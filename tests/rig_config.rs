@@ -47,3 +47,39 @@ fn missing_rig_file_is_named() {
     let err = RigConfig::load(Path::new("rigs/nope.toml")).unwrap_err();
     assert!(err.to_string().contains("rigs/nope.toml"), "{err}");
 }
+
+/// Guards the gear ratio bound (issue 16: `gear_ratio = 1e9` got a message from deep in
+/// the backend without file, line or field): in a stepper and in a Dynamixel rig the value
+/// is refused at load with the file, the line and `driver.gear_ratio`, and `measure` says
+/// so before opening any port.
+#[test]
+fn absurd_gear_ratio_names_file_line_and_field() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = tempfile::tempdir().unwrap();
+    for rig in ["sim-stepper.toml", "sim-dynamixel.toml"] {
+        let text = std::fs::read_to_string(root.join("rigs").join(rig)).unwrap();
+        let line = text
+            .lines()
+            .position(|l| l.starts_with("gear_ratio"))
+            .expect("the rig sets gear_ratio")
+            + 1;
+        let bad = text.replacen("gear_ratio = 1.0", "gear_ratio = 1e9", 1);
+        let path = dir.path().join(rig);
+        std::fs::write(&path, bad).unwrap();
+        let err = RigConfig::load(&path).unwrap_err().to_string();
+        let place = format!("{}:{line}: field `driver.gear_ratio`", path.display());
+        assert!(err.starts_with(&place), "{err}");
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_mpc-rig"))
+            .args(["measure", "--rig"])
+            .arg(&path)
+            .args(["--port", "/dev/null", "--motion"])
+            .arg(root.join("data/motions/half-turn-2to1.toml"))
+            .arg("-o")
+            .arg(dir.path().join("rec"))
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success());
+        assert!(stderr.contains(&place), "{stderr}");
+    }
+}

@@ -62,6 +62,7 @@ fn run_session_with(
         settle_cycles: 1,
         reverse: false,
         out_dir: Some(rec_dir.clone()),
+        replace: false,
         cancel: Arc::new(AtomicBool::new(false)),
         progress: None,
     };
@@ -116,8 +117,8 @@ fn mixed_bench_measures_a_3r_follower_turned_by_a_servo() {
     assert_eq!(device.ports.len(), 2);
     assert!(device.extra.contains_key("bus"));
     // The board's timeline is complete: one row every 2 ms of board time, none missing.
-    // (A bus transaction lost on a loaded machine counts as a link gap but is bridged by
-    // the interpolation, so the summed counts may show it.)
+    // (A bus transaction lost on a loaded machine is bridged by the interpolation: it is
+    // counted under `link_gaps`, not as a hole.)
     let steps: Vec<u64> = rec.device_time_us.windows(2).map(|w| w[1] - w[0]).collect();
     assert!(steps.iter().all(|&d| d == 2000), "{:?}", rec.meta.counts);
     // 3 turns at 30 rpm = 6 s at 500 Hz ≈ 3000 rows (fewer on a loaded machine).

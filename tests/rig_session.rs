@@ -197,6 +197,7 @@ fn options(dir: &Path, reverse: bool) -> MeasureOptions {
         settle_cycles: 1,
         reverse,
         out_dir: Some(dir.to_path_buf()),
+        replace: false,
         cancel: Arc::new(AtomicBool::new(false)),
         progress: None,
     }

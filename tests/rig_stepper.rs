@@ -45,6 +45,7 @@ fn session(sim: &SimHandle, out: &Path, cycles: u32, reverse: bool) -> MeasureOu
         settle_cycles: 1,
         reverse,
         out_dir: Some(out.to_path_buf()),
+        replace: false,
         cancel: Arc::new(AtomicBool::new(false)),
         progress: None,
     };
@@ -228,6 +229,7 @@ fn imu_bench_records_follower_orientation() {
         settle_cycles: 0,
         reverse: false,
         out_dir: Some(dir.path().to_path_buf()),
+        replace: false,
         cancel: Arc::new(AtomicBool::new(false)),
         progress: None,
     };

@@ -18,9 +18,8 @@ use crate::rig::config::{Dof as RigDof, SensorConfig};
 use crate::rig::recording::{flags, RecordingMeta, RecordingReader, RowBuf};
 
 /// An IMU quaternion whose norm is further than this from 1 is rejected as garbage rather
-/// than normalized. Default 0.1: fused-orientation IMUs report unit quaternions to a few
-/// 10⁻⁴ (BNO055 uses 2¹⁴ LSB per unit); anything 10 % off is a corrupted value.
-pub const QUATERNION_NORM_TOLERANCE: f64 = 0.1;
+/// than normalized: the rig's [`crate::rig::config::IMU_NORM_TOLERANCE`].
+pub use crate::rig::config::IMU_NORM_TOLERANCE as QUATERNION_NORM_TOLERANCE;
 
 /// What loading found besides the samples.
 #[derive(Debug, Clone)]
@@ -254,44 +253,25 @@ impl TargetSource {
     }
 }
 
-/// `scale_mm` of a mechanism file (directory or file), or the default when absent.
-fn mechanism_scale_mm(path: &Path) -> Result<f64, AnalysisError> {
-    let file = if path.is_dir() {
-        path.join("mechanism.json")
-    } else {
-        path.to_path_buf()
-    };
-    let text = std::fs::read_to_string(&file).map_err(|e| AnalysisError::io(&file, e))?;
-    let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| AnalysisError::Target {
-        path: file.clone(),
-        message: e.to_string(),
-    })?;
-    match v.get("scale_mm") {
-        None => Ok(DEFAULT_SCALE_MM),
-        Some(x) => x
-            .as_f64()
-            .filter(|s| s.is_finite() && *s > 0.0)
-            .ok_or_else(|| AnalysisError::Target {
-                path: file,
-                message: format!("field `scale_mm`: {x} is not a positive number"),
-            }),
-    }
-}
-
-/// Load the target law.
+/// Load the target law. A mechanism file is validated as `mpc-rig synth --check` does
+/// ([`crate::rig::target::load_mechanism`]) before its follower motion is compared with
+/// anything, and its own `scale_mm` converts heights.
 pub fn load_target(src: &TargetSource) -> Result<TargetLaw, AnalysisError> {
-    let err = |e: crate::motion::MotionError| AnalysisError::Target {
+    let err = |e: crate::rig::RigError| AnalysisError::Target {
         path: src.path().to_path_buf(),
-        message: e.to_string(),
+        message: match e {
+            crate::rig::RigError::Target { message, .. } => message,
+            other => other.to_string(),
+        },
     };
     match src {
         TargetSource::Mechanism(p) => {
-            let m = crate::motion::Motion::from_mechanism_file(p).map_err(err)?;
-            Ok(TargetLaw::from_motion(&m, mechanism_scale_mm(p)?))
+            let (mechanism, motion) = crate::rig::target::load_mechanism(p).map_err(err)?;
+            Ok(TargetLaw::from_motion(&motion, mechanism.scale_mm))
         }
         TargetSource::Motion(p) => {
-            let m = crate::motion::Motion::from_file(p).map_err(err)?;
-            Ok(TargetLaw::from_motion(&m, DEFAULT_SCALE_MM))
+            let motion = crate::rig::target::load_motion(p).map_err(err)?;
+            Ok(TargetLaw::from_motion(&motion, DEFAULT_SCALE_MM))
         }
     }
 }
@@ -371,6 +351,7 @@ pub fn analyze_and_report(
         rows: loaded.rows,
         stale_rows: loaded.stale_rows,
         truncated_last_line: loaded.truncated_last_line,
+        degraded: loaded.meta.degraded.clone(),
         device_counts: serde_json::to_value(loaded.meta.counts).unwrap_or_default(),
         target_kind: src.kind().into(),
         target_path: src.path().to_path_buf(),

@@ -3,13 +3,13 @@
 //! Owns the figures that say whether the recording itself can be trusted: rate, period
 //! spread, gaps and an estimate of the samples lost in them, plus the driver speed per
 //! direction (used to turn driver-angle lags into milliseconds). It does not look at the
-//! follower.
+//! follower. Gaps follow the recording's own rule ([`crate::rig::recording::missing_before`])
+//! measured against the median period of the samples used (rows the device flagged stale,
+//! such as repeated IMU values, are not samples here), not the nominal rate the sidecar's
+//! counts use.
 
 use super::run::{MeasuredRun, Phase};
-
-/// A period longer than this many median periods counts as a gap. Default 1.5: one lost
-/// sample doubles the period, while normal jitter of a USB link stays well below +50 %.
-pub const GAP_FACTOR: f64 = 1.5;
+use crate::rig::recording::missing_before;
 
 /// Sampling figures of a run.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -28,7 +28,7 @@ pub struct SamplingStats {
     pub max_period_ms: f64,
     /// Standard deviation of the periods that are not gaps.
     pub period_jitter_ms: f64,
-    /// Periods longer than [`GAP_FACTOR`] × median.
+    /// Periods longer than [`crate::rig::recording::GAP_FACTOR`] × median.
     pub gaps: usize,
     /// Samples missing in the gaps, estimated as round(period / median) − 1 per gap.
     pub missing_samples_estimate: u64,
@@ -65,9 +65,11 @@ pub fn sampling_stats(run: &MeasuredRun) -> SamplingStats {
     for &p in &periods {
         lo = lo.min(p);
         hi = hi.max(p);
-        if med > 0.0 && p > GAP_FACTOR * med {
+        // Both in µs, as the rule is written for device times.
+        let m = missing_before((p * 1e6).round() as u64, med * 1e6);
+        if m > 0 {
             gaps += 1;
-            missing += ((p / med).round() as u64).saturating_sub(1);
+            missing += m;
         } else {
             s += p;
             s2 += p * p;

@@ -244,14 +244,21 @@ pub fn write_recording(
 ) -> Result<crate::rig::recording::RecordingMeta, crate::rig::recording::RecordingError> {
     use crate::rig::config::{Dof as RigDof, SensorConfig};
     use crate::rig::recording::{
-        DeviceInfo, Phase as RecPhase, RecordingMeta, RecordingWriter, Row, SessionInfo,
+        Claim, DeviceInfo, Existing, Phase as RecPhase, RecordingMeta, RecordingWriter, Row,
+        SessionInfo,
     };
     let session = SessionInfo {
         speed_rpm: 0.0,
         cycles: 0,
         settle_cycles: 0,
         reverse: run.phase.contains(&Phase::Reverse),
-        sample_rate_hz: rig.sampling.rate_hz,
+        // The run's own rate (the rig's may differ), so the writer's hole counts are right.
+        sample_rate_hz: {
+            let periods: Vec<f64> = run.time_s.windows(2).map(|w| w[1] - w[0]).collect();
+            super::sampling::median(&periods)
+                .filter(|p| *p > 0.0)
+                .map_or(rig.sampling.rate_hz, |p| 1.0 / p)
+        },
     };
     let device = DeviceInfo {
         backend: "synthetic".into(),
@@ -259,7 +266,7 @@ pub fn write_recording(
     };
     let sensors = rig.sensors.clone();
     let meta = RecordingMeta::new(rig, device, target, session);
-    let mut w = RecordingWriter::create(dir, meta)?;
+    let mut w = RecordingWriter::create(Claim::folder(dir, Existing::Refuse)?, meta)?;
     let mut values: Vec<f64> = Vec::new();
     for i in 0..run.len() {
         values.clear();

@@ -18,6 +18,7 @@
 //!
 //! It does not align anything; it takes the sensor offset from [`mod@super::align`].
 
+use super::metrics::{cycle_coverage, FULL_CYCLE_COVERAGE, PROFILE_BINS};
 use super::run::{MeasuredRun, Phase};
 use super::target::PeriodicTable;
 use super::AnalysisError;
@@ -115,6 +116,10 @@ pub struct TimingReport {
     /// Complete cycles left out because the driver speed was not steady
     /// ([`TIMING_STEADY_SPEED`]).
     pub cycles_rejected_unsteady: usize,
+    /// Cycles whose crossings were all found but whose samples cover less than
+    /// [`FULL_CYCLE_COVERAGE`] of the revolution (gaps): left out, since a crossing fitted
+    /// across a gap is a guess, and the headline counts only covered cycles.
+    pub cycles_rejected_gaps: usize,
 }
 
 /// Parse `--timing 0,180,360`: at least two strictly monotone, finite angles.
@@ -197,8 +202,10 @@ pub fn timing(input: &TimingInput<'_>) -> Result<TimingReport, AnalysisError> {
     let step = input.quantum_deg.max(3.0 * noise);
     let mut cycles = Vec::new();
     let mut rejected = 0;
+    let mut rejected_gaps = 0;
     for (s, e) in forward_segments(input.run) {
         let phi = &input.run.driver_deg;
+        let coverage = coverage_by_cycle(&phi[s..e]);
         let k0 = (phi[s] / 360.0).floor() as i64;
         let k1 = (phi[e - 1] / 360.0).floor() as i64;
         let mut start = s;
@@ -223,7 +230,9 @@ pub fn timing(input: &TimingInput<'_>) -> Result<TimingReport, AnalysisError> {
             if crossings.len() == levels.len() {
                 start = i.saturating_sub(1).max(s);
                 let c = cycle_timing(k, crossings);
-                if steady(&c) {
+                if coverage.get(&k).copied().unwrap_or(0.0) < FULL_CYCLE_COVERAGE {
+                    rejected_gaps += 1;
+                } else if steady(&c) {
                     cycles.push(c);
                 } else {
                     rejected += 1;
@@ -234,7 +243,8 @@ pub fn timing(input: &TimingInput<'_>) -> Result<TimingReport, AnalysisError> {
     if cycles.is_empty() {
         return Err(AnalysisError::NotEnoughData(format!(
             "no complete forward cycle at steady speed passes all timing angles {levels:?} \
-             ({rejected} complete cycles had an unsteady driver speed)"
+             ({rejected} complete cycles had an unsteady driver speed, {rejected_gaps} too \
+             many missing samples)"
         )));
     }
     let nl = levels.len();
@@ -282,6 +292,7 @@ pub fn timing(input: &TimingInput<'_>) -> Result<TimingReport, AnalysisError> {
         ratios,
         cycles,
         cycles_rejected_unsteady: rejected,
+        cycles_rejected_gaps: rejected_gaps,
     })
 }
 
@@ -332,6 +343,23 @@ fn cycle_timing(cycle: i64, crossings: Vec<Crossing>) -> CycleTiming {
 }
 
 /// Contiguous runs of forward samples, as [start, end).
+/// Coverage ([`cycle_coverage`] over [`PROFILE_BINS`] bins) of each driver revolution k
+/// (φ in [360k, 360k + 360)) by the samples of one forward segment.
+fn coverage_by_cycle(phi: &[f64]) -> std::collections::BTreeMap<i64, f64> {
+    let mut occupied: std::collections::BTreeMap<i64, Vec<bool>> = Default::default();
+    for &p in phi {
+        let k = (p / 360.0).floor();
+        let bin = (((p - 360.0 * k) / 360.0 * PROFILE_BINS as f64) as usize).min(PROFILE_BINS - 1);
+        occupied
+            .entry(k as i64)
+            .or_insert_with(|| vec![false; PROFILE_BINS])[bin] = true;
+    }
+    occupied
+        .into_iter()
+        .map(|(k, o)| (k, cycle_coverage(&o)))
+        .collect()
+}
+
 fn forward_segments(run: &MeasuredRun) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
     let mut i = 0;
@@ -589,6 +617,49 @@ mod tests {
             r.cycles.iter().map(|c| c.cycle).collect::<Vec<_>>()
         );
         assert!((r.ratios[0].measured - 2.0).abs() < 1e-9);
+    }
+
+    /// Guards the coverage rule (issue 16: a stepper run with 72 % of its samples missing
+    /// still gave a timing ratio from cycles the headline counted as incomplete): a forward
+    /// cycle missing a 60° stretch of driver angle away from every crossing is left out of
+    /// the timing (counted in `cycles_rejected_gaps`), the fully covered ones are used.
+    #[test]
+    fn cycle_with_a_gap_is_left_out_of_timing() {
+        let law = piecewise_half_turn(2.0 / 3.0);
+        let full = SyntheticBench::default().generate(&law);
+        let table = law.rz_deg.as_ref().unwrap();
+        let input = |run: &MeasuredRun| {
+            let follower = run.rz_deg.clone().unwrap();
+            timing(&TimingInput {
+                run,
+                follower_deg: &follower,
+                target: table,
+                quantum_deg: 0.0,
+                levels_deg: &[0.0, 180.0, 360.0],
+            })
+            .unwrap()
+        };
+        let before = input(&full);
+        assert_eq!(before.cycles_rejected_gaps, 0);
+        // Drop the samples between 60° and 120° of driver angle in the second forward
+        // cycle (crossings of this law lie at 0°, 240° and 360°).
+        let first = before.cycles[0].cycle;
+        let lo = 360.0 * (first + 1) as f64 + 60.0;
+        let keep: Vec<usize> = (0..full.len())
+            .filter(|&i| !(lo..lo + 60.0).contains(&full.driver_deg[i]))
+            .collect();
+        let pick = |v: &[f64]| keep.iter().map(|&i| v[i]).collect::<Vec<f64>>();
+        let gappy = MeasuredRun {
+            time_s: pick(&full.time_s),
+            phase: keep.iter().map(|&i| full.phase[i]).collect(),
+            driver_deg: pick(&full.driver_deg),
+            rz_deg: full.rz_deg.as_deref().map(pick),
+            ..Default::default()
+        };
+        let after = input(&gappy);
+        assert_eq!(after.cycles_rejected_gaps, 1);
+        assert_eq!(after.cycles.len(), before.cycles.len() - 1);
+        assert!(after.cycles.iter().all(|c| c.cycle != first + 1));
     }
 
     /// Guards option parsing messages.

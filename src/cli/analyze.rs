@@ -139,6 +139,9 @@ pub fn print_summary(s: &Summary, report_dir: &Path) {
         "samples:  {} at {:.1} Hz, {} gaps, {} cycles",
         s.sampling.samples, s.sampling.mean_rate_hz, s.sampling.gaps, h.cycles
     );
+    if let Some(why) = &s.source.degraded {
+        println!("degraded: {why}");
+    }
     match s.pass {
         Some(true) => println!("verdict:  PASS ({} checks)", s.checks.len()),
         Some(false) => {

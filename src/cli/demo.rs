@@ -293,6 +293,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         settle_cycles: session::DEFAULT_SETTLE_CYCLES,
         reverse: !args.no_reverse,
         out_dir: Some(run_dir.clone()),
+        replace: false,
         cancel,
         progress: Some(Box::new(move |p: &Progress| {
             if last.elapsed().as_secs_f64() >= 1.0 {

@@ -3,7 +3,7 @@
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Arc;
 
 use anyhow::Context;
@@ -14,10 +14,38 @@ use crate::rig::session::{self, EndReason, MeasureOptions, Progress, TargetSpec}
 
 /// Exit code when the device disconnected during the run (recording kept, incomplete).
 pub const EXIT_DISCONNECTED: u8 = 5;
-/// Exit code when the run stopped at `safety.max_run_s` or on another error mid-run.
+/// Exit code when the run stopped early: `safety.max_run_s`, a stalled driver, a jammed
+/// mechanism, a full disk, or another error mid-run.
 pub const EXIT_INCOMPLETE: u8 = 4;
-/// Exit code after Ctrl-C (the shell convention 128 + SIGINT).
+/// Exit code after Ctrl-C (the shell convention 128 + SIGINT); after SIGTERM or SIGHUP it
+/// is 128 plus that signal's number (143, 129), as if the signal had ended the process.
 pub const EXIT_CANCELLED: u8 = 130;
+/// Exit code when the run finished but its data is degraded (too many samples missing; the
+/// recording's sidecar says why and the analysis gives only what the data supports).
+pub const EXIT_DEGRADED: u8 = 6;
+
+/// The signals that stop a run like Ctrl-C — motor stopped, recording finished and marked
+/// `cancelled` — with their names: the terminal's interrupt, what `timeout` and service
+/// managers send, and a closed terminal.
+const STOP_SIGNALS: [(i32, &str); 3] = [
+    (signal_hook::consts::SIGINT, "SIGINT"),
+    (signal_hook::consts::SIGTERM, "SIGTERM"),
+    (signal_hook::consts::SIGHUP, "SIGHUP"),
+];
+
+/// Make every [`STOP_SIGNALS`] set `cancel` and remember which one came. A second signal
+/// while the motor is being stopped is ignored (the firmware watchdog and the servo's bus
+/// watchdog cover a host that dies; SIGKILL still ends it).
+fn stop_on_signals(cancel: &Arc<AtomicBool>) -> anyhow::Result<Arc<AtomicUsize>> {
+    let which = Arc::new(AtomicUsize::new(0));
+    for (signal, name) in STOP_SIGNALS {
+        // The signal's number first, so it is there when the session sees the flag.
+        signal_hook::flag::register_usize(signal, which.clone(), signal as usize)
+            .and_then(|_| signal_hook::flag::register(signal, cancel.clone()))
+            .with_context(|| format!("cannot install the {name} handler"))?;
+    }
+    Ok(which)
+}
 
 /// Arguments of `mpc-rig measure`.
 #[derive(Debug, Args)]
@@ -51,9 +79,13 @@ pub struct MeasureArgs {
     /// Also run the same cycles in reverse (for backlash).
     #[arg(long)]
     pub reverse: bool,
-    /// Recording directory (default `out/measure/<UTC timestamp>`).
+    /// Recording directory (default: a new `out/measure/<UTC timestamp>`). A directory that
+    /// already holds a recording is refused unless --replace is given.
     #[arg(short, long, value_name = "DIR")]
     pub output: Option<PathBuf>,
+    /// Replace the recording already in the -o directory (its CSV, sidecar and report).
+    #[arg(long, requires = "output")]
+    pub replace: bool,
     /// Do not analyse the recording at the end (run `mpc-rig analyze DIR` later).
     #[arg(long)]
     pub no_analysis: bool,
@@ -73,13 +105,7 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
         (None, None) => anyhow::bail!("give the target with --mechanism PATH or --motion FILE"),
     };
     let cancel = Arc::new(AtomicBool::new(false));
-    {
-        let cancel = cancel.clone();
-        // A second Ctrl-C while shutting down is ignored; the firmware watchdog covers a
-        // host that dies.
-        ctrlc::set_handler(move || cancel.store(true, Ordering::Relaxed))
-            .context("cannot install the Ctrl-C handler")?;
-    }
+    let signal = stop_on_signals(&cancel)?;
     let tty = std::io::stderr().is_terminal();
     let mut last_line = std::time::Instant::now();
     let mut opts = MeasureOptions {
@@ -91,6 +117,7 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
         settle_cycles: args.settle,
         reverse: args.reverse,
         out_dir: args.output.clone(),
+        replace: args.replace,
         cancel,
         progress: Some(Box::new(move |p: &Progress| {
             if tty {
@@ -132,24 +159,45 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
             ),
         }
     }
-    let (code, what) = match &outcome.end {
-        EndReason::Finished => return Ok(analysis_code),
-        EndReason::Cancelled => (EXIT_CANCELLED, "cancelled".to_string()),
+    let dir = outcome.dir.display();
+    let incomplete = |code: u8, what: String| {
+        (
+            code,
+            format!("{what}; the recording in {dir} is kept and marked incomplete"),
+        )
+    };
+    let (code, message) = match &outcome.end {
+        EndReason::Finished => match &outcome.meta.degraded {
+            None => return Ok(analysis_code),
+            Some(why) => (
+                EXIT_DEGRADED,
+                format!(
+                    "run degraded: {why}; the recording in {dir} is kept (complete, marked \
+                     degraded)"
+                ),
+            ),
+        },
+        EndReason::Cancelled => {
+            let number = signal.load(Ordering::SeqCst);
+            match STOP_SIGNALS.iter().find(|s| s.0 as usize == number) {
+                Some((n, name)) => incomplete(128 + *n as u8, format!("cancelled by {name}")),
+                None => incomplete(EXIT_CANCELLED, "cancelled".into()),
+            }
+        }
         // The end reason's own text starts with "disconnected": give its message once.
-        EndReason::Disconnected(m) => (EXIT_DISCONNECTED, format!("device disconnected ({m})")),
-        EndReason::MaxRunTime | EndReason::Error(_) => (
+        EndReason::Disconnected(m) => {
+            incomplete(EXIT_DISCONNECTED, format!("device disconnected ({m})"))
+        }
+        EndReason::MaxRunTime
+        | EndReason::DiskFull(_)
+        | EndReason::DriverStalled(_)
+        | EndReason::Jammed { .. }
+        | EndReason::Error(_) => incomplete(
             EXIT_INCOMPLETE,
             format!("run stopped early ({})", outcome.end),
         ),
     };
-    Err(ExitStatusError {
-        code,
-        message: format!(
-            "{what}; the recording in {} is kept and marked incomplete",
-            outcome.dir.display()
-        ),
-    }
-    .into())
+    Err(ExitStatusError { code, message }.into())
 }
 
 fn progress_line(p: &Progress) -> String {

@@ -23,6 +23,7 @@ use crate::rig::sim::dynamixel::{
 use crate::rig::sim::mixed;
 use crate::rig::sim::plant::{PlantConfig, FAULT_KEYS};
 use crate::rig::sim::stepper::{self, Mechanics, SimStepperOptions};
+use crate::rig::target;
 
 /// Serve a simulated device on a pseudo-terminal.
 #[derive(Debug, Args)]
@@ -84,7 +85,8 @@ pub struct SimDynamixelArgs {
     pub target: TargetArgs,
     /// Plant imperfection or link fault, `key=value`, repeatable (e.g. backlash_deg=0.5,
     /// gain_error=0.01, encoder_noise_counts=1, drop_prob=0.001, corrupt_prob=0.001,
-    /// disconnect_at_s=5, dropout_at_s=2, seed=7).
+    /// disconnect_at_s=5, dropout_at_s=2, driver_fault_at_s=2, driver_stall_at_s=2,
+    /// jam_at_s=2, echo=1, seed=7).
     #[arg(long = "fault", value_name = "KEY=VALUE")]
     pub faults: Vec<String>,
     /// ID of the driver servo.
@@ -116,7 +118,8 @@ pub struct SimStepperArgs {
     /// Plant imperfection or link fault, `key=value`, repeatable: backlash_deg,
     /// phase_lag_deg, gain_error, encoder_noise_counts, encoder_resolution, imu_noise_deg,
     /// imu_bias_deg, missed_step_prob, scale_mm, drop_prob, corrupt_prob, disconnect_at_s,
-    /// dropout_at_s, dropout_s, protocol_version, seed.
+    /// dropout_at_s, dropout_s, driver_fault_at_s, driver_stall_at_s, jam_at_s,
+    /// protocol_version, seed.
     #[arg(long = "fault", value_name = "KEY=VALUE")]
     pub faults: Vec<String>,
     /// Take the bench's mechanics (steps/rev, microsteps, gear, direction, fitted sensors)
@@ -140,9 +143,9 @@ pub fn run(args: SimDeviceArgs) -> anyhow::Result<ExitCode> {
 }
 
 fn run_mixed(a: SimMixedArgs) -> anyhow::Result<ExitCode> {
-    let motion = load_target(&a.target)?;
-    let plant = plant_from(&a.faults)?;
     let rig = RigConfig::load(&a.rig)?;
+    let motion = load_target(&a.target, Some(&rig))?;
+    let plant = plant_from(&a.faults)?;
     let sim = mixed::spawn(&rig, motion, plant).context("starting the simulated mixed bench")?;
     {
         let mut out = std::io::stdout().lock();
@@ -183,10 +186,11 @@ pub(super) fn plant_from(faults: &[String]) -> anyhow::Result<PlantConfig> {
 }
 
 fn run_stepper(a: SimStepperArgs) -> anyhow::Result<ExitCode> {
-    let motion = load_target(&a.target)?;
+    let rig = a.rig.as_deref().map(RigConfig::load).transpose()?;
+    let motion = load_target(&a.target, rig.as_ref())?;
     let plant = plant_from(&a.faults)?;
-    let mechanics = match &a.rig {
-        Some(r) => Mechanics::from_rig(&RigConfig::load(r)?)?,
+    let mechanics = match &rig {
+        Some(r) => Mechanics::from_rig(r)?,
         None => Mechanics::default(),
     };
     let sim = stepper::spawn(SimStepperOptions {
@@ -226,19 +230,23 @@ fn run_stepper(a: SimStepperArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-pub(super) fn load_target(t: &TargetArgs) -> anyhow::Result<Motion> {
-    match (&t.mechanism, &t.motion) {
-        (Some(m), _) => Motion::from_mechanism_file(m)
-            .with_context(|| format!("loading mechanism {}", m.display())),
-        (None, Some(f)) => {
-            Motion::from_file(f).with_context(|| format!("loading motion {}", f.display()))
-        }
+/// The target law to serve: a mechanism only after the checks `synth --check` makes (a
+/// broken file must not become a simulated bench that someone then runs a motor against),
+/// and, when the bench comes from a rig file, one the rig's sensors can measure.
+pub(super) fn load_target(t: &TargetArgs, rig: Option<&RigConfig>) -> anyhow::Result<Motion> {
+    let motion = match (&t.mechanism, &t.motion) {
+        (Some(m), _) => target::load_mechanism(m)?.1,
+        (None, Some(f)) => target::load_motion(f)?,
         (None, None) => anyhow::bail!("give --mechanism PATH or --motion FILE"),
+    };
+    if let Some(rig) = rig {
+        target::check_measurable(rig, motion.class())?;
     }
+    Ok(motion)
 }
 
 fn run_dynamixel(a: SimDynamixelArgs) -> anyhow::Result<ExitCode> {
-    let motion = load_target(&a.target)?;
+    let motion = load_target(&a.target, None)?;
     let target = MotionTarget::new(motion)?;
     let plant = plant_from(&a.faults)?;
     let mut opts = SimDynamixelOptions::new(Arc::new(target));

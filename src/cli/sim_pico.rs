@@ -65,7 +65,7 @@ fn parse_flash_id(s: &str) -> Result<u64, String> {
 
 /// Run `sim-device pico`.
 pub fn run(a: SimPicoArgs) -> anyhow::Result<ExitCode> {
-    let motion = load_target(&a.target)?;
+    let motion = load_target(&a.target, None)?;
     let plant = plant_from(&a.faults)?;
     let mechanics = match &a.rig {
         Some(r) => Mechanics::from_rig(&RigConfig::load(r)?)?,

@@ -378,13 +378,13 @@ mod tests {
             .filter(|&i| marks[i])
             .map(|i| g.center(g.unflat(i)))
             .collect();
-        for i in 0..g.len() {
+        for (i, &di) in d.iter().enumerate() {
             let c = g.center(g.unflat(i));
             let brute = marked
                 .iter()
                 .map(|m| (m - c).norm())
                 .fold(f64::INFINITY, f64::min);
-            assert!((d[i] as f64 - brute).abs() < 1e-5, "voxel {i}");
+            assert!((di as f64 - brute).abs() < 1e-5, "voxel {i}");
         }
     }
 

@@ -59,6 +59,49 @@ pub(crate) fn finite(value: f64, at: impl FnOnce() -> Location) -> Result<f64, M
     }
 }
 
+/// Check an angle in degrees is finite and within [`MAX_ABS_ANGLE_DEG`].
+pub(crate) fn angle_deg(value: f64, at: impl Fn() -> Location) -> Result<f64, MotionError> {
+    within(
+        finite(value, &at)?,
+        MAX_ABS_ANGLE_DEG,
+        "deg",
+        "1000 turns",
+        at,
+    )
+}
+
+/// Check a translation component or height (model units) is finite and within
+/// [`MAX_ABS_TRANSLATION`].
+pub(crate) fn length(value: f64, at: impl Fn() -> Location) -> Result<f64, MotionError> {
+    within(
+        finite(value, &at)?,
+        MAX_ABS_TRANSLATION,
+        "model units",
+        "10 m at the default scale for a follower about one unit in size",
+        at,
+    )
+}
+
+fn within(
+    value: f64,
+    limit: f64,
+    unit: &'static str,
+    why: &'static str,
+    at: impl FnOnce() -> Location,
+) -> Result<f64, MotionError> {
+    if value.abs() <= limit {
+        Ok(value)
+    } else {
+        Err(MotionError::NotPhysical {
+            at: at(),
+            value,
+            limit,
+            unit,
+            why,
+        })
+    }
+}
+
 /// A unit quaternion from `[w, x, y, z]`: normalized silently within
 /// [`QUATERNION_NORM_SILENT`], with a warning within [`QUATERNION_NORM_TOLERANCE`], an error
 /// beyond.
@@ -176,11 +219,11 @@ impl Assembly {
                     ((last + step - angles[0]) / std::f64::consts::TAU).round()
                 }
             };
-            if turns.abs() > f64::from(i32::MAX) {
-                return Err(MotionError::Invalid {
-                    at: self.list_at.clone(),
-                    message: format!("{turns} net turns per period is not a motion"),
-                });
+            // Dense rows unwrap into angles no key wrote: bound those too.
+            for (k, a) in keys.iter().zip(&angles) {
+                angle_deg(a.to_degrees(), || {
+                    self.at(k.line, format!("{}.rotation (unwrapped angle)", k.field))
+                })?;
             }
             let offset = turns * std::f64::consts::TAU;
             if turns == 0.0 && keys.len() < 2 {
@@ -272,7 +315,7 @@ impl Assembly {
             angle_scheme,
             law,
         };
-        scan_for_warnings(&mut motion);
+        scan_for_warnings(&mut motion)?;
         Ok(motion)
     }
 
@@ -321,6 +364,9 @@ impl Assembly {
             let tr = k.translation;
             let arr = [tr.x, tr.y, tr.z];
             let at = || self.at(k.line, format!("{}.translation", k.field));
+            for c in arr {
+                length(c, at)?;
+            }
             match class {
                 MotionClass::R1 | MotionClass::R3 => {
                     if tr.amax() > TRANSLATION_TOLERANCE {
@@ -359,14 +405,26 @@ impl Assembly {
 }
 
 /// Scan the law at [`WARNING_SCAN_SAMPLES`] points for motions unlikely to be
-/// synthesizable; one warning per kind, at its worst sample.
-fn scan_for_warnings(motion: &mut Motion) {
+/// synthesizable; one warning per kind, at its worst sample. A law whose derivatives are
+/// not finite (keys that jump a large angle within a tiny time) is an error at the nearest
+/// key.
+fn scan_for_warnings(motion: &mut Motion) -> Result<(), MotionError> {
     let n = WARNING_SCAN_SAMPLES;
     let mut worst_tilt = (0.0_f64, 0.0);
     let mut worst_acc = (0.0_f64, 0.0);
     let mut worst_lin = (0.0_f64, 0.0);
+    let mut not_finite = None;
     for i in 0..n {
         let s = motion.sample(i as f64 / n as f64);
+        let derivatives = [
+            s.angular_velocity,
+            s.angular_acceleration,
+            s.velocity,
+            s.acceleration,
+        ];
+        if not_finite.is_none() && derivatives.iter().any(|d| !d.iter().all(|x| x.is_finite())) {
+            not_finite = Some(s.t);
+        }
         if motion.class == MotionClass::R3 {
             let tilt = tilt_deg(&s.rotation);
             if tilt > worst_tilt.0 {
@@ -397,6 +455,15 @@ fn scan_for_warnings(motion: &mut Motion) {
             "motion (interpolated)",
         )
     };
+    if let Some(t) = not_finite {
+        return Err(MotionError::Invalid {
+            at: at(t),
+            message: format!(
+                "the interpolated motion's velocity or acceleration is not finite near t = {t:.4}: \
+                 keyframes too close in time for the motion between them"
+            ),
+        });
+    }
     let mut found = Vec::new();
     if worst_tilt.0 > MAX_TILT_DEG {
         found.push(MotionWarning {
@@ -426,4 +493,5 @@ fn scan_for_warnings(motion: &mut Motion) {
         });
     }
     motion.warnings.extend(found);
+    Ok(())
 }

@@ -48,6 +48,16 @@ impl fmt::Display for Location {
     }
 }
 
+/// A number as typed by a person: plain below a million, in exponent form above (`1e300`
+/// rather than three hundred digits).
+fn short(v: f64) -> String {
+    if v.abs() < 1e6 {
+        v.to_string()
+    } else {
+        format!("{v:e}")
+    }
+}
+
 /// Why a motion could not be loaded.
 #[derive(Debug, thiserror::Error)]
 pub enum MotionError {
@@ -176,6 +186,20 @@ pub enum MotionError {
         /// Why.
         why: &'static str,
     },
+    /// A finite value no mechanism can have (an angle of 1e300°, a height of a kilometre).
+    #[error("{at}: {} {unit} is not a physical value (at most ±{limit} {unit}: {why})", short(*.value))]
+    NotPhysical {
+        /// Where.
+        at: Location,
+        /// The value.
+        value: f64,
+        /// The largest magnitude accepted.
+        limit: f64,
+        /// Its unit.
+        unit: &'static str,
+        /// What the limit stands for.
+        why: &'static str,
+    },
     /// Anything else that is wrong with one field (missing, conflicting, out of range).
     #[error("{at}: {message}")]
     Invalid {
@@ -197,6 +221,7 @@ impl MotionError {
             | Self::TimeNotIncreasing { at, .. }
             | Self::DuplicateTime { at, .. }
             | Self::NonFinite { at, .. }
+            | Self::NotPhysical { at, .. }
             | Self::NonUnitQuaternion { at, .. }
             | Self::TranslationNotAllowed { at, .. }
             | Self::RotationOffAxis { at, .. }

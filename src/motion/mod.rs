@@ -52,6 +52,7 @@ use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 pub use angle::AngleScheme;
 pub use class::{MotionClass, UnknownClass};
 pub use error::{Location, MotionError, MotionWarning, WarningKind};
+pub use mechanism::MECHANISM_FILE;
 
 use angle::AngleLaw;
 use rotation::RotationLaw;
@@ -108,6 +109,24 @@ pub const MAX_LINEAR_ACCELERATION: f64 = 600.0;
 /// Sample density (per period) at which the loaded law is scanned for warnings: four times
 /// the default N, matching the conjugation acceptance check of the conventions.
 pub const WARNING_SCAN_SAMPLES: usize = 4 * DEFAULT_SAMPLES;
+
+/// Largest keyframe spec (`.toml`) read, in bytes. The TOML parser holds about 2 kB per
+/// key while it reads (1.15 M keys in 65 MB of text took 2.4 GB), so a larger spec is
+/// refused before parsing. 8 MiB holds over 100 000 keys, hundreds per degree of a period;
+/// data that dense belongs in the dense CSV format, which reads 1.15 M rows in about 2 s
+/// and 0.5 GB.
+pub const MAX_SPEC_BYTES: usize = 8 << 20;
+
+/// Largest magnitude of any angle in a motion (keyframe angles, Euler and direction
+/// angles, net rotation, timing segments; unwrapped), degrees: 1000 turns. No mechanism
+/// turns its follower a thousand times per driver revolution, and beyond it a typo such as
+/// `angle = 1e300` would make ω infinite (and synthesis run for minutes on nonsense).
+pub const MAX_ABS_ANGLE_DEG: f64 = 360_000.0;
+
+/// Largest magnitude of a translation or height, model units: 1000 (10 m at the default
+/// 10 mm per unit) for a follower about one unit in size (the paper's curve lengths of
+/// 4π–6π units).
+pub const MAX_ABS_TRANSLATION: f64 = 1000.0;
 
 /// Follower pose and its derivatives with respect to t (t = fraction of the period).
 #[derive(Debug, Clone, Copy)]

@@ -49,9 +49,9 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use super::angle::AngleScheme;
-use super::build::{finite, unit_quaternion, Assembly, NetRotation, RawKey};
+use super::build::{angle_deg, finite, length, unit_quaternion, Assembly, NetRotation, RawKey};
 use super::rotation::{from_axis_angle_deg, from_direction_roll_deg, from_euler_zyx_deg};
-use super::{Location, Motion, MotionClass, MotionError, MotionWarning};
+use super::{Location, Motion, MotionClass, MotionError, MotionWarning, MAX_SPEC_BYTES};
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -96,26 +96,46 @@ struct SegmentSpec {
     duration: Spanned<f64>,
 }
 
-/// Line numbers from byte offsets.
-struct Lines<'a> {
-    text: &'a str,
+/// Line numbers from byte offsets: the offsets of every line start, found once, so each
+/// lookup is a binary search (counting newlines from the start for every key made parsing
+/// quadratic: 40 000 keys took 22 s).
+struct Lines {
+    starts: Vec<usize>,
 }
 
-impl Lines<'_> {
+impl Lines {
+    fn new(text: &str) -> Lines {
+        let mut starts = vec![0];
+        starts.extend(
+            text.bytes()
+                .enumerate()
+                .filter(|&(_, b)| b == b'\n')
+                .map(|(i, _)| i + 1),
+        );
+        Lines { starts }
+    }
+
+    /// 1-based line of a byte offset.
     fn line(&self, offset: usize) -> usize {
-        let end = offset.min(self.text.len());
-        1 + self.text.as_bytes()[..end]
-            .iter()
-            .filter(|&&b| b == b'\n')
-            .count()
+        self.starts.partition_point(|&s| s <= offset)
     }
 }
 
 /// Parse and validate a keyframe spec. `path` names the file in messages and supplies the
 /// default name.
 pub fn parse_spec(text: &str, path: Option<&Path>) -> Result<Motion, MotionError> {
-    let lines = Lines { text };
     let file = path.map(Path::to_path_buf);
+    if text.len() > MAX_SPEC_BYTES {
+        return Err(MotionError::Invalid {
+            at: Location::new(file, None, ""),
+            message: format!(
+                "{} bytes is more than a keyframe spec may hold ({MAX_SPEC_BYTES} bytes, over \
+                 100 000 keys); write data this dense as a .csv dense file (data/README.md)",
+                text.len()
+            ),
+        });
+    }
+    let lines = Lines::new(text);
     let at = |span: std::ops::Range<usize>, field: &str| {
         Location::new(file.clone(), Some(lines.line(span.start)), field)
     };
@@ -195,7 +215,7 @@ pub fn parse_spec(text: &str, path: Option<&Path>) -> Result<Motion, MotionError
                 .collect::<Result<Vec<_>, _>>()?;
             let net = match &spec.net_rotation {
                 Some(n) => NetRotation::Given {
-                    degrees: finite(*n.get_ref(), || at(n.span(), "net_rotation"))?,
+                    degrees: angle_deg(*n.get_ref(), || at(n.span(), "net_rotation"))?,
                     at: at(n.span(), "net_rotation"),
                 },
                 None => NetRotation::Given {
@@ -222,6 +242,9 @@ pub fn parse_spec(text: &str, path: Option<&Path>) -> Result<Motion, MotionError
 
 type At<'a> = dyn Fn(std::ops::Range<usize>, &str) -> Location + 'a;
 
+/// A bound on one number of a field: finite, or finite and physical (angles, lengths).
+type Check = dyn Fn(f64, &dyn Fn() -> Location) -> Result<f64, MotionError>;
+
 /// Keys from a `[timing]` table.
 fn timing_keys(
     timing: &Spanned<TimingSpec>,
@@ -238,7 +261,7 @@ fn timing_keys(
     }
     let timing = timing.get_ref();
     let start = match &timing.start_angle {
-        Some(s) => finite(*s.get_ref(), || at(s.span(), "timing.start_angle"))?,
+        Some(s) => angle_deg(*s.get_ref(), || at(s.span(), "timing.start_angle"))?,
         None => 0.0,
     };
     let segs = timing.segments.get_ref();
@@ -261,7 +284,7 @@ fn timing_keys(
                 &format!("timing.segments[{i}].duration"),
             )
         })?;
-        let a = finite(*seg.angle.get_ref(), || {
+        let a = angle_deg(*seg.angle.get_ref(), || {
             at(seg.angle.span(), &format!("timing.segments[{i}].angle"))
         })?;
         if d <= 0.0 {
@@ -323,7 +346,13 @@ fn key(
     let prefix = format!("key[{index}]");
     let f = |name: &str| format!("{prefix}.{name}");
     let num = |v: &Spanned<f64>, name: &str| finite(*v.get_ref(), || at(v.span(), &f(name)));
-    let vec_n = |v: &Spanned<Vec<f64>>, name: &str, n: usize| -> Result<Vec<f64>, MotionError> {
+    let angle = |v: &Spanned<f64>, name: &str| angle_deg(*v.get_ref(), || at(v.span(), &f(name)));
+    // `check` bounds each component (finite, and physical for angles and lengths).
+    let vec_n = |v: &Spanned<Vec<f64>>,
+                 name: &str,
+                 n: usize,
+                 check: &Check|
+     -> Result<Vec<f64>, MotionError> {
         if v.get_ref().len() != n {
             return Err(MotionError::Invalid {
                 at: at(v.span(), &f(name)),
@@ -331,10 +360,13 @@ fn key(
             });
         }
         for &x in v.get_ref() {
-            finite(x, || at(v.span(), &f(name)))?;
+            check(x, &|| at(v.span(), &f(name)))?;
         }
         Ok(v.get_ref().clone())
     };
+    let any = |x: f64, at: &dyn Fn() -> Location| finite(x, at);
+    let angles = |x: f64, at: &dyn Fn() -> Location| angle_deg(x, at);
+    let lengths = |x: f64, at: &dyn Fn() -> Location| length(x, at);
     let t = num(&k.t, "t")?;
     let line = Some(at(k.t.span(), "").line.unwrap_or(0));
 
@@ -376,7 +408,7 @@ fn key(
     let rotation = match forms.first().copied() {
         None => match &k.angle {
             Some(a) if class.is_planar_rotation() => {
-                let deg = num(a, "angle")?;
+                let deg = angle(a, "angle")?;
                 explicit_angle = Some(deg.to_radians());
                 UnitQuaternion::from_axis_angle(&Vector3::z_axis(), deg.to_radians())
             }
@@ -403,7 +435,7 @@ fn key(
         },
         Some("quaternion") => {
             let q = k.quaternion.as_ref().expect("present");
-            let v = vec_n(q, "quaternion", 4)?;
+            let v = vec_n(q, "quaternion", 4, &any)?;
             unit_quaternion(
                 [v[0], v[1], v[2], v[3]],
                 &|| at(q.span(), &f("quaternion")),
@@ -412,14 +444,14 @@ fn key(
         }
         Some("axis") => {
             let ax = k.axis.as_ref().expect("present");
-            let v = vec_n(ax, "axis", 3)?;
+            let v = vec_n(ax, "axis", 3, &any)?;
             let Some(a) = &k.angle else {
                 return Err(MotionError::Invalid {
                     at: at(ax.span(), &f("axis")),
                     message: "`axis` needs an `angle` (degrees)".into(),
                 });
             };
-            let deg = num(a, "angle")?;
+            let deg = angle(a, "angle")?;
             let q = from_axis_angle_deg([v[0], v[1], v[2]], deg).ok_or_else(|| {
                 MotionError::Invalid {
                     at: at(ax.span(), &f("axis")),
@@ -435,7 +467,7 @@ fn key(
         }
         Some("euler_zyx") => {
             let e = k.euler_zyx.as_ref().expect("present");
-            let v = vec_n(e, "euler_zyx", 3)?;
+            let v = vec_n(e, "euler_zyx", 3, &angles)?;
             from_euler_zyx_deg(v[0], v[1], v[2])
         }
         Some(_) => {
@@ -455,17 +487,17 @@ fn key(
                 });
             };
             let roll = match &k.roll {
-                Some(r) => num(r, "roll")?,
+                Some(r) => angle(r, "roll")?,
                 None => 0.0,
             };
-            from_direction_roll_deg(num(az, "azimuth")?, num(el, "elevation")?, roll)
+            from_direction_roll_deg(angle(az, "azimuth")?, angle(el, "elevation")?, roll)
         }
     };
 
     let mut translation = Vector3::zeros();
     let mut translation_line = line;
     if let Some(tr) = &k.translation {
-        let v = vec_n(tr, "translation", 3)?;
+        let v = vec_n(tr, "translation", 3, &lengths)?;
         translation = Vector3::new(v[0], v[1], v[2]);
         translation_line = at(tr.span(), "").line;
     }
@@ -484,7 +516,7 @@ fn key(
                 message: "give `height` or `translation`, not both".into(),
             });
         }
-        translation.z = num(h, "height")?;
+        translation.z = length(*h.get_ref(), || at(h.span(), &f("height")))?;
     } else if class == MotionClass::R1T1 && k.translation.is_none() {
         return Err(MotionError::Invalid {
             at: at(first_span(), &prefix),
@@ -510,6 +542,21 @@ fn key(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Guards the line index: every byte offset (and one past the end) maps to the line
+    /// that counting newlines before it gives.
+    #[test]
+    fn line_index_matches_counting_newlines() {
+        let text = "a = 1\n\n[[key]]\nt = 0.5\nangle = 3\n";
+        let lines = Lines::new(text);
+        for offset in 0..=text.len() + 1 {
+            let counted = 1 + text.as_bytes()[..offset.min(text.len())]
+                .iter()
+                .filter(|&&b| b == b'\n')
+                .count();
+            assert_eq!(lines.line(offset), counted, "offset {offset}");
+        }
+    }
 
     fn parse(text: &str) -> Result<Motion, MotionError> {
         parse_spec(text, Some(Path::new("test.toml")))

@@ -122,6 +122,16 @@ pub enum RigError {
         /// What went wrong.
         message: String,
     },
+    /// The rig's sensors cannot measure the target's motion class.
+    #[error("refused: rig `{rig}` cannot measure a {class} target: {missing}")]
+    CannotMeasure {
+        /// The rig's name.
+        rig: String,
+        /// The target's class.
+        class: String,
+        /// What sensor is missing, and what to do.
+        missing: String,
+    },
     /// Creating or serving a pseudo-terminal failed.
     #[error("pseudo-terminal: {0}")]
     Pty(String),

@@ -9,6 +9,8 @@
 //! - [`backend`]: the driver and sample-stream traits, one folder per backend.
 //! - [`link`]: serial port listing and resolution.
 //! - [`session`]: the measurement session (`mpc-rig measure`).
+//! - [`target`]: what a run is measured against: motion files, mechanism files validated
+//!   as `synth --check` does, and whether a rig can measure a class.
 //! - [`sim`]: the plant model and the simulated devices behind pseudo-terminals.
 
 pub mod backend;
@@ -18,5 +20,6 @@ pub mod link;
 pub mod recording;
 pub mod session;
 pub mod sim;
+pub mod target;
 
 pub use error::RigError;

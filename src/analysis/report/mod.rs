@@ -79,6 +79,8 @@ pub struct SourceInfo {
     pub stale_rows: usize,
     /// The CSV ended in a cut-off line that was dropped.
     pub truncated_last_line: bool,
+    /// Why the session marked the recording degraded (sidecar `degraded`), if it did.
+    pub degraded: Option<String>,
     /// The recording's own counters (gaps, CRC errors, reconnects …), as written by the rig.
     pub device_counts: serde_json::Value,
     /// Target kind (`mechanism` or `motion`).
@@ -416,6 +418,12 @@ fn blocks(s: &Summary, a: &Analysis, pictures: &[plots::Picture]) -> Vec<Block> 
         "{} complete cycles, {} samples at {:.1} Hz, {} gaps.",
         h.cycles, s.sampling.samples, s.sampling.mean_rate_hz, s.sampling.gaps
     ));
+    if let Some(why) = &s.source.degraded {
+        lines.push(format!(
+            "**Degraded recording:** {why}. Figures that need whole cycles (timing ratios, \
+             per-cycle statistics) are given only for cycles the samples cover."
+        ));
+    }
     for l in lines {
         b.push(Block::Para(l));
     }
@@ -727,6 +735,10 @@ fn blocks(s: &Summary, a: &Analysis, pictures: &[plots::Picture]) -> Vec<Block> 
                         format!("no ({})", src.end_reason.clone().unwrap_or_default())
                     }
                 }),
+            ],
+            vec![
+                "degraded".into(),
+                src.degraded.clone().unwrap_or_else(|| "no".into()),
             ],
             vec![
                 "rows / stale rows left out".into(),

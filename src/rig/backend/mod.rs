@@ -59,6 +59,11 @@ pub trait Driver {
     fn estop(&mut self) -> Result<(), RigError>;
     /// Current driver angle (deg).
     fn position_deg(&mut self) -> Result<f64, RigError>;
+    /// What hardware fault the driver reports, in words for the user, once a sample carried
+    /// [`crate::rig::recording::flags::DRIVER_FAULT`]; `None` when it cannot tell.
+    fn fault(&mut self) -> Option<String> {
+        None
+    }
     /// Leave the hardware safe: stop, disable the motor / torque, stop streaming. Called on
     /// every exit path of a session (end, error, Ctrl-C); must be safe to call twice.
     fn shutdown(&mut self) -> Result<(), RigError>;

@@ -15,9 +15,11 @@
 //!    IMU **bias** (a constant rotation) and Gaussian **IMU noise** (a random small
 //!    rotation per reading).
 //!
-//! Link faults (dropped or corrupted bytes, a disconnect, a brief drop-out) are parsed here
-//! too, so one `--fault key=value` list configures a whole simulated bench, but they are
-//! applied by the simulator's link ([`Plant::link_byte`]).
+//! Link faults (dropped or corrupted bytes, a disconnect, a brief drop-out) and faults of
+//! the driver and the mechanism at a given time (a driver hardware fault, a blocked driver
+//! shaft, a follower that binds) are parsed here too, so one `--fault key=value` list
+//! configures a whole simulated bench; the simulators apply them at their time (the
+//! follower's binding through [`Plant::jam`]).
 //!
 //! Randomness comes from ChaCha8 streams seeded by `seed`, one stream for sensors and one
 //! for the link, so the same seed gives the same run and link faults do not change sensor
@@ -101,6 +103,9 @@ pub struct LinkFaults {
     /// at factory defaults (torque off, the streamed block's indirect addresses unmapped,
     /// bus watchdog off), realtime tick restarting from 0.
     pub reboot_at_s: Option<f64>,
+    /// Dynamixel bus: every byte the host sends comes straight back to it before the
+    /// servos' replies, as through a half-duplex (RS-485) adapter without echo suppression.
+    pub echo: bool,
 }
 
 /// Imperfections of a simulated bench.
@@ -126,8 +131,26 @@ pub struct PlantConfig {
     pub scale_mm: f64,
     /// Link faults.
     pub link: LinkFaults,
+    /// Faults of the driver and the mechanism.
+    pub events: BenchFaults,
     /// Seed of all randomness.
     pub seed: u64,
+}
+
+/// Faults of the driver and the mechanism at a time (s since the simulator started).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct BenchFaults {
+    /// The driver reports a hardware fault and stops: a Dynamixel driver latches an
+    /// overload (torque off), the firmware's STEP output fails and it latches its
+    /// emergency stop.
+    pub driver_fault_at_s: Option<f64>,
+    /// The driver's shaft is blocked, with no fault reported: a Dynamixel's position stops
+    /// changing; a stepper loses every step (its firmware still counts them, so only the
+    /// follower shows it).
+    pub driver_stall_at_s: Option<f64>,
+    /// The follower binds and stops where it is while the driver turns on (a slipping
+    /// coupling, a broken tooth).
+    pub jam_at_s: Option<f64>,
 }
 
 impl Default for PlantConfig {
@@ -143,6 +166,7 @@ impl Default for PlantConfig {
             missed_step_prob: 0.0,
             scale_mm: DEFAULT_SCALE_MM,
             link: LinkFaults::default(),
+            events: BenchFaults::default(),
             seed: DEFAULT_SEED,
         }
     }
@@ -184,6 +208,19 @@ pub const FAULT_KEYS: &[(&str, &str)] = &[
     (
         "reboot_at_s",
         "Dynamixel bus: the driver reboots at this time, s (a brown-out)",
+    ),
+    (
+        "driver_fault_at_s",
+        "the driver reports a hardware fault (overload, firmware e-stop) at this time, s",
+    ),
+    (
+        "driver_stall_at_s",
+        "the driver's shaft is blocked from this time, s (no fault reported)",
+    ),
+    ("jam_at_s", "the follower binds and stops from this time, s"),
+    (
+        "echo",
+        "Dynamixel bus: 1 echoes every byte the host sends (adapter without echo suppression)",
     ),
     (
         "protocol_version",
@@ -285,6 +322,16 @@ impl PlantConfig {
             "stall_at_s" => self.link.stall_at_s = Some(nonneg()?),
             "stall_s" => self.link.stall_s = nonneg()?,
             "reboot_at_s" => self.link.reboot_at_s = Some(nonneg()?),
+            "driver_fault_at_s" => self.events.driver_fault_at_s = Some(nonneg()?),
+            "driver_stall_at_s" => self.events.driver_stall_at_s = Some(nonneg()?),
+            "jam_at_s" => self.events.jam_at_s = Some(nonneg()?),
+            "echo" => {
+                self.link.echo = match value {
+                    "1" | "true" => true,
+                    "0" | "false" => false,
+                    _ => return Err(fail("expected 1 or 0".into())),
+                }
+            }
             "protocol_version" => {
                 self.link.protocol_version = Some(
                     value
@@ -326,6 +373,10 @@ pub struct Plant {
     cfg: PlantConfig,
     /// Follower input angle after the backlash gap, rad (None before the first call).
     input: Option<f64>,
+    /// The follower has bound: it stays at this state.
+    jammed: Option<FollowerState>,
+    /// The last state returned.
+    last: Option<FollowerState>,
     sensor_rng: ChaCha8Rng,
     link_rng: ChaCha8Rng,
     step_rng: ChaCha8Rng,
@@ -344,6 +395,8 @@ impl Plant {
         Plant {
             target: Box::new(target),
             input: None,
+            jammed: None,
+            last: None,
             sensor_rng: stream(1),
             link_rng: stream(2),
             step_rng: stream(3),
@@ -362,9 +415,26 @@ impl Plant {
         self.target.follower_at(phi / TAU)
     }
 
+    /// The follower binds where it is now ([`BenchFaults::jam_at_s`]): from here on
+    /// [`Plant::follower`] returns this state whatever the driver does.
+    pub fn jam(&mut self) {
+        if self.jammed.is_none() {
+            self.jammed = Some(self.last.unwrap_or_else(|| self.ideal(0.0)));
+        }
+    }
+
     /// The true follower state for the physical driver angle `phi` (rad, unwrapped). Call
     /// with successive angles: backlash is stateful.
     pub fn follower(&mut self, phi: f64) -> FollowerState {
+        if let Some(state) = self.jammed {
+            return state;
+        }
+        let state = self.follow(phi);
+        self.last = Some(state);
+        state
+    }
+
+    fn follow(&mut self, phi: f64) -> FollowerState {
         let half_gap = self.cfg.backlash_deg.to_radians() / 2.0;
         let input = match self.input {
             None => phi - half_gap,

@@ -14,6 +14,7 @@
 //!
 //! Does not own the session, the recording, or the rig file's schema.
 
+pub mod echo;
 pub mod models;
 pub mod tick;
 pub mod worker;
@@ -47,9 +48,12 @@ pub const EXTENDED_POSITION_LIMIT: i64 = 1_048_575;
 /// different moments.
 pub const WATCHDOG_CHECK_FRACTION: f64 = 0.8;
 
-/// Attempts per command transaction before giving up. Default 3: a reply lost to line noise
-/// or a busy host is retried, a servo that is really gone fails within ~0.1 s at 57600 baud.
-pub const COMMAND_ATTEMPTS: u32 = 3;
+/// Attempts per command transaction before giving up. Default 8, so setup survives the
+/// noise the stream survives: with 1 % of the bytes corrupted (the stream runs on, losing
+/// about half its samples) a reply of 11–20 bytes is damaged one time in five to ten, so
+/// three attempts failed together about once per setup in a hundred (issue 16), eight once
+/// in millions. A servo that is really gone still fails within ~0.3 s at 57600 baud.
+pub const COMMAND_ATTEMPTS: u32 = 8;
 
 /// Bus watchdog unit (address 98), ms per count.
 pub const BUS_WATCHDOG_UNIT_MS: u32 = 20;
@@ -116,9 +120,13 @@ pub struct DynamixelBench {
     events: Receiver<Event>,
     thread: Option<JoinHandle<()>>,
     counts: Arc<Mutex<Counts>>,
+    /// Why the bus thread ended, when it ended on its own.
+    fatal: worker::Fatal,
     shared: Shared,
     device: DeviceInfo,
     lost: Option<String>,
+    /// The driver's hardware error, read once after its first reply with the alert bit.
+    fault: Option<String>,
     shut_down: bool,
 }
 
@@ -191,6 +199,19 @@ impl DynamixelBench {
                     .join(", ")
             ))
         })?;
+        // dynamixel2 reads an echoed instruction as a reply and panics on it: refuse an
+        // echoing adapter before the library sees a byte (docs/faults.md).
+        if echo::port_echoes(path, driver.baud, driver.id)? {
+            return Err(RigError::WrongDevice {
+                path: path.to_path_buf(),
+                expected: crate::rig::error::NOT_THE_SERVOS,
+                detail: "it sends back every byte written to it (an RS-485 adapter without \
+                         echo suppression, or a loopback): use an adapter that suppresses its \
+                         own echo, such as a U2D2"
+                    .into(),
+            });
+        }
+        worker::quiet_caught_library_panics();
         let bus = DxlBus::open(path, driver.baud).map_err(|e| RigError::Open {
             path: path.to_path_buf(),
             message: e.to_string(),
@@ -213,9 +234,11 @@ impl DynamixelBench {
         let (etx, erx) = mpsc::channel();
         let counts = Arc::new(Mutex::new(Counts::default()));
         let wcounts = counts.clone();
+        let fatal = worker::Fatal::default();
+        let wfatal = fatal.clone();
         let thread = std::thread::Builder::new()
-            .name("dynamixel-bus".into())
-            .spawn(move || worker::run(bus, setup, rx, etx, wcounts))
+            .name(worker::THREAD_NAME.into())
+            .spawn(move || worker::run(bus, setup, rx, etx, wcounts, wfatal))
             .map_err(|e| RigError::Setup(format!("cannot start the Dynamixel bus thread: {e}")))?;
         let mut bench = DynamixelBench {
             path: path.to_path_buf(),
@@ -228,6 +251,7 @@ impl DynamixelBench {
             events: erx,
             thread: Some(thread),
             counts,
+            fatal,
             shared: Shared {
                 home_pulses: 0.0,
                 estop: false,
@@ -241,6 +265,7 @@ impl DynamixelBench {
                 ..Default::default()
             },
             lost: None,
+            fault: None,
             shut_down: false,
         };
         bench.identify(expected_model)?;
@@ -255,13 +280,11 @@ impl DynamixelBench {
         what: &str,
         f: impl Fn(&mut DxlBus) -> Result<T, dynamixel2::TransferError> + Send + 'static,
     ) -> Result<T, RigError> {
-        match call(&self.tx, move |b| with_retries(b, f)) {
+        let pause = self.retry_pause();
+        match call(&self.tx, move |b| with_retries(b, pause, f)) {
             Some((Ok(v), _)) => Ok(v),
             Some((Err(e), attempts)) => Err(self.transfer_error(what, &e, attempts)),
-            None => Err(RigError::Disconnected {
-                path: self.path.clone(),
-                message: "the bus thread has ended".into(),
-            }),
+            None => Err(self.thread_ended()),
         }
     }
 
@@ -316,7 +339,8 @@ impl DynamixelBench {
             .collect();
         let mut firmware = Vec::new();
         for (id, role) in ids {
-            let ping = call(&self.tx, move |b| with_retries(b, |b| b.ping(id)).0);
+            let pause = self.retry_pause();
+            let ping = call(&self.tx, move |b| with_retries(b, pause, |b| b.ping(id)).0);
             let ping = match ping {
                 Some(Ok(p)) => p,
                 Some(Err(e)) => {
@@ -353,12 +377,7 @@ impl DynamixelBench {
                         ),
                     });
                 }
-                None => {
-                    return Err(RigError::Disconnected {
-                        path: self.path.clone(),
-                        message: "bus thread ended".into(),
-                    })
-                }
+                None => return Err(self.thread_ended()),
             };
             let model = ping.data.model;
             if role == "driver" && model != expected_model {
@@ -509,6 +528,19 @@ impl DynamixelBench {
         Ok(units as i32)
     }
 
+    /// The error for a bus thread that is gone, with its reason when it ended on its own.
+    fn thread_ended(&self) -> RigError {
+        RigError::Disconnected {
+            path: self.path.clone(),
+            message: self
+                .fatal
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .clone()
+                .unwrap_or_else(|| "the bus thread has ended".into()),
+        }
+    }
+
     fn check_lost(&self) -> Result<(), RigError> {
         match &self.lost {
             Some(m) => Err(RigError::Disconnected {
@@ -593,6 +625,33 @@ impl DynamixelBench {
     /// The port path.
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// The wait before retrying a failed command: as long as the streamed replies of every
+    /// servo take at the factory return delay ([`worker::quiet_time`]).
+    fn retry_pause(&self) -> Duration {
+        worker::quiet_time(
+            worker::reply_latency(worker::FACTORY_RETURN_DELAY, self.driver.baud),
+            1 + self.followers.len(),
+        )
+    }
+
+    /// The driver's Hardware Error Status in words (after it set the alert bit).
+    fn read_hardware_error(&self) -> String {
+        let id = self.driver.id;
+        match self.bus("read hardware error status", move |b| {
+            b.read_u8(id, HARDWARE_ERROR_STATUS).map(|r| r.data)
+        }) {
+            Ok(bits) => format!(
+                "driver ID {id} reports a hardware error: {} (status 0x{bits:02X}); it has \
+                 switched its torque off, power-cycle or reboot it after fixing the cause",
+                hardware_error_text(bits)
+            ),
+            Err(e) => format!(
+                "driver ID {id} reports a hardware error (alert bit); its Hardware Error \
+                 Status could not be read: {e}"
+            ),
+        }
     }
 }
 
@@ -705,6 +764,10 @@ impl Driver for DynamixelBench {
         Ok(self.driver_deg(p))
     }
 
+    fn fault(&mut self) -> Option<String> {
+        self.fault.clone()
+    }
+
     fn shutdown(&mut self) -> Result<(), RigError> {
         if self.shut_down {
             return Ok(());
@@ -733,10 +796,7 @@ impl SampleStream for DynamixelBench {
         }
         self.tx
             .send(Message::Start(Duration::from_secs_f64(1.0 / rate_hz)))
-            .map_err(|_| RigError::Disconnected {
-                path: self.path.clone(),
-                message: "bus thread ended".into(),
-            })
+            .map_err(|_| self.thread_ended())
     }
 
     fn stop_stream(&mut self) -> Result<(), RigError> {
@@ -761,12 +821,7 @@ impl SampleStream for DynamixelBench {
                 {
                     Ok(ev) => ev,
                     Err(mpsc::RecvTimeoutError::Timeout) => return Ok(()),
-                    Err(mpsc::RecvTimeoutError::Disconnected) => {
-                        return Err(RigError::Disconnected {
-                            path: self.path.clone(),
-                            message: "bus thread ended".into(),
-                        })
-                    }
+                    Err(mpsc::RecvTimeoutError::Disconnected) => return Err(self.thread_ended()),
                 }
             };
             match ev {
@@ -774,6 +829,12 @@ impl SampleStream for DynamixelBench {
                     let mut f = raw.flags;
                     if self.shared.estop {
                         f |= flags::ESTOP;
+                    }
+                    if raw.alert {
+                        f |= flags::DRIVER_FAULT;
+                        if self.fault.is_none() {
+                            self.fault = Some(self.read_hardware_error());
+                        }
                     }
                     if let Some(silent) = raw.resumed_after {
                         if self.rearm_after_silence(silent)? {
@@ -825,27 +886,39 @@ impl Drop for DynamixelBench {
 }
 
 /// Whether a failed transaction is worth repeating: no reply in time, or a reply damaged on
-/// the wire. A servo's own error reply (e.g. Access error) is not.
+/// the wire (including one `dynamixel2` panicked on). A servo's own error reply (e.g.
+/// Access error) is not.
 fn retryable(e: &dynamixel2::TransferError) -> bool {
     use dynamixel2::{ReadError, TransferError};
     match e {
-        TransferError::ReadError(ReadError::Io(io)) => io.kind() == std::io::ErrorKind::TimedOut,
+        TransferError::ReadError(ReadError::Io(io))
+            if io.kind() == std::io::ErrorKind::TimedOut =>
+        {
+            true
+        }
+        e if worker::is_library_panic(e) => true,
         TransferError::ReadError(ReadError::InvalidMessage(_)) => true,
         TransferError::ReadError(ReadError::BufferFull(_)) => true,
         _ => false,
     }
 }
 
-/// Run `f` up to [`COMMAND_ATTEMPTS`] times while it fails retryably; returns the last result
-/// and the number of attempts made.
+/// Run `f` up to [`COMMAND_ATTEMPTS`] times while it fails retryably, waiting `pause`
+/// before each new attempt so late replies (of this transaction or of a sync read just
+/// before it) arrive and are discarded rather than read as its answer; returns the last
+/// result and the number of attempts made.
 fn with_retries<T>(
     bus: &mut DxlBus,
+    pause: Duration,
     f: impl Fn(&mut DxlBus) -> Result<T, dynamixel2::TransferError>,
 ) -> (Result<T, dynamixel2::TransferError>, u32) {
     let mut attempt = 1;
     loop {
-        match f(bus) {
-            Err(e) if retryable(&e) && attempt < COMMAND_ATTEMPTS => attempt += 1,
+        match worker::transaction(|| f(bus)) {
+            Err(e) if retryable(&e) && attempt < COMMAND_ATTEMPTS => {
+                attempt += 1;
+                std::thread::sleep(pause);
+            }
             r => return (r, attempt),
         }
     }

@@ -8,7 +8,8 @@
 //! device clock (the driver's realtime tick unwrapped by `tick`), counts failed
 //! transactions as gaps and CRC failures, declares the link lost after a run of failures,
 //! and turns the driver's torque off when the backend goes away (dropped, or the process
-//! unwinding).
+//! unwinding). A panic inside `dynamixel2` on malformed input (a length byte damaged by
+//! noise) is caught: a failed transaction, retried or counted like a damaged reply.
 //!
 //! It does not decide what to command (that is [`super::DynamixelBench`]).
 
@@ -68,7 +69,7 @@ pub struct RawSample {
     pub followers: Vec<i32>,
     /// [`flags`] bits decided by the worker (gap before, follower stale).
     pub flags: u32,
-    /// Whether any servo set the alert bit (a hardware error is latched).
+    /// Whether the driver set the alert bit in its reply (a hardware error is latched).
     pub alert: bool,
     /// On the first sample after failed reads: how long the bus was silent (the servos'
     /// bus watchdog may have stopped the driver meanwhile).
@@ -120,7 +121,7 @@ pub struct WorkerSetup {
 const RETURN_DELAY_TIME: u16 = 9;
 
 /// Factory Return Delay Time, counts of 2 µs.
-const FACTORY_RETURN_DELAY: u8 = 250;
+pub const FACTORY_RETURN_DELAY: u8 = 250;
 
 /// Time from the driver latching a streamed sample to its reply having crossed the wire:
 /// the return delay plus the status packet (11 framing bytes and the block) at 10 bits
@@ -155,13 +156,83 @@ struct Streamer {
     last_success: Instant,
 }
 
-/// Run the worker until [`Message::Quit`] or the sender is dropped.
+/// Why the worker thread ended early, for the errors of calls made after it: set when
+/// `dynamixel2` panicked on something read from the bus.
+pub type Fatal = Arc<Mutex<Option<String>>>;
+
+/// `dynamixel2` panicked while parsing what it read: its message. `dynamixel2` 0.9.1 does
+/// not check a status packet's length field before using it, so a length byte damaged by
+/// line noise (or an echoed instruction, see `super::echo`) panics inside `Bus`
+/// (docs/faults.md). The bus itself stays usable: the next instruction clears its read
+/// buffer.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("the Dynamixel library panicked reading a reply ({0})")]
+pub struct LibraryPanic(pub String);
+
+/// Name of the bus thread.
+pub const THREAD_NAME: &str = "dynamixel-bus";
+
+/// Keep the panics of `dynamixel2` that the bus thread catches ([`transaction`]) out of
+/// the terminal: they are failed transactions, reported as such, not crashes. Installed once
+/// per process; every other panic goes to the hook that was there before.
+pub fn quiet_caught_library_panics() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            let ours = std::thread::current().name() == Some(THREAD_NAME)
+                && info
+                    .location()
+                    .is_some_and(|l| l.file().contains("dynamixel2"));
+            if ours {
+                tracing::debug!("dynamixel2 panicked (caught): {info}");
+            } else {
+                previous(info);
+            }
+        }));
+    });
+}
+
+fn panic_message(p: Box<dyn std::any::Any + Send>) -> String {
+    p.downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| p.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "no message".into())
+}
+
+/// Run `f` on the bus, with a panic inside `dynamixel2` caught as [`LibraryPanic`].
+fn catch<T>(f: impl FnOnce() -> T) -> Result<T, LibraryPanic> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f))
+        .map_err(|p| LibraryPanic(panic_message(p)))
+}
+
+/// One transaction, with a panic inside `dynamixel2` returned as a failed read (an I/O
+/// error carrying [`LibraryPanic`]) that the caller may retry like a damaged reply.
+pub fn transaction<T>(f: impl FnOnce() -> Result<T, TransferError>) -> Result<T, TransferError> {
+    catch(f).unwrap_or_else(|p| {
+        Err(TransferError::ReadError(ReadError::Io(
+            std::io::Error::other(p),
+        )))
+    })
+}
+
+/// Whether a failed transaction is a caught [`LibraryPanic`].
+pub fn is_library_panic(e: &TransferError) -> bool {
+    matches!(e, TransferError::ReadError(ReadError::Io(io))
+        if io.get_ref().is_some_and(|inner| inner.is::<LibraryPanic>()))
+}
+
+/// Run the worker until [`Message::Quit`] or the sender is dropped. A panic of `dynamixel2`
+/// inside a transaction counts as a failed transaction ([`transaction`]); one anywhere else
+/// in a job ends the worker: the stream ends with [`Event::Lost`], `fatal` says why, and the
+/// driver's torque is switched off if the bus still answers.
 pub fn run(
     mut bus: DxlBus,
     setup: WorkerSetup,
     rx: Receiver<Message>,
     events: Sender<Event>,
     counts: Arc<Mutex<Counts>>,
+    fatal: Fatal,
 ) {
     let ids: Vec<u8> = std::iter::once(setup.driver_id)
         .chain(setup.follower_ids.iter().copied())
@@ -175,13 +246,17 @@ pub fn run(
         };
         match rx.recv_timeout(timeout) {
             Ok(Message::Job(job)) => {
-                job(&mut bus);
+                // Transactions in jobs catch the library's panics themselves (retried like
+                // damaged replies); one that escapes anything else ends the worker.
+                if let Err(p) = catch(|| job(&mut bus)) {
+                    fail(&fatal, &events, format!("{p} outside a transaction"));
+                    break;
+                }
                 last_traffic = Instant::now();
                 continue;
             }
             Ok(Message::Start(period)) => {
-                let delay = bus
-                    .read_u8(setup.driver_id, RETURN_DELAY_TIME)
+                let delay = transaction(|| bus.read_u8(setup.driver_id, RETURN_DELAY_TIME))
                     .map_or(FACTORY_RETURN_DELAY, |r| r.data);
                 stream = Some(Streamer {
                     latency: reply_latency(delay, setup.baud),
@@ -219,13 +294,20 @@ pub fn run(
             }
             None => {
                 // Heartbeat: any instruction resets the servos' bus watchdog timers.
-                let _ = bus.ping(setup.driver_id);
+                let _ = transaction(|| bus.ping(setup.driver_id));
                 last_traffic = Instant::now();
             }
         }
     }
     // Last line of defence besides the servo's own bus watchdog: torque off on the way out.
-    let _ = bus.write_u8(setup.driver_id, 64, 0);
+    let _ = transaction(|| bus.write_u8(setup.driver_id, 64, 0));
+}
+
+/// Record why the worker ends and end any stream with it.
+fn fail(fatal: &Fatal, events: &Sender<Event>, message: String) {
+    tracing::error!("{message}");
+    *fatal.lock().unwrap_or_else(|p| p.into_inner()) = Some(message.clone());
+    let _ = events.send(Event::Lost(message));
 }
 
 /// Margin added to a sync read's reply time in [`quiet_time`]. Default 2 ms: a few
@@ -256,24 +338,31 @@ fn sample_once(
     let mut alert = false;
     let mut failure: Option<(bool, String)> = None;
     let mut driver_reply_at = None;
-    let sent = bus.sync_read_cb(ids, STREAM_BLOCK_ADDRESS, STREAM_BLOCK_LEN, |r| match r {
-        Ok(resp) => {
-            if resp.motor_id == ids[0] {
-                driver_reply_at = Some(Instant::now());
+    let sent = catch(|| {
+        bus.sync_read_cb(ids, STREAM_BLOCK_ADDRESS, STREAM_BLOCK_LEN, |r| match r {
+            Ok(resp) => {
+                if resp.motor_id == ids[0] {
+                    driver_reply_at = Some(Instant::now());
+                }
+                if let Some(k) = ids.iter().position(|&id| id == resp.motor_id) {
+                    if k == 0 {
+                        alert = resp.alert;
+                    }
+                    blocks[k] = Some(resp.data.to_vec());
+                }
             }
-            if let Some(k) = ids.iter().position(|&id| id == resp.motor_id) {
-                alert |= resp.alert;
-                blocks[k] = Some(resp.data.to_vec());
+            Err(e) => {
+                if failure.is_none() {
+                    failure = Some(describe(&TransferError::ReadError(e)));
+                }
             }
-        }
-        Err(e) => {
-            if failure.is_none() {
-                failure = Some(describe(&TransferError::ReadError(e)));
-            }
-        }
+        })
     });
-    if let Err(e) = sent {
-        failure = Some((false, format!("cannot send to the bus: {e}")));
+    match sent {
+        Ok(Ok(())) => {}
+        Ok(Err(e)) => failure = Some((false, format!("cannot send to the bus: {e}"))),
+        // A reply the library cannot parse: a failed read like a damaged one.
+        Err(p) => failure = Some((false, p.to_string())),
     }
     if failure.is_some() || blocks.iter().any(Option::is_none) {
         // Let late replies arrive before the next instruction discards the input.
@@ -365,6 +454,20 @@ pub fn call<T: Send + 'static>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Guards the last resort against `dynamixel2`'s panics: a transaction that panics
+    /// comes back as an error marked as the library's panic, with its message, which the
+    /// backend retries like a damaged reply, and the thread goes on.
+    #[test]
+    fn a_panicking_transaction_is_a_failed_one() {
+        let r: Result<(), TransferError> =
+            transaction(|| panic!("slice index starts at 9 but ends at 8"));
+        let e = r.unwrap_err();
+        assert!(is_library_panic(&e), "{e}");
+        assert!(e.to_string().contains("starts at 9"), "{e}");
+        let ok: Result<u8, TransferError> = transaction(|| Ok(7));
+        assert_eq!(ok.unwrap(), 7);
+    }
 
     /// The block as a servo sends it, preceded by the status error byte.
     fn block(tick: u16, velocity: i32, moving: u8, position: i32) -> Vec<u8> {

@@ -36,6 +36,10 @@ pub const INTERPOLATION_MAX_SPAN_S: f64 = 0.05;
 /// Resolution of the Dynamixel realtime tick, seconds (whole milliseconds).
 pub const BUS_TICK_S: f64 = 1e-3;
 
+/// Flags of the bus's samples that carry over to the rows built from them: the driver's
+/// state (e-stop, hardware fault) and the follower servo's staleness.
+const BUS_FLAGS: u32 = flags::ESTOP | flags::DRIVER_FAULT | flags::FOLLOWER_STALE;
+
 /// Where one recording column comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Source {
@@ -192,7 +196,7 @@ impl Merger {
                     .zip(&s1.values)
                     .map(|(&a, &b)| lerp(a, b))
                     .collect();
-                let f = (s0.flags | s1.flags) & (flags::ESTOP | flags::FOLLOWER_STALE);
+                let f = (s0.flags | s1.flags) & BUS_FLAGS;
                 (lerp(s0.driver_angle_deg, s1.driver_angle_deg), values, f)
             }
             _ => {
@@ -201,7 +205,7 @@ impl Merger {
                     .unwrap_or(0);
                 let s = &self.bus[nearest].sample;
                 self.held += 1;
-                let f = s.flags & (flags::ESTOP | flags::FOLLOWER_STALE);
+                let f = s.flags & BUS_FLAGS;
                 (s.driver_angle_deg, s.values.clone(), f | flags::DRIVER_HELD)
             }
         };

@@ -144,6 +144,9 @@ impl Driver for MixedBench {
     fn position_deg(&mut self) -> Result<f64, RigError> {
         self.bus.position_deg()
     }
+    fn fault(&mut self) -> Option<String> {
+        self.bus.fault()
+    }
     fn shutdown(&mut self) -> Result<(), RigError> {
         // The motor first; the board's stream after, whatever happened to the bus.
         let driver = self.bus.shutdown();
@@ -209,6 +212,7 @@ impl SampleStream for MixedBench {
             crc_errors: a.crc_errors + b.crc_errors,
             reconnects: a.reconnects + b.reconnects,
             decode_errors: a.decode_errors + b.decode_errors,
+            ..Counts::default()
         }
     }
 

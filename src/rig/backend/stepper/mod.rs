@@ -31,7 +31,7 @@ pub use convert::{gear_fraction, SensorMap, GEAR_RATIO_TOLERANCE};
 use crate::rig::backend::{Driver, Sample, SampleStream};
 use crate::rig::config::{DriverConfig, RigConfig, StepperDriverConfig};
 use crate::rig::link::resolve_port;
-use crate::rig::recording::{Counts, DeviceInfo};
+use crate::rig::recording::{flags, Counts, DeviceInfo};
 use crate::rig::RigError;
 
 use link::{IoThread, Request, Restore, Shared};
@@ -74,6 +74,9 @@ pub struct StepperBench {
     quit: Arc<AtomicBool>,
     thread: Option<JoinHandle<()>>,
     value_count: usize,
+    /// This board turns the driver (false for a mixed bench's sensor board): its emergency
+    /// stop is a driver fault.
+    drives: bool,
     shut: bool,
 }
 
@@ -92,7 +95,7 @@ impl StepperBench {
             .port(&driver.port)
             .ok_or_else(|| RigError::Setup(format!("rig has no port named `{}`", driver.port)))?;
         let path = resolve_port(port_cfg)?;
-        Self::open_path(rig, driver, &path, port_cfg.baud)
+        Self::open_path(rig, driver, &path, port_cfg.baud, true)
     }
 
     /// Open our firmware as the sensor board of a mixed rig (`[sensor_board]`): the
@@ -114,7 +117,7 @@ impl StepperBench {
             port: board.port.clone(),
             ..SENSOR_BOARD_MOTOR
         };
-        Self::open_path(&part, &motor, &path, port_cfg.baud)
+        Self::open_path(&part, &motor, &path, port_cfg.baud, false)
     }
 
     fn open_path(
@@ -122,6 +125,7 @@ impl StepperBench {
         driver: &StepperDriverConfig,
         path: &Path,
         baud: u32,
+        drives: bool,
     ) -> Result<StepperBench, RigError> {
         let map = SensorMap::new(rig)?;
         let mut port = link::open_port(path, baud)?;
@@ -228,6 +232,7 @@ impl StepperBench {
             quit,
             thread: Some(thread),
             value_count: map.fields.len(),
+            drives,
             shut: false,
         };
         bench.command(Command::Configure(wire_config))?;
@@ -395,6 +400,18 @@ impl Driver for StepperBench {
         }
     }
 
+    fn fault(&mut self) -> Option<String> {
+        let sh = self.shared.lock().unwrap_or_else(|p| p.into_inner());
+        sh.events
+            .iter()
+            .any(|(k, _)| *k == mpc_wire::EventKind::EmergencyStop)
+            .then(|| {
+                "the firmware latched its emergency stop (it could not drive the STEP/DIR/EN \
+                 pins, or its e-stop input tripped)"
+                    .to_string()
+            })
+    }
+
     fn shutdown(&mut self) -> Result<(), RigError> {
         if self.shut {
             return Ok(());
@@ -454,6 +471,7 @@ impl SampleStream for StepperBench {
     }
 
     fn poll_samples(&mut self, timeout: Duration, out: &mut Vec<Sample>) -> Result<(), RigError> {
+        let first = out.len();
         match self.samples.recv_timeout(timeout) {
             Ok(s) => out.push(s),
             Err(RecvTimeoutError::Timeout) => return Ok(()),
@@ -461,6 +479,14 @@ impl SampleStream for StepperBench {
         }
         while let Ok(s) = self.samples.try_recv() {
             out.push(s);
+        }
+        if self.drives {
+            // The board that turns the driver stopped it on its own.
+            for s in &mut out[first..] {
+                if s.flags & flags::ESTOP != 0 {
+                    s.flags |= flags::DRIVER_FAULT;
+                }
+            }
         }
         Ok(())
     }

@@ -1,6 +1,7 @@
 //! The simulated bus behind a pseudo-terminal: a thread that reads instruction packets from
 //! the pty master, lets the [`Bus`] answer them in real time, and writes status packets
-//! back, optionally paced at the control table's baud rate and with injected link faults.
+//! back, optionally paced at the control table's baud rate and with injected link faults
+//! (including an adapter that echoes what the host sends).
 //!
 //! The simulator keeps its own handle on the pty slave open, so a client closing and
 //! reopening the port (as hosts do between runs) never ends the simulation; a pty has no
@@ -108,8 +109,18 @@ impl Server {
         let mut decoder = Decoder::new();
         let mut last_byte = Instant::now();
         let mut buf = [0u8; 4096];
+        let events = lock(&self.plant).config().events.clone();
         let mut pending_faults = self.options.hardware_faults.clone();
+        if let Some(at_s) = events.driver_fault_at_s {
+            pending_faults.push(HardwareFault {
+                at_s,
+                driver: true,
+                bits: super::control_table::hw_error::OVERLOAD,
+            });
+        }
         pending_faults.sort_by(|a, b| a.at_s.total_cmp(&b.at_s));
+        let mut stall_at = events.driver_stall_at_s;
+        let mut jam_at = events.jam_at_s;
         let end = loop {
             if self.stop.load(Ordering::Relaxed) {
                 break ServerEnd::Stopped;
@@ -135,6 +146,18 @@ impl Server {
                     s.inject_hardware_error(f.bits);
                 }
             }
+            if stall_at.is_some_and(|at| at <= t) {
+                // The driver's shaft is blocked; it reports nothing.
+                stall_at = None;
+                let mut bus = lock(&self.bus);
+                bus.advance(t);
+                bus.driver_mut().block();
+            }
+            if jam_at.is_some_and(|at| at <= t) {
+                jam_at = None;
+                lock(&self.bus).advance(t);
+                lock(&self.plant).jam();
+            }
             if reboot_at.is_some_and(|at| at <= t) {
                 // A brown-out: the driver reboots by itself.
                 reboot_at = None;
@@ -154,6 +177,10 @@ impl Server {
                 match self.master.read(&mut buf) {
                     Ok(n) if n > 0 && silent => {}
                     Ok(n) if n > 0 => {
+                        if link.echo {
+                            // The adapter hands the host its own bytes back first.
+                            let _ = self.master.write(&buf[..n]);
+                        }
                         decoder.push(&buf[..n]);
                         last_byte = Instant::now();
                     }

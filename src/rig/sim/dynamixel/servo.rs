@@ -113,6 +113,8 @@ pub struct Servo {
     boot_s: f64,
     last_instruction_s: f64,
     now_s: f64,
+    /// The shaft is blocked: it does not move, and no error is reported.
+    blocked: bool,
 }
 
 impl Servo {
@@ -132,6 +134,7 @@ impl Servo {
             boot_s: now_s,
             last_instruction_s: now_s,
             now_s,
+            blocked: false,
         };
         // Power-on: the present position is absolute within one rotation.
         s.reset_turns();
@@ -265,6 +268,14 @@ impl Servo {
         }
     }
 
+    /// Block the shaft (a jammed mechanism, a stalled gearbox): it stops where it is with
+    /// no error reported, as a servo does until its overload detection trips.
+    pub fn block(&mut self) {
+        self.blocked = true;
+        self.vel = 0.0;
+        self.refresh_live();
+    }
+
     /// Latch hardware error bits (fault injection). Bits in the Shutdown mask turn torque off.
     pub fn inject_hardware_error(&mut self, bits: u8) {
         let latched = self.hardware_error() | bits;
@@ -333,7 +344,7 @@ impl Servo {
     }
 
     fn control_step(&mut self, dt: f64) {
-        if !self.torque_enabled() {
+        if !self.torque_enabled() || self.blocked {
             self.vel = 0.0;
             return;
         }

@@ -52,7 +52,9 @@ use crate::motion::Motion;
 use crate::rig::sim::plant::{LinkByte, Plant, PlantConfig};
 use crate::rig::sim::pty::StableLink;
 use crate::rig::sim::stepper::i2c::SensorBus;
-use crate::rig::sim::stepper::pins::{DirPin, DriverChip, EnablePin, SimQuadrature, StepPin};
+use crate::rig::sim::stepper::pins::{
+    DirPin, DriverChip, EnablePin, PinFault, SimQuadrature, StepPin,
+};
 use crate::rig::sim::stepper::{Bench, Mechanics, MAX_CATCH_UP};
 use crate::rig::RigError;
 
@@ -336,7 +338,7 @@ impl Attached {
     fn pin(&mut self, gpio: u8, level: Level) {
         // An undriven input of the driver reads low: the worst case for EN (enabled).
         let high = level == Level::High;
-        let pin: &mut dyn OutputPin<Error = std::convert::Infallible> =
+        let pin: &mut dyn OutputPin<Error = PinFault> =
             match wiring::driver_input(gpio) {
                 Some(DriverInput::Step) => &mut self.step,
                 Some(DriverInput::Dir) => &mut self.dir,

@@ -339,6 +339,8 @@ pub(in crate::rig::sim) struct Bench {
     pub(in crate::rig::sim) physical: i64,
     pub(in crate::rig::sim) missed: u64,
     last_step_change_us: u64,
+    /// The driver's shaft is blocked (`driver_stall_at_s`): every step is lost.
+    shaft_blocked: bool,
     external: Option<External>,
 }
 
@@ -403,6 +405,7 @@ impl Bench {
             physical: 0,
             missed: 0,
             last_step_change_us: 0,
+            shaft_blocked: false,
             external: external.map(External::new),
         }
     }
@@ -414,7 +417,8 @@ impl Bench {
         if delta != 0 {
             self.last_step_change_us = now_us;
             for _ in 0..delta.unsigned_abs() {
-                if self.plant.step_missed() {
+                // A blocked shaft loses every step the firmware makes.
+                if self.shaft_blocked || self.plant.step_missed() {
                     self.missed += 1;
                 } else {
                     self.physical += delta.signum();
@@ -471,6 +475,8 @@ fn run(
         quadrature.clone(),
         opts.driver.clone(),
     )));
+    let events = opts.plant.events.clone();
+    let mut events_done = (false, false, false);
     bench.borrow_mut().update(0);
     {
         // Sensors read what the plant is at the read's instant. Weak: the bench owns the
@@ -558,8 +564,28 @@ fn run(
                 st.bytes_out += p.write_lossy(&wire)? as u64;
             }
         }
-        // Unplug and re-plug.
+        // Faults of the driver and the mechanism (a board turning no driver has none of the
+        // driver's).
         let t = sim_us as f64 / 1e6;
+        {
+            let due = |at: Option<f64>, done: &mut bool| {
+                let now = at.is_some_and(|a| t >= a) && !*done;
+                *done |= now;
+                now
+            };
+            let mut b = bench.borrow_mut();
+            let own_driver = b.external.is_none();
+            if due(events.driver_fault_at_s, &mut events_done.0) && own_driver {
+                b.chip.fail_step_output();
+            }
+            if due(events.driver_stall_at_s, &mut events_done.1) && own_driver {
+                b.shaft_blocked = true;
+            }
+            if due(events.jam_at_s, &mut events_done.2) {
+                b.plant.jam();
+            }
+        }
+        // Unplug and re-plug.
         if let Some(at) = faults.disconnect_at_s {
             if t >= at && !st.disconnected {
                 st.disconnected = true;

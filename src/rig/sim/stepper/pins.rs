@@ -4,14 +4,25 @@
 //! The STEP pin counts rising edges, signed by the DIR level at the edge and only while
 //! the driver is enabled (as an A4988/TMC2209 does); the simulator reads the count after
 //! every poll and turns it into motor motion (minus missed steps). Time is simulated: the
-//! clock is a counter the simulator advances, and delays return at once.
+//! clock is a counter the simulator advances, and delays return at once. A failed STEP
+//! output ([`DriverChip::fail_step_output`]) makes every write to that pin fail, as a
+//! shorted or broken STEP line: the firmware then latches its emergency stop.
 
 use std::cell::{Cell, RefCell};
-use std::convert::Infallible;
 use std::rc::Rc;
 
 use embedded_hal::delay::DelayNs;
-use embedded_hal::digital::{ErrorType, OutputPin};
+use embedded_hal::digital::{ErrorKind, ErrorType, OutputPin};
+
+/// A pin write that failed (the STEP output has failed).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PinFault;
+
+impl embedded_hal::digital::Error for PinFault {
+    fn kind(&self) -> ErrorKind {
+        ErrorKind::Other
+    }
+}
 
 /// Pin levels and step counts of the emulated driver chip.
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
@@ -26,6 +37,8 @@ pub struct DriverPins {
     pub dir_high: bool,
     /// EN level.
     pub enable_high: bool,
+    /// The STEP output has failed: every write to it fails.
+    pub step_failed: bool,
 }
 
 /// Shared state of the emulated driver chip.
@@ -50,6 +63,11 @@ impl DriverChip {
     /// Whether the driver is enabled (EN at its active level).
     pub fn enabled(&self) -> bool {
         self.state.borrow().enable_high != self.enable_active_low
+    }
+
+    /// Fail the STEP output: from now on every write to it fails.
+    pub fn fail_step_output(&self) {
+        self.state.borrow_mut().step_failed = true;
     }
 
     /// Pin state snapshot.
@@ -81,21 +99,33 @@ pub struct DirPin(DriverChip);
 pub struct EnablePin(DriverChip);
 
 impl ErrorType for StepPin {
-    type Error = Infallible;
+    type Error = PinFault;
 }
 impl ErrorType for DirPin {
-    type Error = Infallible;
+    type Error = PinFault;
 }
 impl ErrorType for EnablePin {
-    type Error = Infallible;
+    type Error = PinFault;
+}
+
+impl StepPin {
+    fn check(&self) -> Result<(), PinFault> {
+        if self.0.state.borrow().step_failed {
+            Err(PinFault)
+        } else {
+            Ok(())
+        }
+    }
 }
 
 impl OutputPin for StepPin {
-    fn set_low(&mut self) -> Result<(), Infallible> {
+    fn set_low(&mut self) -> Result<(), PinFault> {
+        self.check()?;
         self.0.state.borrow_mut().step_high = false;
         Ok(())
     }
-    fn set_high(&mut self) -> Result<(), Infallible> {
+    fn set_high(&mut self) -> Result<(), PinFault> {
+        self.check()?;
         let enabled = self.0.enabled();
         let mut s = self.0.state.borrow_mut();
         if !s.step_high {
@@ -111,22 +141,22 @@ impl OutputPin for StepPin {
 }
 
 impl OutputPin for DirPin {
-    fn set_low(&mut self) -> Result<(), Infallible> {
+    fn set_low(&mut self) -> Result<(), PinFault> {
         self.0.state.borrow_mut().dir_high = false;
         Ok(())
     }
-    fn set_high(&mut self) -> Result<(), Infallible> {
+    fn set_high(&mut self) -> Result<(), PinFault> {
         self.0.state.borrow_mut().dir_high = true;
         Ok(())
     }
 }
 
 impl OutputPin for EnablePin {
-    fn set_low(&mut self) -> Result<(), Infallible> {
+    fn set_low(&mut self) -> Result<(), PinFault> {
         self.0.state.borrow_mut().enable_high = false;
         Ok(())
     }
-    fn set_high(&mut self) -> Result<(), Infallible> {
+    fn set_high(&mut self) -> Result<(), PinFault> {
         self.0.state.borrow_mut().enable_high = true;
         Ok(())
     }

@@ -2,11 +2,13 @@
 //!
 //! Owns the run plan (zero/home, settle cycle(s), N forward cycles, optionally the same in
 //! reverse), the sample loop (recording every sample, counting cycles from the driver
-//! angle, live progress with the current error against the target law), the safety limits
-//! (speed, run time, sample stall) and the exit paths: on the planned end, an unplug, an
-//! error or a cancel (Ctrl-C) the motor is stopped, the hardware shut down and the
-//! recording finished — complete only in the first case. The firmware's dead-man watchdog
-//! is the last line of defence if the host itself dies.
+//! angle, live progress with the current error against the target law), the recording
+//! folder's claim, the safety limits (speed, run time, sample stall, and the [`watch`]es on
+//! every sample: a driver fault or stall, a jammed mechanism) and the exit paths: on the
+//! planned end, an unplug, an error, a full disk, a watch firing or a cancel (the `cancel`
+//! flag: Ctrl-C, SIGTERM, SIGHUP in `measure`) the motor is stopped, the hardware shut down
+//! and the recording finished — complete only in the first case. The firmware's dead-man
+//! watchdog is the last line of defence if the host itself dies.
 //!
 //! It is generic over [`Bench`] and does not know which device it talks to; it does not
 //! analyse the recording (the caller runs [`crate::analysis`] afterwards).
@@ -16,15 +18,18 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime};
 
-use sha2::{Digest, Sha256};
+pub mod watch;
 
-use crate::motion::{Motion, MotionClass};
 use crate::rig::backend::{Bench, Sample};
-use crate::rig::config::{Dof, HomeMethod, RigConfig, SensorConfig};
+use crate::rig::config::{HomeMethod, RigConfig};
 use crate::rig::recording::{
-    utc_dir_stamp, Phase, RecordingMeta, RecordingWriter, Row, SessionInfo, TargetRef,
+    flags, utc_dir_stamp, Claim, Existing, Phase, RecordingError, RecordingMeta, RecordingWriter,
+    Row, SafetyStop, SessionInfo,
 };
+use crate::rig::target::check_measurable;
+pub use crate::rig::target::{Target, TargetSpec};
 use crate::rig::RigError;
+use watch::{ErrorProbe, Fired, JamWatch, StallWatch};
 
 /// How long the session waits for samples before declaring the stream stalled: 8 s,
 /// longer than a backend's reconnect window (5 s for the stepper firmware) plus its
@@ -56,6 +61,17 @@ pub const REST_WINDOW: Duration = Duration::from_millis(150);
 /// labelled samples. 10° is several samples even at high speed and far less than a cycle.
 pub const PHASE_MARGIN_DEG: f64 = 10.0;
 
+/// Where recordings go without `-o`: a new folder per run named by its UTC start time
+/// (`out/measure/20261122T055901Z`, then `…-2` for a second run in the same second).
+pub const DEFAULT_OUT_PARENT: &str = "out/measure";
+
+/// A finished run whose recording misses more than this fraction of the samples its rate
+/// promises is marked degraded (sidecar `degraded`, exit code 6): 10 %. Below it the gaps
+/// are the odd lost frame; above it whole stretches of every cycle are missing, so cycle
+/// statistics and timing ratios no longer rest on the data (a stepper link with 1 % of its
+/// bytes corrupted loses 72 % of the samples).
+pub const DEGRADED_MISSING_FRACTION: f64 = 0.1;
+
 /// Default settle cycles before the measured ones: one revolution lets the mechanism
 /// take up its backlash and the speed settle.
 pub const DEFAULT_SETTLE_CYCLES: u32 = 1;
@@ -63,61 +79,6 @@ pub const DEFAULT_SETTLE_CYCLES: u32 = 1;
 /// Extra time granted on top of the planned run duration before `max_run_s` is checked
 /// up front (ramps, settle, stop): 20 %.
 pub const RUN_TIME_MARGIN: f64 = 1.2;
-
-/// What the session measures against.
-#[derive(Debug, Clone, PartialEq)]
-pub enum TargetSpec {
-    /// A `mechanism.json` or the directory holding it.
-    Mechanism(PathBuf),
-    /// A motion file (`.toml` keyframes or `.csv` dense).
-    Motion(PathBuf),
-}
-
-/// A loaded target: the motion law and its reference for the sidecar.
-#[derive(Debug, Clone)]
-pub struct Target {
-    /// The law.
-    pub motion: Motion,
-    /// Reference written into the recording.
-    pub reference: TargetRef,
-}
-
-impl TargetSpec {
-    /// Load the motion and hash the file.
-    pub fn load(&self) -> Result<Target, RigError> {
-        let (kind, path, motion) = match self {
-            TargetSpec::Mechanism(p) => ("mechanism", p, Motion::from_mechanism_file(p)),
-            TargetSpec::Motion(p) => ("motion", p, Motion::from_file(p)),
-        };
-        let motion = motion.map_err(|e| RigError::Target {
-            path: path.clone(),
-            message: e.to_string(),
-        })?;
-        let file = if path.is_dir() {
-            path.join("mechanism.json")
-        } else {
-            path.clone()
-        };
-        let bytes = std::fs::read(&file).map_err(|e| RigError::Target {
-            path: file.clone(),
-            message: e.to_string(),
-        })?;
-        let sha256 = Sha256::digest(&bytes)
-            .iter()
-            .map(|b| format!("{b:02x}"))
-            .collect();
-        Ok(Target {
-            reference: TargetRef {
-                kind: kind.into(),
-                path: path.clone(),
-                sha256,
-                class: motion.class().to_string(),
-                name: motion.name().to_string(),
-            },
-            motion,
-        })
-    }
-}
 
 /// Live progress of a run.
 #[derive(Debug, Clone, PartialEq)]
@@ -132,10 +93,11 @@ pub struct Progress {
     pub samples: u64,
     /// Sample rate over the last progress interval, Hz.
     pub sample_rate_hz: f64,
-    /// Sequence gaps so far.
+    /// Holes in the recording so far (as of its last write to disk).
     pub gaps: u64,
-    /// Current follower error against the target (deg), when a rotary sensor measures the
-    /// follower of a 1R/1R1T motion; the constant offset at the start is removed.
+    /// Current follower error against the target (deg; geodesic for 3R), when the rig has
+    /// the sensor for it: relative to the first reading during the first driver
+    /// revolution, against the aligned target after it ([`watch::ErrorProbe`]).
     pub error_deg: Option<f64>,
     /// Seconds since the start.
     pub elapsed_s: f64,
@@ -160,8 +122,12 @@ pub struct MeasureOptions {
     pub settle_cycles: u32,
     /// Also run in reverse.
     pub reverse: bool,
-    /// Recording directory; default `out/measure/<UTC timestamp>`.
+    /// Recording directory; default a new `out/measure/<UTC timestamp>` folder
+    /// ([`DEFAULT_OUT_PARENT`]). A folder that already holds a recording is refused unless
+    /// `replace` is set; one another session is recording into is always refused.
     pub out_dir: Option<PathBuf>,
+    /// Replace a recording already in `out_dir` (`measure --replace`).
+    pub replace: bool,
     /// Set to stop early (Ctrl-C); the recording is kept, marked incomplete.
     pub cancel: Arc<AtomicBool>,
     /// Called with live progress about every [`PROGRESS_INTERVAL`].
@@ -192,6 +158,20 @@ pub enum EndReason {
     Disconnected(String),
     /// The run exceeded `safety.max_run_s`.
     MaxRunTime,
+    /// The recording's disk filled up (the file being written); the motor was stopped and
+    /// the sidecar describes the rows on disk.
+    DiskFull(String),
+    /// The driver did not follow its command: it reported a hardware fault or stopped
+    /// advancing (why, in words); the motor was stopped.
+    DriverStalled(String),
+    /// The follower deviated from the target beyond `safety.max_follower_error_deg`; the
+    /// motor was stopped.
+    Jammed {
+        /// Driver angle where the deviation began, deg.
+        driver_angle_deg: f64,
+        /// The follower's error there, deg.
+        error_deg: f64,
+    },
     /// Another error during the run.
     Error(String),
 }
@@ -203,6 +183,17 @@ impl std::fmt::Display for EndReason {
             EndReason::Cancelled => write!(f, "cancelled"),
             EndReason::Disconnected(m) => write!(f, "disconnected: {m}"),
             EndReason::MaxRunTime => write!(f, "stopped: safety.max_run_s reached"),
+            EndReason::DiskFull(path) => write!(f, "disk full: {path}"),
+            EndReason::DriverStalled(why) => write!(f, "driver stalled: {why}"),
+            EndReason::Jammed {
+                driver_angle_deg,
+                error_deg,
+            } => write!(
+                f,
+                "mechanism jammed: the follower was {error_deg:.1}° off the target at driver \
+                 angle {driver_angle_deg:.1}° (a binding mechanism, or a follower sensor whose \
+                 sign or scale does not match the rig file)"
+            ),
             EndReason::Error(m) => write!(f, "error: {m}"),
         }
     }
@@ -214,8 +205,30 @@ pub fn measure(opts: &mut MeasureOptions) -> Result<MeasureOutcome, RigError> {
     rig.apply_port_overrides(&opts.ports)?;
     let target = opts.target.load()?;
     check_plan(&rig, opts)?;
+    check_measurable(&rig, target.motion.class())?;
+    let claim = claim_folder(opts)?;
     let mut bench = crate::rig::backend::open(&rig)?;
-    run_session(bench.as_mut(), &rig, &target, opts)
+    run_claimed(bench.as_mut(), &rig, &target, opts, claim)
+}
+
+/// Claim the run's recording folder (`-o` or a new default one) before any hardware is
+/// touched: a folder being recorded into, or holding a recording not to be replaced, is
+/// refused here.
+fn claim_folder(opts: &MeasureOptions) -> Result<Claim, RigError> {
+    Ok(match &opts.out_dir {
+        Some(dir) => Claim::folder(
+            dir,
+            if opts.replace {
+                Existing::Replace
+            } else {
+                Existing::Refuse
+            },
+        )?,
+        None => Claim::unique(
+            Path::new(DEFAULT_OUT_PARENT),
+            &utc_dir_stamp(SystemTime::now()),
+        )?,
+    })
 }
 
 /// Refuse plans that break the rig's limits before touching the hardware.
@@ -246,13 +259,6 @@ pub fn check_plan(rig: &RigConfig, opts: &MeasureOptions) -> Result<(), RigError
         )));
     }
     Ok(())
-}
-
-/// Default recording directory for a run starting now.
-pub fn default_out_dir() -> PathBuf {
-    Path::new("out")
-        .join("measure")
-        .join(utc_dir_stamp(SystemTime::now()))
 }
 
 /// Where the run is, from the driver angle travelled.
@@ -307,45 +313,6 @@ impl Plan {
     }
 }
 
-/// The live error display: measured follower angle against the target law.
-struct ErrorProbe {
-    column: usize,
-    sensor: SensorConfig,
-    offset: Option<f64>,
-}
-
-impl ErrorProbe {
-    fn new(rig: &RigConfig, motion: &Motion) -> Option<ErrorProbe> {
-        if motion.class() == MotionClass::R3 {
-            return None;
-        }
-        let mut column = 0;
-        for s in &rig.sensors {
-            if s.dof() == Some(Dof::Rz) && s.counts_per_rev().is_some() {
-                return Some(ErrorProbe {
-                    column,
-                    sensor: s.clone(),
-                    offset: None,
-                });
-            }
-            column += s.columns().len();
-        }
-        None
-    }
-
-    fn error_deg(&mut self, motion: &Motion, s: &Sample) -> Option<f64> {
-        let measured = self.sensor.to_physical(*s.values.get(self.column)?)?;
-        let target = motion.angle_z(s.driver_angle_deg / 360.0)?[0].to_degrees();
-        let raw = wrap180(measured - target);
-        let offset = *self.offset.get_or_insert(raw);
-        Some(wrap180(raw - offset))
-    }
-}
-
-fn wrap180(deg: f64) -> f64 {
-    (deg + 180.0).rem_euclid(360.0) - 180.0
-}
-
 /// Run the plan on an open bench and record it. Always shuts the bench down.
 pub fn run_session(
     bench: &mut (dyn Bench + Send),
@@ -353,7 +320,25 @@ pub fn run_session(
     target: &Target,
     opts: &mut MeasureOptions,
 ) -> Result<MeasureOutcome, RigError> {
-    let result = run_inner(bench, rig, target, opts);
+    let claim = claim_folder(opts);
+    match claim {
+        Ok(claim) => run_claimed(bench, rig, target, opts, claim),
+        Err(e) => {
+            let _ = bench.shutdown();
+            Err(e)
+        }
+    }
+}
+
+/// [`run_session`] into a folder already claimed.
+fn run_claimed(
+    bench: &mut (dyn Bench + Send),
+    rig: &RigConfig,
+    target: &Target,
+    opts: &mut MeasureOptions,
+    claim: Claim,
+) -> Result<MeasureOutcome, RigError> {
+    let result = run_inner(bench, rig, target, opts, claim);
     let shutdown = bench.shutdown();
     match (result, shutdown) {
         (Ok(o), Ok(())) => Ok(o),
@@ -374,7 +359,9 @@ fn run_inner(
     rig: &RigConfig,
     target: &Target,
     opts: &mut MeasureOptions,
+    claim: Claim,
 ) -> Result<MeasureOutcome, RigError> {
+    check_measurable(rig, target.motion.class())?;
     if bench.value_count() != rig.sensor_columns().len() {
         return Err(RigError::Setup(format!(
             "the backend delivers {} sensor values but the rig declares {} columns",
@@ -382,7 +369,6 @@ fn run_inner(
             rig.sensor_columns().len()
         )));
     }
-    let dir = opts.out_dir.clone().unwrap_or_else(default_out_dir);
     let session = SessionInfo {
         speed_rpm: opts.speed_rpm,
         cycles: opts.cycles,
@@ -396,18 +382,29 @@ fn run_inner(
         target.reference.clone(),
         session,
     );
-    let mut writer = RecordingWriter::create(&dir, meta)?;
+    let mut writer = RecordingWriter::create(claim, meta)?;
+    let dir = writer.dir().to_path_buf();
     let start = Instant::now();
     // Errors from here on end the run but keep the recording.
-    let end = match drive(bench, rig, target, opts, &mut writer, start) {
+    let mut end = match drive(bench, rig, target, opts, &mut writer, start) {
         Ok(end) => end,
-        Err(RigError::Disconnected { path, message }) => {
-            EndReason::Disconnected(format!("{}: {message}", path.display()))
+        Err(e) => {
+            // Stop the motor before anything else (the recording is finished next).
+            bench.stop().ok();
+            end_reason_of(e)
         }
-        Err(e) => EndReason::Error(e.to_string()),
     };
+    set_link_counts(&mut writer, bench);
+    // Write what is buffered now, so a disk that fills at the very end is the end reason.
+    if let Err(e) = writer.flush() {
+        if end == EndReason::Finished {
+            end = end_reason_of(e.into());
+        }
+    }
     let complete = end == EndReason::Finished;
-    writer.meta_mut().counts = merged_counts(writer.meta().counts.samples, bench);
+    if complete {
+        writer.meta_mut().degraded = degraded(&writer.meta().counts, rig.sampling.rate_hz);
+    }
     let meta = writer.finish(complete, &end.to_string())?;
     Ok(MeasureOutcome {
         dir,
@@ -417,10 +414,45 @@ fn run_inner(
     })
 }
 
-fn merged_counts(rows: u64, bench: &(dyn Bench + Send)) -> crate::rig::recording::Counts {
-    let mut c = bench.counts();
-    c.samples = rows;
-    c
+/// Why a run ended, from the error that ended it.
+fn end_reason_of(e: RigError) -> EndReason {
+    match e {
+        RigError::Disconnected { path, message } => {
+            EndReason::Disconnected(format!("{}: {message}", path.display()))
+        }
+        RigError::Recording(RecordingError::DiskFull { path }) => {
+            EndReason::DiskFull(path.display().to_string())
+        }
+        e => EndReason::Error(e.to_string()),
+    }
+}
+
+/// Why a finished run's data is degraded, if it is: more than
+/// [`DEGRADED_MISSING_FRACTION`] of the samples the rate promises are missing.
+fn degraded(c: &crate::rig::recording::Counts, rate_hz: f64) -> Option<String> {
+    let expected = c.samples + c.missing_samples;
+    let fraction = c.missing_samples as f64 / expected.max(1) as f64;
+    (fraction > DEGRADED_MISSING_FRACTION).then(|| {
+        format!(
+            "{:.0} % of the samples expected at {rate_hz} Hz are missing ({} in {} gaps); \
+             cycle and timing figures need most of every cycle",
+            fraction * 100.0,
+            c.missing_samples,
+            c.gaps
+        )
+    })
+}
+
+/// Copy the backend's link counts into the sidecar (the sample, gap and missing counts are
+/// the writer's own, from what is on disk).
+fn set_link_counts(writer: &mut RecordingWriter, bench: &(dyn Bench + Send)) {
+    let link = bench.counts();
+    let c = &mut writer.meta_mut().counts;
+    c.crc_errors = link.crc_errors;
+    c.reconnects = link.reconnects;
+    c.decode_errors = link.decode_errors;
+    c.link_gaps = link.gaps;
+    c.link_missing_samples = link.missing_samples;
 }
 
 fn drive(
@@ -431,12 +463,25 @@ fn drive(
     writer: &mut RecordingWriter,
     start: Instant,
 ) -> Result<EndReason, RigError> {
+    // A cancel (a signal) during the setup must not start the motor.
+    if opts.cancel.load(Ordering::Relaxed) {
+        return Ok(EndReason::Cancelled);
+    }
     if rig.home.method == HomeMethod::ZeroHere {
         bench.zero()?;
     }
     bench.enable()?;
     bench.start_stream(rig.sampling.rate_hz)?;
+    if opts.cancel.load(Ordering::Relaxed) {
+        bench.stop_stream().ok();
+        return Ok(EndReason::Cancelled);
+    }
     bench.run_at(opts.speed_rpm)?;
+    let mut stall = StallWatch::new(rig.driver_accel_deg_s2());
+    stall.commanded(opts.speed_rpm);
+    let mut jam = JamWatch::new(rig.safety.max_follower_error_deg);
+    // Set when a watch fired: the motor is stopped at once, the batch still recorded.
+    let mut stopping: Option<(EndReason, SafetyStop)> = None;
     let mut plan = Plan {
         settle_deg: f64::from(opts.settle_cycles) * 360.0,
         measure_deg: f64::from(opts.cycles) * 360.0,
@@ -493,6 +538,7 @@ fn drive(
                         plan.turn = Some(s.driver_angle_deg);
                         phase = Phase::Settle;
                         bench.run_at(-opts.speed_rpm)?;
+                        stall.commanded(-opts.speed_rpm);
                     }
                     Step::Done => {
                         done = true;
@@ -502,8 +548,18 @@ fn drive(
                     }
                 }
             }
-            if let Some(p) = probe.as_mut() {
-                error_deg = p.error_deg(&target.motion, s).or(error_deg);
+            let error = probe.as_mut().and_then(|p| p.error(&target.motion, s));
+            error_deg = error.map(|e| e.deg).or(error_deg);
+            // Only an error against the aligned target can tell a jam.
+            let error = error.filter(|e| e.aligned).map(|e| e.deg);
+            if !done && stopping.is_none() {
+                stopping = watch_sample(bench, s, error, &mut stall, &mut jam);
+                if stopping.is_some() {
+                    // Stop first; the rest of the batch is recorded after.
+                    bench.stop().ok();
+                    done = true;
+                    phase = Phase::Settle;
+                }
             }
             writer.push(&Row {
                 device_time_us: s.device_time_us,
@@ -515,11 +571,11 @@ fn drive(
             })?;
         }
         if writer.flush_due() {
-            writer.meta_mut().counts = merged_counts(writer.meta().counts.samples, bench);
+            set_link_counts(writer, bench);
             writer.flush()?;
         }
         if last_progress.elapsed() >= PROGRESS_INTERVAL {
-            let rows = writer.meta().counts.samples;
+            let rows = writer.rows_pushed();
             let dt = last_progress.elapsed().as_secs_f64();
             if let Some(cb) = opts.progress.as_mut() {
                 cb(&Progress {
@@ -528,7 +584,7 @@ fn drive(
                     cycles: opts.cycles,
                     samples: rows,
                     sample_rate_hz: (rows - rows_at_last_progress) as f64 / dt,
-                    gaps: bench.counts().gaps,
+                    gaps: writer.meta().counts.gaps,
                     error_deg,
                     elapsed_s: start.elapsed().as_secs_f64(),
                 });
@@ -538,7 +594,57 @@ fn drive(
         }
     }
     finish_tail(bench, writer, start)?;
-    Ok(EndReason::Finished)
+    Ok(match stopping {
+        Some((end, record)) => {
+            writer.meta_mut().safety_stop = Some(record);
+            end
+        }
+        None => EndReason::Finished,
+    })
+}
+
+/// Check one sample against the driver and mechanism watches: why to stop, if any.
+fn watch_sample(
+    bench: &mut (dyn Bench + Send),
+    s: &Sample,
+    error_deg: Option<f64>,
+    stall: &mut StallWatch,
+    jam: &mut JamWatch,
+) -> Option<(EndReason, SafetyStop)> {
+    let record = |kind: &str, fired: Fired, detail: String| SafetyStop {
+        kind: kind.into(),
+        onset_device_time_us: fired.onset_us,
+        detected_device_time_us: fired.decided_us,
+        driver_angle_deg: fired.onset_driver_deg,
+        detail,
+    };
+    if s.flags & flags::DRIVER_FAULT != 0 {
+        let why = bench
+            .fault()
+            .unwrap_or_else(|| "the driver reports a hardware fault".into());
+        let here = Fired {
+            onset_us: s.device_time_us,
+            onset_driver_deg: s.driver_angle_deg,
+            decided_us: s.device_time_us,
+        };
+        return Some((
+            EndReason::DriverStalled(why.clone()),
+            record("driver fault", here, why),
+        ));
+    }
+    if let Some((fired, why)) = stall.observe(s) {
+        return Some((
+            EndReason::DriverStalled(why.clone()),
+            record("driver stall", fired, why),
+        ));
+    }
+    let (fired, error) = jam.observe(s, error_deg?)?;
+    let end = EndReason::Jammed {
+        driver_angle_deg: fired.onset_driver_deg,
+        error_deg: error,
+    };
+    let detail = end.to_string();
+    Some((end, record("jam", fired, detail)))
 }
 
 /// After a stop command: keep recording until the driver is at rest (or [`STOP_WAIT`]),
@@ -637,13 +743,5 @@ mod tests {
             Step::Continue(Phase::Reverse, _)
         ));
         assert!(matches!(plan.step(top - 1080.0 - m), Step::Done));
-    }
-
-    /// Guards: wrapping of the displayed error.
-    #[test]
-    fn wrap_to_half_turn() {
-        assert_eq!(wrap180(190.0), -170.0);
-        assert_eq!(wrap180(-190.0), 170.0);
-        assert_eq!(wrap180(10.0), 10.0);
     }
 }

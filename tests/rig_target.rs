@@ -1,0 +1,253 @@
+//! Broken or unmeasurable targets never move a motor (issue 16): every reader of
+//! `mechanism.json` — `measure`, `sim-device` and `analyze` — validates it as `mpc-rig synth
+//! --check` does before anything moves, and a target class the rig's sensors cannot measure
+//! is refused before the bench is opened. Checked against live simulated stepper, Dynamixel
+//! and mixed benches, which must see no motion at all.
+
+use std::path::{Path, PathBuf};
+
+use serde_json::{json, Value};
+
+use mpc_rig::analysis::{load_target, TargetSource};
+use mpc_rig::rig::config::RigConfig;
+use mpc_rig::rig::session::{measure, MeasureOptions, TargetSpec};
+use mpc_rig::rig::sim::mixed;
+use mpc_rig::rig::sim::plant::PlantConfig;
+use mpc_rig::rig::RigError;
+
+#[path = "support/bench.rs"]
+mod bench;
+use bench::{dxl_sim, motion, repo, stepper_sim};
+
+/// The accepted half-turn mechanism (N = 90, K = 4) the broken variants are made from.
+fn good_mechanism() -> Value {
+    let text = std::fs::read_to_string(repo("tests/data/mechanism/half-turn-2to1/mechanism.json"))
+        .unwrap();
+    serde_json::from_str(&text).unwrap()
+}
+
+/// One edit of the good mechanism: name, a fragment of its refusal, the edit.
+type Edit = (&'static str, &'static str, Box<dyn Fn(&mut Value)>);
+
+/// The broken variants of the issue, each with a fragment its refusal must contain: the
+/// file name, and what `synth --check` names.
+fn broken_variants(dir: &Path) -> Vec<(PathBuf, &'static str)> {
+    let edits: Vec<Edit> = vec![
+        (
+            "format-2",
+            "`format`",
+            Box::new(|m| m["format"] = json!("mpcmech-mechanism/2")),
+        ),
+        (
+            "null-sample",
+            "null",
+            Box::new(|m| m["curve_pairs"][0]["samples"]["p"][3] = Value::Null),
+        ),
+        (
+            "no-pairs",
+            "no curve pairs",
+            Box::new(|m| m["curve_pairs"] = json!([])),
+        ),
+        (
+            "short-array",
+            "curve_pairs[1].samples.n",
+            Box::new(|m| {
+                m["curve_pairs"][1]["samples"]["n"]
+                    .as_array_mut()
+                    .unwrap()
+                    .pop();
+            }),
+        ),
+        (
+            "short-follower-motion",
+            "follower_motion",
+            Box::new(|m| {
+                m["follower_motion"].as_array_mut().unwrap().truncate(25);
+            }),
+        ),
+        (
+            "zero-samples",
+            "samples",
+            Box::new(|m| m["samples"] = json!(0)),
+        ),
+        (
+            "zero-normal",
+            "opposite normals",
+            Box::new(|m| m["curve_pairs"][2]["samples"]["n"][7] = json!([0.0, 0.0, 0.0])),
+        ),
+        (
+            "class-3r",
+            "fails the mechanism check",
+            Box::new(|m| m["class"] = json!("3R")),
+        ),
+        (
+            "partial",
+            "partial design",
+            Box::new(|m| m["solve"]["partial"] = json!(true)),
+        ),
+    ];
+    edits
+        .into_iter()
+        .map(|(name, fragment, edit)| {
+            let mut m = good_mechanism();
+            edit(&mut m);
+            let sub = dir.join(name);
+            std::fs::create_dir_all(&sub).unwrap();
+            let file = if name == "partial" {
+                sub.join("mechanism.partial.json")
+            } else {
+                sub.join("mechanism.json")
+            };
+            std::fs::write(&file, serde_json::to_string(&m).unwrap()).unwrap();
+            (file, fragment)
+        })
+        .collect()
+}
+
+/// Options of a session on `rig` towards `target` (30 rpm, one cycle).
+fn options(rig: &str, ports: Vec<String>, target: TargetSpec, out: &Path) -> MeasureOptions {
+    let mut o = bench::options(rig, ports, "half-turn-2to1", out);
+    o.target = target;
+    o.speed_rpm = 30.0;
+    o
+}
+
+/// Guards the good fixture itself: it loads as a target, so the refusals below are the
+/// edits' doing.
+#[test]
+fn the_accepted_mechanism_is_a_target() {
+    let t = TargetSpec::Mechanism(repo("tests/data/mechanism/half-turn-2to1"))
+        .load()
+        .unwrap();
+    assert_eq!(t.motion.class().to_string(), "1R");
+    load_target(&TargetSource::Mechanism(repo(
+        "tests/data/mechanism/half-turn-2to1/mechanism.json",
+    )))
+    .unwrap();
+}
+
+/// Guards the broken mechanism files of the issue (format version 2, a `null` sample, K = 0,
+/// an array one entry short, a short `follower_motion`, `samples = 0`, a zero normal, a
+/// class changed to 3R, a `mechanism.partial.json`): `measure` refuses each with the file
+/// and the problem named, against a live simulated stepper bench, Dynamixel bench and mixed
+/// bench, none of which sees a byte or moves; `analyze`'s target loader refuses each too.
+#[test]
+fn broken_mechanisms_never_move_a_motor() {
+    let tmp = tempfile::tempdir().unwrap();
+    let variants = broken_variants(tmp.path());
+    let stepper_sim = stepper_sim::<&str>("half-turn-2to1", &[]);
+    let dxl_sim = dxl_sim::<&str>("half-turn-2to1", &[]);
+    let mixed_rig = RigConfig::load(&repo("rigs/sim-dynamixel-1r1t.toml")).unwrap();
+    let screw = motion("screw-bob");
+    let mixed_sim = mixed::spawn(&mixed_rig, screw, PlantConfig::default()).unwrap();
+    let benches = [
+        (
+            "rigs/sim-stepper.toml",
+            vec![stepper_sim.path().display().to_string()],
+        ),
+        (
+            "rigs/sim-dynamixel.toml",
+            vec![dxl_sim.path().display().to_string()],
+        ),
+        ("rigs/sim-dynamixel-1r1t.toml", mixed_sim.port_overrides()),
+    ];
+    for (file, fragment) in &variants {
+        for (rig, ports) in &benches {
+            let out = tmp.path().join("rec");
+            let mut opts = options(
+                rig,
+                ports.clone(),
+                TargetSpec::Mechanism(file.clone()),
+                &out,
+            );
+            let err = measure(&mut opts).expect_err("a broken mechanism is refused");
+            let text = err.to_string();
+            assert!(matches!(err, RigError::Target { .. }), "{text}");
+            assert!(text.contains(&file.display().to_string()), "{text}");
+            assert!(text.contains(fragment), "{}: {text}", file.display());
+            assert!(!out.exists(), "no recording is started for {text}");
+        }
+        let err = load_target(&TargetSource::Mechanism(file.clone()))
+            .expect_err("analysis refuses it too")
+            .to_string();
+        assert!(err.contains(fragment), "{err}");
+    }
+    let status = stepper_sim.stop().unwrap();
+    assert_eq!(
+        (status.bytes_in, status.steps),
+        (0, 0),
+        "the stepper bench was used: {status:?}"
+    );
+    for bus in [dxl_sim.bus(), mixed_sim.bus().bus()] {
+        assert!(!bus.driver().torque_enabled());
+        assert_eq!(bus.driver().present_velocity(), 0);
+    }
+    assert_eq!(mixed_sim.board().status().bytes_in, 0);
+}
+
+/// Guards `sim-device --mechanism` (it served broken files before): it exits with an error
+/// naming the file and the problem and never prints a port to connect to.
+#[test]
+fn sim_device_refuses_broken_mechanisms() {
+    let tmp = tempfile::tempdir().unwrap();
+    for (file, fragment) in broken_variants(tmp.path()) {
+        for device in ["stepper", "dynamixel"] {
+            let out = std::process::Command::new(env!("CARGO_BIN_EXE_mpc-rig"))
+                .args(["sim-device", device, "--mechanism"])
+                .arg(&file)
+                .output()
+                .unwrap();
+            let stderr = String::from_utf8_lossy(&out.stderr);
+            assert!(!out.status.success(), "{device} served {}", file.display());
+            assert!(out.stdout.is_empty(), "printed a port: {:?}", out.stdout);
+            assert!(stderr.contains(fragment), "{stderr}");
+        }
+    }
+}
+
+/// Guards the class check (issue 16: a 3R motion on a rig without an IMU ran the whole
+/// motor run, then "analysis failed", exit 0): a 3R target on the stepper rig with only an
+/// AS5600, a 1R1T target on the Dynamixel rig (no height sensor) and a 1R target on the
+/// mixed IMU rig (no rotary sensor) are each refused before the bench is opened, naming the
+/// missing sensor; the live simulators see nothing.
+#[test]
+fn targets_the_rig_cannot_measure_are_refused_before_moving() {
+    let tmp = tempfile::tempdir().unwrap();
+    let stepper_sim = stepper_sim::<&str>("half-turn-2to1", &[]);
+    let dxl_sim = dxl_sim::<&str>("half-turn-2to1", &[]);
+    let imu_rig = RigConfig::load(&repo("rigs/sim-dynamixel-imu.toml")).unwrap();
+    let mixed_sim =
+        mixed::spawn(&imu_rig, motion("half-turn-2to1"), PlantConfig::default()).unwrap();
+    let cases = [
+        (
+            "rigs/sim-stepper.toml",
+            vec![stepper_sim.path().display().to_string()],
+            "data/motions/figure-eight.toml",
+            "orientation sensor",
+        ),
+        (
+            "rigs/sim-dynamixel.toml",
+            vec![dxl_sim.path().display().to_string()],
+            "data/motions/screw-bob.toml",
+            "linear sensor",
+        ),
+        (
+            "rigs/sim-dynamixel-imu.toml",
+            mixed_sim.port_overrides(),
+            "data/motions/half-turn-2to1.toml",
+            "rotary sensor",
+        ),
+    ];
+    for (rig, ports, motion, missing) in cases {
+        let out = tmp.path().join("rec");
+        let mut opts = options(rig, ports, TargetSpec::Motion(repo(motion)), &out);
+        let err = measure(&mut opts).expect_err("refused");
+        assert!(matches!(err, RigError::CannotMeasure { .. }), "{err}");
+        assert!(err.to_string().contains(missing), "{err}");
+        assert!(!out.exists());
+    }
+    assert_eq!(stepper_sim.stop().unwrap().bytes_in, 0);
+    assert!(!dxl_sim.bus().driver().torque_enabled());
+    assert_eq!(dxl_sim.bus().driver().present_velocity(), 0);
+    assert_eq!(mixed_sim.board().status().bytes_in, 0);
+}
