@@ -27,14 +27,13 @@
 
 use std::f64::consts::TAU;
 
-use nalgebra::{DMatrix, DVector};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::bspline;
 use super::closure::{self, Class};
-use super::dual::V3;
 use super::energy::{PairProblem, Stage, LENGTH_BOUNDS};
+use super::math::{DMatrix, DVector, V3};
 use super::model::{self, ANGLE_CPS, CURVE_CPS, NV};
 use super::optimizer::{Minimizer, SolveStatus};
 
@@ -73,25 +72,19 @@ pub struct Candidate {
     pub evals: usize,
 }
 
-/// Signed normalized ẑ×p̂ circumferential direction made perpendicular to t.
-fn circumferential_normal(p: [f64; 3], t: [f64; 3], sign: f64) -> [f64; 3] {
-    let c = [-p[1], p[0], 0.0];
-    let tl = (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt().max(1e-12);
-    let th = [t[0] / tl, t[1] / tl, t[2] / tl];
-    let d = c[0] * th[0] + c[1] * th[1] + c[2] * th[2];
-    let mut n = [c[0] - d * th[0], c[1] - d * th[1], c[2] - d * th[2]];
-    let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+/// Signed normalized ẑ×p̂ circumferential direction made perpendicular to t (t × p where
+/// the two are parallel).
+fn circumferential_normal(p: V3<f64>, t: V3<f64>, sign: f64) -> V3<f64> {
+    let c = V3::new(-p.y, p.x, 0.0);
+    let tl = t.norm().max(1e-12);
+    let th = V3::new(t.x / tl, t.y / tl, t.z / tl);
+    let mut n = c - th.scalec(c.dot(th));
+    let mut l = n.norm();
     if l < 1e-9 {
-        // Fall back to t × p.
-        n = [
-            th[1] * p[2] - th[2] * p[1],
-            th[2] * p[0] - th[0] * p[2],
-            th[0] * p[1] - th[1] * p[0],
-        ];
-        let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt().max(1e-12);
-        return [sign * n[0] / l, sign * n[1] / l, sign * n[2] / l];
+        n = th.cross(p);
+        l = n.norm().max(1e-12);
     }
-    [sign * n[0] / l, sign * n[1] / l, sign * n[2] / l]
+    V3::new(sign * n.x / l, sign * n.y / l, sign * n.z / l)
 }
 
 /// Least-squares fit of closed-spline control points to samples at tᵢ = i/N (per column).
@@ -124,10 +117,7 @@ fn fit_spline(n_cps: usize, values: &[Vec<f64>]) -> Vec<Vec<f64>> {
 fn curve_length(x: &[f64], n: usize) -> f64 {
     let cps = model::curve_cps(x);
     (0..n)
-        .map(|i| {
-            let d = bspline::eval_point(&cps, i as f64 / n as f64)[1];
-            (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
-        })
+        .map(|i| V3::from(bspline::eval_point(&cps, i as f64 / n as f64)[1]).norm())
         .sum::<f64>()
         / n as f64
 }
@@ -383,17 +373,17 @@ fn start_angles(pb: &PairProblem, x: &mut [f64], sign: f64, r3_loop: bool) {
         .iter()
         .map(|pose| model::contact_f64(x, pose, pb.dx))
         .collect();
-    let wants: Vec<[f64; 3]> = match pb.class {
+    let wants: Vec<V3<f64>> = match pb.class {
         Class::R3 if r3_loop => contacts
             .iter()
-            .map(|c| r3_start_normal(c, sign, pb.cone.max_abs_dot()).vals())
+            .map(|c| r3_start_normal(c, sign, pb.cone.max_abs_dot()))
             .collect(),
         Class::R3 => contacts
             .iter()
             .map(|c| {
                 let v = c.t2.unit().cross(c.p.unit());
                 let l = v.norm().max(1e-12);
-                v.scalec(sign / l).vals()
+                v.scalec(sign / l)
             })
             .collect(),
         _ => {
@@ -407,7 +397,7 @@ fn start_angles(pb: &PairProblem, x: &mut [f64], sign: f64, r3_loop: bool) {
                 } else if let Some(pv) = prev {
                     (pv - t2.scale(pv.dot(t2))).unit()
                 } else {
-                    V3::cst(circumferential_normal(c.p.vals(), c.t2.vals(), 1.0))
+                    circumferential_normal(c.p, c.t2, 1.0)
                 };
                 if let Some(pv) = prev {
                     if v.dot(pv) < 0.0 {
@@ -423,13 +413,12 @@ fn start_angles(pb: &PairProblem, x: &mut [f64], sign: f64, r3_loop: bool) {
                 .map(|(v, c)| c.p.cross(*v).z)
                 .sum();
             let flip = if torque * sign < 0.0 { -1.0 } else { 1.0 };
-            out.iter().map(|v| v.scalec(flip).vals()).collect()
+            out.iter().map(|v| v.scalec(flip)).collect()
         }
     };
     let mut thetas = Vec::with_capacity(n);
     let mut prev: Option<f64> = None;
-    for ((pose, c), want) in poses.iter().zip(&contacts).zip(&wants) {
-        let want = *want;
+    for ((pose, c), &want) in poses.iter().zip(&contacts).zip(&wants) {
         // Express in the local frame: θ = atan2(n·B, n·N) with N, B rotated into R.
         let th0 = model::contact_f64(
             &{
@@ -442,15 +431,10 @@ fn start_angles(pb: &PairProblem, x: &mut [f64], sign: f64, r3_loop: bool) {
             pose,
             pb.dx,
         );
-        let nn = th0.n.vals(); // θ = 0 → N
-        let tt = c.t2.unit().vals();
-        let bb = [
-            tt[1] * nn[2] - tt[2] * nn[1],
-            tt[2] * nn[0] - tt[0] * nn[2],
-            tt[0] * nn[1] - tt[1] * nn[0],
-        ];
-        let dn = want[0] * nn[0] + want[1] * nn[1] + want[2] * nn[2];
-        let db = want[0] * bb[0] + want[1] * bb[1] + want[2] * bb[2];
+        let nn = th0.n; // θ = 0 → N
+        let bb = c.t2.unit().cross(nn);
+        let dn = want.dot(nn);
+        let db = want.dot(bb);
         let mut a = db.atan2(dn);
         if let Some(pv) = prev {
             while a - pv > std::f64::consts::PI {
@@ -534,7 +518,7 @@ pub fn worst_residual(pb: &PairProblem, x: &[f64], over: usize) -> f64 {
             let t = i as f64 / m as f64;
             let pose = (pb.poses.at)(t);
             let c = model::contact_f64(x, &pose, pb.dx);
-            model::conjugation_residual_deg(c.n.vals(), c.t1.vals(), c.t2.vals())
+            model::conjugation_residual_deg(c.n, c.t1, c.t2)
         })
         .fold(0.0, f64::max)
 }
@@ -773,9 +757,8 @@ pub(crate) mod tests {
             // K = 7, d_x = 7.5: usable per band [6, 2, 1, 0, 3, 1, 1, 3] and closed, against
             // [9, 0, 1, 0, 0, 1, 0, 0, 0] with the angles kept).
             let median_residual = |x: &[f64]| {
-                let r = per_sample_sorted(&pb, x, |c| {
-                    model::conjugation_residual_deg(c.n.vals(), c.t1.vals(), c.t2.vals())
-                });
+                let r =
+                    per_sample_sorted(&pb, x, |c| model::conjugation_residual_deg(c.n, c.t1, c.t2));
                 r[r.len() / 2]
             };
             let mut kept = x.clone();

@@ -11,17 +11,24 @@
 //! --ignored --nocapture` (env: MOTION, DX, K, M; MECH for the diagnosis).
 #![cfg(test)]
 
-use super::closure::{self, cross, dot, Class};
+use super::closure::{self, Class};
+use super::math::{Mat3, V3};
 use super::pose::PoseTrack;
 use rand::{Rng, SeedableRng};
 use std::sync::Arc;
 
 fn unit(a: [f64; 3]) -> [f64; 3] {
-    let l = dot(a, a).sqrt().max(1e-300);
-    [a[0] / l, a[1] / l, a[2] / l]
+    let a = V3::from(a);
+    a.scalec(1.0 / a.norm().max(1e-300)).vals()
 }
-fn rot(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
-    [dot(m[0], v), dot(m[1], v), dot(m[2], v)]
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    V3::from(a).cross(V3::from(b)).vals()
+}
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    V3::from(a).dot(V3::from(b))
+}
+fn rot(m: &Mat3, v: [f64; 3]) -> [f64; 3] {
+    V3::from(v).rot(m).vals()
 }
 
 /// ŵ⊥p: the relative velocity of the follower material point at p (w.r.t. the driver),

@@ -14,6 +14,7 @@ pub mod error;
 #[cfg(test)]
 mod explore_r3;
 pub mod ga;
+pub mod math;
 pub mod mechanism;
 pub mod model;
 pub mod optimizer;

@@ -8,15 +8,15 @@
 
 use std::sync::Arc;
 
-use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use super::math::{mat3_of, quaternion_of, Mat3, UnitQuaternion, Vector3};
 
 /// One follower pose with first derivatives, in frame R.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Pose {
     /// t ∈ [0, 1).
     pub t: f64,
-    /// R₂(t), row-major.
-    pub rot: [[f64; 3]; 3],
+    /// R₂(t).
+    pub rot: Mat3,
     /// T₂(t).
     pub trans: [f64; 3],
     /// ω (`dR₂/dt = [ω]ₓ R₂`), per unit t.
@@ -34,16 +34,9 @@ impl Pose {
         omega: Vector3<f64>,
         vel: Vector3<f64>,
     ) -> Self {
-        let m: Matrix3<f64> = *q.to_rotation_matrix().matrix();
-        let mut rot = [[0.0; 3]; 3];
-        for (r, row) in rot.iter_mut().enumerate() {
-            for (c, x) in row.iter_mut().enumerate() {
-                *x = m[(r, c)];
-            }
-        }
         Self {
             t,
-            rot,
+            rot: mat3_of(q),
             trans: trans.into(),
             omega: omega.into(),
             vel: vel.into(),
@@ -52,8 +45,7 @@ impl Pose {
 
     /// Rotation as a unit quaternion.
     pub fn quaternion(&self) -> UnitQuaternion<f64> {
-        let m = Matrix3::from_fn(|r, c| self.rot[r][c]);
-        UnitQuaternion::from_matrix(&m)
+        quaternion_of(&self.rot)
     }
 }
 

@@ -81,10 +81,7 @@ pub fn write_report(m: &Mechanism, dir: &Path) -> Result<Vec<PathBuf>, SynthErro
                 .iter()
                 .zip(&cp.samples.n)
                 .enumerate()
-                .map(|(i, (p, nn))| {
-                    let pxy = (p[0] * p[0] + p[1] * p[1]).sqrt().max(1e-12);
-                    (i as f64 / n, (p[0] * nn[1] - p[1] * nn[0]) / pxy)
-                })
+                .map(|(i, (&p, &nn))| (i as f64 / n, closure::torque_arm(p, nn)))
                 .collect();
             c.series.push(Series::line(format!("pair {k}"), pts, k));
         }

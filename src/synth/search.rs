@@ -38,6 +38,7 @@ use super::closure::{self, Class, ClosureSummary, NormalCone};
 use super::energy::{PairProblem, Stage, LENGTH_BOUNDS, W_CLOSURE, W_ROBUST};
 use super::error::SynthError;
 use super::ga::{self, Fitness, GaSettings, Pool};
+use super::math::rz;
 use super::mechanism::*;
 use super::model::{self, ANGLE_CPS, CURVE_CPS};
 use super::optimizer::{default_minimizer, Minimizer, MAX_EVAL};
@@ -691,10 +692,6 @@ fn solve_band(
         .collect()
 }
 
-fn neg(v: [f64; 3]) -> [f64; 3] {
-    [-v[0], -v[1], -v[2]]
-}
-
 /// Build the mechanism file content from chosen candidates (one per band).
 pub fn assemble(
     class: Class,
@@ -719,18 +716,12 @@ pub fn assemble(
         };
         for pose in &poses.samples {
             let ct = model::contact_f64(&c.x, pose, dx);
-            let nn = ct.n.vals();
             s.p.push(ct.p.vals());
-            s.n.push(nn);
+            s.n.push(ct.n.vals());
             s.c1.push(ct.c1.vals());
             s.c2.push(ct.c2.vals());
-            let phi = tau * pose.t;
-            let n1 = super::dual::V3::<f64>::cst(nn)
-                .rot_t(&model::rz(phi))
-                .vals();
-            s.n1.push(n1);
-            let n2 = super::dual::V3::<f64>::cst(neg(nn)).rot_t(&pose.rot).vals();
-            s.n2.push(n2);
+            s.n1.push(ct.n.rot_t(&rz(tau * pose.t)).vals());
+            s.n2.push((-ct.n).rot_t(&pose.rot).vals());
         }
         let (zlo, zhi) = band(c.band);
         pairs.push(CurvePair {
