@@ -13,7 +13,7 @@ use std::time::Instant;
 
 use mpc_rig::motion::Motion;
 use mpc_rig::synth::closure::NormalCone;
-use mpc_rig::synth::{synthesize, NoProgress, SynthError, SynthOptions};
+use mpc_rig::synth::{synthesize, NoProgress, Outcome, SynthOptions};
 
 fn main() {
     let filter = std::env::var("SYNTH_BENCH_FILTER").unwrap_or_default();
@@ -65,7 +65,7 @@ fn main() {
         let r = synthesize(&motion, &opts, &NoProgress);
         let secs = t0.elapsed().as_secs_f64();
         let (m, verdict) = match r {
-            Ok(m) => {
+            Ok(Outcome::Accepted(m)) => {
                 let ok = m.check().passed();
                 (
                     Some(m),
@@ -76,16 +76,14 @@ fn main() {
                     },
                 )
             }
-            Err(SynthError::Infeasible {
-                best: None,
-                message,
-            }) => {
-                // No combination was ever scored: say why (the message's first clause).
-                let why = message.split(':').next().unwrap_or(&message);
+            Ok(Outcome::Infeasible { best: None, reason }) => {
+                // No combination was ever scored: say why (the reason's first clause).
+                let why = reason.split(':').next().unwrap_or(&reason);
                 println!("{name:<22} not accepted, no GA run: {why} ({secs:.1} s)");
                 continue;
             }
-            Err(SynthError::Infeasible { best, .. }) => (best.map(|b| *b), "NOT ACCEPTED"),
+            Ok(Outcome::Infeasible { best, .. }) => (best.map(|b| *b), "NOT ACCEPTED"),
+            Ok(Outcome::Cancelled { best }) => (best.map(|b| *b), "cancelled"),
             Err(e) => {
                 println!("{name:<22} error: {e} ({secs:.1} s)");
                 continue;

@@ -12,7 +12,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use crate::motion::Motion;
 use crate::synth::closure::NormalCone;
 use crate::synth::mechanism::Attempt;
-use crate::synth::{self, Mechanism, SynthError, SynthOptions, SynthProgress};
+use crate::synth::{self, Mechanism, Outcome, SynthOptions, SynthProgress};
 
 use super::ExitStatusError;
 
@@ -210,9 +210,10 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
     let progress = Bar { bar };
     let result = synth::synthesize(&motion, &opts, &progress);
     progress.bar.finish_and_clear();
+    let outcome = result?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    match result {
-        Ok(m) => {
+    match outcome {
+        Outcome::Accepted(m) => {
             let file = out.join("mechanism.json");
             m.save(&file)?;
             // A partial file from an earlier failed or cancelled run would now be stale.
@@ -231,8 +232,8 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
             );
             Ok(ExitCode::SUCCESS)
         }
-        Err(SynthError::Cancelled { partial }) => {
-            let msg = match partial {
+        Outcome::Cancelled { best } => {
+            let msg = match best {
                 Some(m) => {
                     let p = write_partial(&m, out)?;
                     println!("{}", summary(&m));
@@ -246,8 +247,8 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
             }
             .into())
         }
-        Err(SynthError::Infeasible { message, best }) => {
-            let mut msg = message;
+        Outcome::Infeasible { reason, best } => {
+            let mut msg = reason;
             if let Some(m) = best {
                 let p = write_partial(&m, out)?;
                 msg.push_str(&format!(
@@ -261,6 +262,5 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
             }
             .into())
         }
-        Err(e) => Err(e.into()),
     }
 }

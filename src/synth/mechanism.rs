@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::closure::{self, Class, EPSILON, GAMMA0_DEG};
-use super::error::SynthError;
+use super::error::MechanismFileError;
 use super::math::{mat3_of_wxyz, rz, V3};
 
 /// The format tag.
@@ -288,8 +288,8 @@ impl std::fmt::Display for CheckReport {
 
 impl Mechanism {
     /// Write as pretty JSON.
-    pub fn save(&self, path: &Path) -> Result<(), SynthError> {
-        let io = |source| SynthError::Io {
+    pub fn save(&self, path: &Path) -> Result<(), MechanismFileError> {
+        let io = |source| MechanismFileError::Io {
             path: path.to_path_buf(),
             source,
         };
@@ -298,7 +298,7 @@ impl Mechanism {
                 std::fs::create_dir_all(dir).map_err(io)?;
             }
         }
-        let text = serde_json::to_string_pretty(self).map_err(|e| SynthError::Invalid {
+        let text = serde_json::to_string_pretty(self).map_err(|e| MechanismFileError::Invalid {
             path: path.to_path_buf(),
             field: "(whole file)".into(),
             message: e.to_string(),
@@ -307,17 +307,17 @@ impl Mechanism {
     }
 
     /// Read a mechanism from a file or from a directory holding `mechanism.json`.
-    pub fn load(path: &Path) -> Result<Mechanism, SynthError> {
+    pub fn load(path: &Path) -> Result<Mechanism, MechanismFileError> {
         let file: PathBuf = if path.is_dir() {
             path.join("mechanism.json")
         } else {
             path.to_path_buf()
         };
-        let text = std::fs::read_to_string(&file).map_err(|source| SynthError::Io {
+        let text = std::fs::read_to_string(&file).map_err(|source| MechanismFileError::Io {
             path: file.clone(),
             source,
         })?;
-        let m: Mechanism = serde_json::from_str(&text).map_err(|e| SynthError::Parse {
+        let m: Mechanism = serde_json::from_str(&text).map_err(|e| MechanismFileError::Parse {
             path: file.clone(),
             line: e.line(),
             column: e.column(),
@@ -328,8 +328,8 @@ impl Mechanism {
     }
 
     /// Structural validation: format tag, array lengths, finite numbers.
-    pub fn validate(&self, file: &Path) -> Result<(), SynthError> {
-        let bad = |field: String, message: String| SynthError::Invalid {
+    pub fn validate(&self, file: &Path) -> Result<(), MechanismFileError> {
+        let bad = |field: String, message: String| MechanismFileError::Invalid {
             path: file.to_path_buf(),
             field,
             message,

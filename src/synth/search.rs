@@ -42,6 +42,7 @@ use super::math::rz;
 use super::mechanism::*;
 use super::model::{self, ANGLE_CPS, CURVE_CPS};
 use super::optimizer::{default_minimizer, Minimizer, MAX_EVAL};
+use super::outcome::Outcome;
 use super::pose::PoseTrack;
 
 /// Height of each band, model units. Default 1.0 (10 mm at the default scale): room for a
@@ -203,7 +204,7 @@ pub fn synthesize_track(
     source: &str,
     opts: &SynthOptions,
     progress: &dyn SynthProgress,
-) -> Result<Mechanism, SynthError> {
+) -> Result<Outcome, SynthError> {
     if opts.samples < 8 {
         return Err(SynthError::BadRequest(format!(
             "--samples {} is too few (at least 8; the paper uses 360)",
@@ -255,7 +256,7 @@ fn search(
     opts: &SynthOptions,
     progress: &dyn SynthProgress,
     threads: usize,
-) -> Result<Mechanism, SynthError> {
+) -> Result<Outcome, SynthError> {
     let start = Instant::now();
     let minimizer = default_minimizer();
     let k_list: Vec<usize> = match opts.k {
@@ -402,7 +403,9 @@ fn search(
             }
             if accepted {
                 let info = info(&attempts, &k_tried, &dx_tried, true, false);
-                return Ok(assemble(class, &poses, source, dx, &chosen, opts, info));
+                return Ok(Outcome::Accepted(assemble(
+                    class, &poses, source, dx, &chosen, opts, info,
+                )));
             }
             if closes && beats(&closed) {
                 closed = Some(this());
@@ -415,7 +418,9 @@ fn search(
         if let Some(c) = closed {
             attempts[c.attempt].accepted = true;
             let info = info(&attempts, &k_tried, &dx_tried, true, false);
-            return Ok(assemble(class, &poses, source, c.dx, &c.chosen, opts, info));
+            return Ok(Outcome::Accepted(assemble(
+                class, &poses, source, c.dx, &c.chosen, opts, info,
+            )));
         }
     }
     let partial = best.as_ref().map(|b| {
@@ -430,7 +435,7 @@ fn search(
         ))
     });
     if cancelled(opts) {
-        return Err(SynthError::Cancelled { partial });
+        return Ok(Outcome::Cancelled { best: partial });
     }
     let few_bands = few_bands_message(class, opts, &attempts, &k_tried, &dx_tried);
     let message = match (&partial, few_bands) {
@@ -480,8 +485,8 @@ fn search(
             )
         }
     };
-    Err(SynthError::Infeasible {
-        message,
+    Ok(Outcome::Infeasible {
+        reason: message,
         best: partial,
     })
 }
@@ -834,10 +839,9 @@ mod tests {
         }
     }
 
-    fn outcome(r: Result<Mechanism, SynthError>) -> Mechanism {
+    fn outcome(r: Result<Outcome, SynthError>) -> Mechanism {
         match r {
-            Ok(m) => m,
-            Err(SynthError::Infeasible { best: Some(m), .. }) => *m,
+            Ok(o) => o.into_mechanism().expect("a design was scored"),
             Err(e) => panic!("unexpected error {e}"),
         }
     }
@@ -916,7 +920,10 @@ mod tests {
             generations: 30,
             ..Default::default()
         };
-        let m = crate::synth::synthesize(&motion, &opts, &NoProgress).unwrap();
+        let m = match crate::synth::synthesize(&motion, &opts, &NoProgress).unwrap() {
+            Outcome::Accepted(m) => m,
+            o => panic!("not accepted: {o:?}"),
+        };
         let at = &m.solve.attempts;
         let short: Vec<&Attempt> = at.iter().filter(|a| a.closes && !a.accepted).collect();
         assert!(
@@ -1085,11 +1092,12 @@ mod tests {
             ..Default::default()
         };
         let r = synthesize_track(Class::R1, half_turn_like(360), "test", &opts, &NoProgress);
-        match r {
-            Ok(m) => {
+        match r.map(Outcome::into_mechanism) {
+            Ok(Some(m)) => {
                 eprintln!("{:#?}", m.solve.attempts);
                 eprintln!("{}", m.check());
             }
+            Ok(None) => eprintln!("no design"),
             Err(e) => eprintln!("ERR {e}"),
         }
         eprintln!("{:.1}s", t0.elapsed().as_secs_f64());
