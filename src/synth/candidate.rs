@@ -621,10 +621,7 @@ pub(crate) mod tests {
             band: (-0.5, 0.5),
             vary: None,
             w_closure: W_CLOSURE,
-            w_robust: std::env::var("WROB")
-                .ok()
-                .and_then(|v| v.parse().ok())
-                .unwrap_or(W_ROBUST),
+            w_robust: W_ROBUST,
             cone: closure::NormalCone::Tangent,
             focus: None,
             stage: Stage::Full,
@@ -774,47 +771,5 @@ pub(crate) mod tests {
             sums.0,
             sums.1
         );
-    }
-
-    /// Exploration aid (ignored): solve a few 1R candidates and print what happened.
-    #[test]
-    #[ignore]
-    fn explore_candidates_1r() {
-        let w: f64 = std::env::var("WCL")
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(W_CLOSURE);
-        let mut pb = problem_1r(360);
-        pb.w_closure = w;
-        let mut tot = 0;
-        for i in 0..12 {
-            let t0 = std::time::Instant::now();
-            let x0 = initial_guess(&pb, 1, 0, i);
-            let e0 = pb.evaluate(&x0);
-            eprintln!(
-                "start cons {:?}",
-                e0.cons_exact
-                    .iter()
-                    .map(|v| format!("{v:.3}"))
-                    .collect::<Vec<_>>()
-            );
-            let c = solve(&pb, &SlsqpRs, 1, 0, i, 400);
-            let nrob = c.robust.iter().filter(|r| **r).count();
-            let pos = c
-                .ntilde
-                .iter()
-                .zip(&c.robust)
-                .filter(|(v, r)| **r && v.is_some_and(|v| v[0] > 0.0))
-                .count();
-            eprintln!(
-                "cand {i}: f={:.2} status={:?} evals={} valid={} reason={:?} res={:.3}° robust={} pos={} {:.2}s",
-                c.f, c.status, c.evals, c.valid, c.reason, c.residual_deg, nrob, pos,
-                t0.elapsed().as_secs_f64()
-            );
-            if c.valid {
-                tot += nrob;
-            }
-        }
-        eprintln!("total robust samples over valid candidates: {tot}");
     }
 }

@@ -11,8 +11,6 @@ pub mod closure;
 pub mod dual;
 pub mod energy;
 pub mod error;
-#[cfg(test)]
-mod explore_r3;
 pub mod ga;
 pub mod math;
 pub mod mechanism;

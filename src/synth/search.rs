@@ -1080,26 +1080,4 @@ mod tests {
             }
         }
     }
-
-    /// Exploration aid (ignored): full 1R search on a half-turn-like motion.
-    #[test]
-    #[ignore]
-    fn explore_search_1r() {
-        let t0 = Instant::now();
-        let opts = SynthOptions {
-            candidates: 16,
-            dx: Some(6.0),
-            ..Default::default()
-        };
-        let r = synthesize_track(Class::R1, half_turn_like(360), "test", &opts, &NoProgress);
-        match r.map(Outcome::into_mechanism) {
-            Ok(Some(m)) => {
-                eprintln!("{:#?}", m.solve.attempts);
-                eprintln!("{}", m.check());
-            }
-            Ok(None) => eprintln!("no design"),
-            Err(e) => eprintln!("ERR {e}"),
-        }
-        eprintln!("{:.1}s", t0.elapsed().as_secs_f64());
-    }
 }
