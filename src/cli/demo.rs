@@ -160,7 +160,7 @@ fn cache_key(motion_bytes: &[u8], o: &SynthOptions) -> String {
     h.update(motion_bytes);
     h.update(
         format!(
-            "seed={} k={:?} dx={:?} n={} m={} g={} p={} e={} scale={} cone={} version={}",
+            "seed={} k={:?} dx={:?} n={} m={} g={} p={} e={} scale={} cone={} margin={} version={}",
             o.seed,
             o.k,
             o.dx,
@@ -171,6 +171,7 @@ fn cache_key(motion_bytes: &[u8], o: &SynthOptions) -> String {
             o.max_eval,
             o.scale_mm,
             o.cone.label(),
+            o.min_margin,
             env!("CARGO_PKG_VERSION")
         )
         .as_bytes(),

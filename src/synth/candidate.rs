@@ -41,6 +41,8 @@ use super::optimizer::{Minimizer, SolveStatus};
 pub const MAX_RESIDUAL_DEG: f64 = 1.0;
 /// Oversampling factor of the residual and closure checks. Default 4 (conventions).
 pub const OVERSAMPLE: usize = 4;
+/// Why a candidate whose solve returned non-finite numbers is not usable.
+pub const NAN_REASON: &str = "optimizer returned NaN";
 /// Constraint violation tolerated in the feasibility check, in the constraints' own units
 /// (relative length, model units, squared sines). Default 1e-6.
 pub const FEAS_TOL: f64 = 1e-6;
@@ -50,6 +52,8 @@ pub const FEAS_TOL: f64 = 1e-6;
 pub struct Candidate {
     /// Band index k.
     pub band: usize,
+    /// The band's [z_min, z_max].
+    pub slab: [f64; 2],
     /// Candidate index within the band.
     pub index: usize,
     /// Design vector.
@@ -64,9 +68,12 @@ pub struct Candidate {
     pub reason: Option<String>,
     /// Worst conjugation residual at OVERSAMPLE× density, degrees.
     pub residual_deg: f64,
-    /// Per sample: ñ (zero-padded) or None when it vanishes.
+    /// Per instant at [`OVERSAMPLE`]× the sample density (entry `OVERSAMPLE·i` is sample
+    /// i): ñ (zero-padded), or None when it vanishes. Empty for a candidate that is not
+    /// usable.
     pub ntilde: Vec<Option<[f64; 3]>>,
-    /// Per sample: whether the contact counts for the robust closure.
+    /// Per instant as `ntilde`: whether the contact counts for the robust closure (3R: for
+    /// the cone the search uses).
     pub robust: Vec<bool>,
     /// Objective evaluations used.
     pub evals: usize,
@@ -510,17 +517,28 @@ pub fn align_start(
     (x, ra.evals)
 }
 
-/// Worst conjugation residual (degrees) at `over`× the sample density.
-pub fn worst_residual(pb: &PairProblem, x: &[f64], over: usize) -> f64 {
-    let m = pb.poses.len() * over;
-    (0..m)
-        .map(|i| {
-            let t = i as f64 / m as f64;
-            let pose = (pb.poses.at)(t);
-            let c = model::contact_f64(x, &pose, pb.dx);
-            model::conjugation_residual_deg(c.n, c.t1, c.t2)
-        })
-        .fold(0.0, f64::max)
+/// A design at [`OVERSAMPLE`]× the sample density: its worst conjugation residual (degrees)
+/// and, per instant, ñ and whether the contact counts for the robust closure. For 3R the
+/// combination counts the contacts that the chosen cone allows (all of them, since it is a
+/// hard constraint); the file still reports the conventions' robust figure (see
+/// `search::assemble`).
+fn oversampled(pb: &PairProblem, x: &[f64]) -> (f64, Vec<Option<[f64; 3]>>, Vec<bool>) {
+    let m = pb.poses.len() * OVERSAMPLE;
+    let (mut residual, mut ntilde, mut robust) =
+        (0.0f64, Vec::with_capacity(m), Vec::with_capacity(m));
+    for i in 0..m {
+        // Entry OVERSAMPLE·j has t = j/N exactly, the pose of sample j.
+        let pose = (pb.poses.at)(i as f64 / m as f64);
+        let c = model::contact_f64(x, &pose, pb.dx);
+        residual = residual.max(model::conjugation_residual_deg(c.n, c.t1, c.t2));
+        let (p, n) = (c.p.vals(), c.n.vals());
+        ntilde.push(closure::project(pb.class, p, n));
+        robust.push(match pb.class {
+            Class::R3 => pb.cone.allows(p, n),
+            _ => closure::is_robust(pb.class, p, n),
+        });
+    }
+    (residual, ntilde, robust)
 }
 
 /// Solve one candidate and run the checks.
@@ -542,13 +560,28 @@ pub fn solve(
         evals = ea;
         cap = (max_eval as f64 * R3_TANGENT_EVAL_SCALE).round() as usize;
     }
-    let res = minimizer.minimize(pb, &x0, cap);
+    solve_from(pb, minimizer, &x0, cap, band, index, evals)
+}
+
+/// Solve one candidate from the start `x0` with at most `max_eval` evaluations and run the
+/// checks; `evals` were already spent on its start. Also what a refinement of a chosen
+/// candidate runs (see `search`).
+pub fn solve_from(
+    pb: &PairProblem,
+    minimizer: &dyn Minimizer,
+    x0: &[f64],
+    max_eval: usize,
+    band: usize,
+    index: usize,
+    evals: usize,
+) -> Candidate {
+    let res = minimizer.minimize(pb, x0, max_eval);
     let x = res.x;
     let mut reason = None;
     let finite = x.iter().all(|v| v.is_finite()) && res.f.is_finite();
     let (mut ntilde, mut robust, mut residual) = (Vec::new(), Vec::new(), f64::INFINITY);
     if !finite {
-        reason = Some("optimizer returned NaN".to_string());
+        reason = Some(NAN_REASON.to_string());
     } else {
         let ev = pb.evaluate(&x);
         if !pb.feasible(&x, &ev, FEAS_TOL) {
@@ -561,27 +594,20 @@ pub fn solve(
                 .unwrap_or_default();
             reason = Some(format!("infeasible ({:?}): {worst}", res.status));
         }
-        residual = worst_residual(pb, &x, OVERSAMPLE);
+        (residual, ntilde, robust) = oversampled(pb, &x);
         if reason.is_none() && residual > MAX_RESIDUAL_DEG {
             reason = Some(format!(
                 "conjugation residual {residual:.2}° > {MAX_RESIDUAL_DEG}°"
             ));
         }
-        for pose in &pb.poses.samples {
-            let c = model::contact_f64(&x, pose, pb.dx);
-            let (p, n) = (c.p.vals(), c.n.vals());
-            ntilde.push(closure::project(pb.class, p, n));
-            // For 3R the GA counts the contacts that the chosen cone allows (all of them,
-            // since it is a hard constraint); the file still reports the conventions' robust
-            // figure (see `search::assemble`).
-            robust.push(match pb.class {
-                Class::R3 => pb.cone.allows(p, n),
-                _ => closure::is_robust(pb.class, p, n),
-            });
+        if reason.is_some() {
+            // Never combined: keep the memory.
+            (ntilde, robust) = (Vec::new(), Vec::new());
         }
     }
     Candidate {
         band,
+        slab: [pb.band.0, pb.band.1],
         index,
         f: res.f,
         valid: reason.is_none(),
@@ -708,10 +734,11 @@ pub(crate) mod tests {
         ))
         .unwrap();
         let poses = Arc::new(PoseTrack::from_motion(&m, 360));
-        let pb = crate::synth::search::band_problem(
+        let pb = crate::synth::bands::band_problem(
             Class::R3,
             &poses,
             7.5,
+            crate::synth::bands::BandLayout::default(),
             1,
             closure::NormalCone::Tangent,
         );

@@ -159,12 +159,35 @@ pub struct Attempt {
     pub robust_vali_time: f64,
     /// Best E_maxDist.
     pub max_dist: f64,
-    /// Meets the acceptance criteria (paper and robust closure, every candidate's residual
-    /// ≤ 1°), whether or not the search went on for a larger closure margin.
+    /// Its robust E_maxDist (ours; absent in older files).
+    #[serde(default = "no_interior")]
+    pub robust_max_dist: f64,
+    /// Its closure at 4× the sample density, where acceptance is judged (absent in older
+    /// files and when no combination could be scored).
+    #[serde(default)]
+    pub oversampled: Option<OversampledClosure>,
+    /// The combination was found by searching every combination of the bands' usable
+    /// candidates (else by the GA and a local search).
+    #[serde(default)]
+    pub exhaustive: bool,
+    /// Bands laid out with usable candidates but left out of this combination (a K − 1
+    /// combination found by leaving bands out of a K one that closed); a gap in the stack.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub left_out: Vec<usize>,
+    /// Meets the acceptance criteria: paper and robust closure at every instant of the 4×
+    /// check with E_maxDist ≤ −`solve.min_margin`, every candidate's residual ≤ 1°.
     #[serde(default)]
     pub closes: bool,
     /// The attempt the mechanism was taken from.
     pub accepted: bool,
+}
+
+fn no_interior() -> f64 {
+    closure::NO_INTERIOR_DIST
+}
+
+fn epsilon() -> f64 {
+    EPSILON
 }
 
 /// How the mechanism was found.
@@ -202,6 +225,10 @@ pub struct SolveInfo {
     /// Bound on the 3R contact normals used (absent in older files: the default).
     #[serde(default)]
     pub normal_cone: closure::NormalCone,
+    /// Closure margin asked of the accepted design (E_maxDist ≤ −min_margin; absent in
+    /// older files: ε).
+    #[serde(default = "epsilon")]
+    pub min_margin: f64,
 }
 
 /// A mechanism: the content of `mechanism.json`.

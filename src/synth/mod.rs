@@ -5,9 +5,12 @@
 //! combination, the K/d_x search and the `mechanism.json` file. It does not build meshes or
 //! talk to hardware.
 
+pub mod assemble;
+pub mod bands;
 pub mod bspline;
 pub mod candidate;
 pub mod closure;
+pub mod combine;
 pub mod dual;
 pub mod energy;
 pub mod error;

@@ -19,12 +19,12 @@ pub enum Outcome {
         reason: String,
         /// The best design reached (not accepted, marked partial); `None` when no
         /// combination could be scored (too few bands with usable candidates).
-        best: Option<Box<Mechanism>>,
+        best: Option<Mechanism>,
     },
     /// Stopped by the user (Ctrl-C).
     Cancelled {
         /// The best design so far (not accepted, marked partial), if any.
-        best: Option<Box<Mechanism>>,
+        best: Option<Mechanism>,
     },
 }
 
@@ -33,7 +33,7 @@ impl Outcome {
     pub fn mechanism(&self) -> Option<&Mechanism> {
         match self {
             Outcome::Accepted(m) => Some(m),
-            Outcome::Infeasible { best, .. } | Outcome::Cancelled { best } => best.as_deref(),
+            Outcome::Infeasible { best, .. } | Outcome::Cancelled { best } => best.as_ref(),
         }
     }
 
@@ -41,7 +41,7 @@ impl Outcome {
     pub fn into_mechanism(self) -> Option<Mechanism> {
         match self {
             Outcome::Accepted(m) => Some(m),
-            Outcome::Infeasible { best, .. } | Outcome::Cancelled { best } => best.map(|b| *b),
+            Outcome::Infeasible { best, .. } | Outcome::Cancelled { best } => best,
         }
     }
 

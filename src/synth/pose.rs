@@ -8,7 +8,7 @@
 
 use std::sync::Arc;
 
-use super::math::{mat3_of, quaternion_of, Mat3, UnitQuaternion, Vector3};
+use super::math::{mat3_of, quaternion_of, Mat3, UnitQuaternion, Vector3, V3};
 
 /// One follower pose with first derivatives, in frame R.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -100,6 +100,26 @@ impl PoseTrack {
     /// Whether there are no samples.
     pub fn is_empty(&self) -> bool {
         self.samples.is_empty()
+    }
+
+    /// Share of the samples at which the follower stands still (|ω| and |dT₂/dt| at most
+    /// [`STILL_SPEED`]).
+    pub fn still_share(&self) -> f64 {
+        let still = self.samples.iter().filter(|p| p.is_still()).count();
+        still as f64 / self.len().max(1) as f64
+    }
+}
+
+/// Follower speed below which a pose counts as standing still: angular speed in radians per
+/// period and linear speed in model units per period. Default 1e-6: a dwell of the motion
+/// schemes is exactly still (zero to round-off), and no sample of the examples without
+/// dwells comes below it (`bands::tests::only_the_dwell_example_gets_the_dwell_layout`).
+pub const STILL_SPEED: f64 = 1e-6;
+
+impl Pose {
+    /// Whether the follower stands still at this pose.
+    pub fn is_still(&self) -> bool {
+        V3::from(self.omega).norm() <= STILL_SPEED && V3::from(self.vel).norm() <= STILL_SPEED
     }
 }
 
