@@ -28,9 +28,10 @@ use rand_chacha::ChaCha8Rng;
 
 use mpc_rig::motion::Motion;
 use mpc_rig::synth::closure::{self, Class, NormalCone};
+use mpc_rig::synth::combine::{self, Density};
 use mpc_rig::synth::math::V3;
 use mpc_rig::synth::pose::PoseTrack;
-use mpc_rig::synth::{candidate, ga, model, optimizer, search, Mechanism};
+use mpc_rig::synth::{bands, candidate, ga, model, optimizer, Mechanism};
 
 #[derive(Parser)]
 #[command(about = "Exploration aids for synthesis (see docs/synthesis.md)")]
@@ -66,6 +67,32 @@ enum Cmd {
         /// 3R: use the `arm` reading of Eq. 30.
         #[arg(long)]
         arm: bool,
+    },
+    /// Solve K plain bands, then compare the GA's best combination with the exhaustive best.
+    Pool {
+        /// Motion: a file stem in data/motions/ or a path.
+        motion: String,
+        /// Driver offset d_x.
+        #[arg(long, default_value_t = 6.0)]
+        dx: f64,
+        /// Bands K.
+        #[arg(short, default_value_t = 3)]
+        k: usize,
+        /// Candidates per band.
+        #[arg(short, default_value_t = 30)]
+        m: usize,
+        /// Seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Skip the exhaustive search when it has more combinations than this.
+        #[arg(long, default_value_t = 2_000_000)]
+        max_combinations: usize,
+        /// Band height (default: the search's).
+        #[arg(long, default_value_t = bands::BAND_HEIGHT)]
+        band_height: f64,
+        /// Gap between bands (default: the search's).
+        #[arg(long, default_value_t = bands::BAND_GAP)]
+        band_gap: f64,
     },
     /// 3R oracle: contacts fixed at follower-local points with ñ = ±ŵ⊥p.
     OraclePoints {
@@ -117,6 +144,24 @@ fn main() {
             max_eval,
             arm,
         } => solve_band(&motion, dx, band, m, samples, seed, max_eval, arm),
+        Cmd::Pool {
+            motion,
+            dx,
+            k,
+            m,
+            seed,
+            max_combinations,
+            band_height,
+            band_gap,
+        } => pool(
+            &motion,
+            dx,
+            k,
+            m,
+            seed,
+            max_combinations,
+            (band_height, band_gap),
+        ),
         Cmd::OraclePoints {
             motion,
             dx,
@@ -174,7 +219,8 @@ fn solve_band(
     let mut usable = 0;
     for i in 0..m {
         let t0 = std::time::Instant::now();
-        let mut pb = search::band_problem(class, &tr, dx, b, cone);
+        let layout = bands::BandLayout::for_motion(class, &tr);
+        let mut pb = bands::band_problem(class, &tr, dx, layout, b, cone);
         if class != Class::R1 {
             pb.vary = Some((i * n / m) % n);
         }
@@ -212,6 +258,183 @@ fn solve_band(
     println!("{name} d_x = {dx} band {b}: {usable} of {m} usable");
 }
 
+fn pool(
+    name: &str,
+    dx: f64,
+    k: usize,
+    m: usize,
+    seed: u64,
+    max_combinations: usize,
+    (height, gap): (f64, f64),
+) {
+    use rayon::prelude::*;
+    let (class, tr) = track(name, 360);
+    let n = tr.len();
+    let t0 = std::time::Instant::now();
+    let bands: Vec<Vec<candidate::Candidate>> = (0..k)
+        .map(|b| {
+            (0..m)
+                .into_par_iter()
+                .map(|i| {
+                    let layout = bands::BandLayout { height, gap };
+                    let mut pb =
+                        bands::band_problem(class, &tr, dx, layout, b, NormalCone::Tangent);
+                    if class != Class::R1 {
+                        pb.vary = Some((i * n / m) % n);
+                    }
+                    let minimizer = optimizer::default_minimizer();
+                    candidate::solve(&pb, minimizer, seed, b, i, optimizer::MAX_EVAL)
+                })
+                .filter(|c| c.valid)
+                .collect()
+        })
+        .collect();
+    println!(
+        "{name} d_x = {dx}: usable per band {:?} ({:.1} s)",
+        bands.iter().map(Vec::len).collect::<Vec<_>>(),
+        t0.elapsed().as_secs_f64()
+    );
+    if class == Class::R1 {
+        // Per band: mean share of samples a usable candidate drives robustly in + and in −,
+        // and the share that some candidate of the band covers in each sign.
+        for (b, cands) in bands.iter().enumerate() {
+            let drives = |c: &candidate::Candidate, i: usize, s: f64| {
+                c.robust[i] && c.ntilde[i].is_some_and(|v| v[0] * s > 0.0)
+            };
+            let mean = |s: f64| {
+                cands
+                    .iter()
+                    .map(|c| (0..n).filter(|&i| drives(c, i, s)).count() as f64 / n as f64)
+                    .sum::<f64>()
+                    / cands.len().max(1) as f64
+            };
+            let union = |s: f64| {
+                (0..n)
+                    .filter(|&i| cands.iter().any(|c| drives(c, i, s)))
+                    .count() as f64
+                    / n as f64
+            };
+            println!(
+                "  band {b}: robust share per candidate + {:.2} − {:.2}; covered by the band + {:.2} − {:.2}",
+                mean(1.0),
+                mean(-1.0),
+                union(1.0),
+                union(-1.0)
+            );
+        }
+    }
+    let pool = combine::Pool {
+        class,
+        bands: bands
+            .iter()
+            .map(|b| {
+                b.iter()
+                    .map(|c| (c.ntilde.as_slice(), c.robust.as_slice()))
+                    .collect()
+            })
+            .collect(),
+    };
+    let show =
+        |what: &str, g: &[usize]| {
+            let s = pool.summary(g, Density::Samples);
+            println!(
+            "  {what}: genome {g:?}: E_valiTime {:.3}, robust {:.3}, E_maxDist {:.3}, robust {:.3}",
+            s.vali_time, s.robust_vali_time, s.max_dist.min(99.0), s.robust_max_dist.min(99.0)
+        );
+        };
+    let t0 = std::time::Instant::now();
+    let settings = ga::GaSettings {
+        population: ga::POPULATION,
+        generations: ga::GENERATIONS,
+        seed,
+    };
+    let res = ga::run(&pool, settings, &mut |_| true);
+    show(
+        &format!("GA ({:.2} s)", t0.elapsed().as_secs_f64()),
+        &res.genome,
+    );
+    let t0 = std::time::Instant::now();
+    let c = combine::combine(&pool, settings, &mut |_| true);
+    show(
+        &format!(
+            "combine, {} ({:.2} s)",
+            if c.exact {
+                "exhaustive"
+            } else {
+                "GA + local search"
+            },
+            t0.elapsed().as_secs_f64()
+        ),
+        &c.genome,
+    );
+    let o = &c.oversampled;
+    println!(
+        "    at 4×: E_valiTime {:.3}, robust {:.3}, E_maxDist {:.3}, robust {:.3}",
+        o.vali_time,
+        o.robust_vali_time,
+        o.max_dist.min(99.0),
+        o.robust_max_dist.min(99.0)
+    );
+    let sizes: Vec<usize> = bands.iter().map(Vec::len).collect();
+    let total: usize = sizes.iter().product();
+    if total == 0 || total > max_combinations {
+        println!("  exhaustive: skipped ({total} combinations)");
+        return;
+    }
+    let t0 = std::time::Instant::now();
+    let genome = |mut c: usize| -> Vec<usize> {
+        sizes
+            .iter()
+            .map(|&s| {
+                let g = c % s;
+                c /= s;
+                g
+            })
+            .collect()
+    };
+    let best = (0..total)
+        .into_par_iter()
+        .map(|c| {
+            let g = genome(c);
+            (pool.fitness(&g, Density::Samples), g)
+        })
+        .reduce_with(|a, b| {
+            if b.0.cmp_better(&a.0) == std::cmp::Ordering::Greater {
+                b
+            } else {
+                a
+            }
+        })
+        .expect("at least one combination");
+    show(
+        &format!(
+            "exhaustive over {total} ({:.2} s)",
+            t0.elapsed().as_secs_f64()
+        ),
+        &best.1,
+    );
+    if class == Class::R1 {
+        // The chosen contacts over the period, 90 columns: robust + / robust − / not robust
+        // (lower case: the sign without a robust arm).
+        for (b, &g) in best.1.iter().enumerate() {
+            let c = &bands[b][g];
+            let line: String = (0..90)
+                .map(|col| {
+                    let i = col * n / 90;
+                    match (c.ntilde[i].map(|v| v[0] > 0.0), c.robust[i]) {
+                        (Some(true), true) => '+',
+                        (Some(false), true) => '-',
+                        (Some(true), false) => '\'',
+                        (Some(false), false) => ',',
+                        (None, _) => ' ',
+                    }
+                })
+                .collect();
+            println!("  band {b} #{:2}: {line}", c.index);
+        }
+    }
+}
+
 fn oracle_points(name: &str, dx: f64, k: usize, trials: usize) {
     let (_, tr) = track(name, 120);
     let mut rng = ChaCha8Rng::seed_from_u64(1);
@@ -219,7 +442,7 @@ fn oracle_points(name: &str, dx: f64, k: usize, trials: usize) {
     for _ in 0..trials {
         let pts: Vec<(V3<f64>, f64)> = (0..k)
             .map(|b| {
-                let (lo, hi) = search::band(b);
+                let (lo, hi) = bands::BandLayout::default().band(b);
                 let z = rng.random_range(lo..hi);
                 let r = rng.random_range(1.0..3.0);
                 let a = rng.random_range(0.0..std::f64::consts::TAU);
@@ -263,7 +486,8 @@ fn oracle_starts(name: &str, dx: f64, k: usize, m: usize) {
     type View = (Vec<Option<[f64; 3]>>, Vec<bool>);
     let mut all: Vec<Vec<View>> = Vec::new();
     for b in 0..k {
-        let pb = search::band_problem(Class::R3, &tr, dx, b, NormalCone::Tangent);
+        let layout = bands::BandLayout::default();
+        let pb = bands::band_problem(Class::R3, &tr, dx, layout, b, NormalCone::Tangent);
         let mut viol = [0usize; 5];
         let mut cands = Vec::new();
         for i in 0..m {
@@ -287,7 +511,7 @@ fn oracle_starts(name: &str, dx: f64, k: usize, m: usize) {
         println!("band {b}: start-constraint violations (len ≥, len ≤, follower, driver, slope) {viol:?}");
         all.push(cands);
     }
-    let pool = ga::Pool {
+    let pool = combine::Pool {
         class: Class::R3,
         bands: all
             .iter()
