@@ -283,22 +283,37 @@ pub fn combine(
         stopped |= !go;
         go
     });
-    let start = pool.fitness(&ga.genome, Density::Oversampled);
-    let exact = !stopped && pool.combinations() <= exact_limit(pool.class);
+    if stopped {
+        let oversampled = pool.fitness(&ga.genome, Density::Oversampled);
+        return Combination {
+            at_samples: pool.fitness(&ga.genome, Density::Samples),
+            genome: ga.genome,
+            oversampled,
+            exact: false,
+        };
+    }
+    improve(pool, ga.genome)
+}
+
+/// The best combination reachable from `start` over the oversampled instants: the exact
+/// search when the pool holds at most [`exact_limit`] combinations, else a 1-opt local
+/// search from `start` (no GA: for a start that is already good, such as a combination that
+/// closed with one band more).
+pub fn improve(pool: &Pool, start: Vec<usize>) -> Combination {
+    let start_fit = pool.fitness(&start, Density::Oversampled);
+    let exact = pool.combinations() <= exact_limit(pool.class);
     let t0 = std::time::Instant::now();
-    let (genome, oversampled) = if stopped {
-        (ga.genome, start)
-    } else if exact {
-        exact_search(pool, ga.genome, start)
+    let (genome, oversampled) = if exact {
+        exact_search(pool, start, start_fit)
     } else {
-        local_search(pool, ga.genome, start)
+        local_search(pool, start, start_fit)
     };
     tracing::debug!(
         combinations = pool.combinations(),
         exact,
         seconds = t0.elapsed().as_secs_f64(),
         robust_vali_time = oversampled.robust_vali_time,
-        "combination searched after the GA"
+        "combination searched"
     );
     Combination {
         at_samples: pool.fitness(&genome, Density::Samples),
