@@ -322,6 +322,45 @@ mod tests {
         assert!(focus_of(&[contact_1r(&full), contact_1r(&neg)], n).is_none());
     }
 
+    /// Guards the refinement focus: a contact is asked for a sign only where the combination
+    /// lacks a robust contact of that sign (widened by `REFINE_WIDEN`) and it already pushes
+    /// that way; a contact pushing the other way there is not asked; a gap between two
+    /// samples (at an instant of the 4× check only) counts; nothing is asked when closure
+    /// holds at every instant.
+    #[test]
+    fn refinement_asks_contacts_for_the_sign_they_push_where_it_lacks() {
+        let n = 200;
+        let w = (REFINE_WIDEN * n as f64).round() as usize;
+        assert_eq!(w, 6);
+        // a: robust + everywhere; b: robust − except 100..110, where it pushes − weakly;
+        // c: robust + everywhere, pushing − nowhere.
+        let a: Vec<_> = (0..n).map(|_| (1.0, true)).collect();
+        let b: Vec<_> = (0..n).map(|i| (-1.0, !(100..110).contains(&i))).collect();
+        let asks = refine_focus(&[contact_1r(&a), contact_1r(&b), contact_1r(&a)], n);
+        assert_eq!(asks.len(), 3);
+        assert!(asks[0].is_none() && asks[2].is_none(), "{asks:?}");
+        let ask_b = asks[1].as_ref().expect("b is asked");
+        for (i, v) in ask_b.iter().enumerate() {
+            let want = if (100 - w..110 + w).contains(&i) {
+                -1.0
+            } else {
+                0.0
+            };
+            assert_eq!(*v, want, "sample {i}");
+        }
+        // Closed at every sample but not at one instant between samples 30 and 31.
+        let mut c = contact_1r(&b.iter().map(|_| (-1.0, true)).collect::<Vec<_>>());
+        c.robust[OVERSAMPLE * 30 + 1] = false;
+        let asks = refine_focus(&[contact_1r(&a), c.clone()], n);
+        let ask = asks[1]
+            .as_ref()
+            .expect("the instant between samples counts");
+        assert_eq!(ask[30], -1.0);
+        assert_eq!(ask[30 + w + 1], 0.0);
+        c.robust[OVERSAMPLE * 30 + 1] = true;
+        assert!(refine_focus(&[contact_1r(&a), c], n).is_empty());
+    }
+
     /// Guards the band layout: bands are disjoint, equal height, and K bands are a prefix of
     /// K + 1 bands.
     #[test]

@@ -597,6 +597,31 @@ mod tests {
         }
     }
 
+    /// Guards the oversampled judgement: a combination closed at every sample but not at an
+    /// instant between two samples closes at the sample density and not at 4×, which is the
+    /// density `combine` reports as `oversampled` and acceptance reads.
+    #[test]
+    fn a_gap_between_samples_fails_the_oversampled_check() {
+        let e = 20 * OVERSAMPLE;
+        let push = |s: f64| (vec![Some([s, 0.0, 0.0]); e], vec![true; e]);
+        let mut weak = push(-1.0);
+        weak.1[OVERSAMPLE * 7 + 2] = false;
+        let data = vec![vec![push(1.0)], vec![weak]];
+        let pool = pool_of(Class::R1, &data);
+        let at_samples = pool.fitness(&[0, 0], Density::Samples);
+        let over = pool.fitness(&[0, 0], Density::Oversampled);
+        assert!(at_samples.closes(EPSILON), "{at_samples:?}");
+        assert!(!over.closes(EPSILON), "{over:?}");
+        assert_eq!(over.robust_vali_time, 1.0 - 1.0 / e as f64);
+        let settings = GaSettings {
+            population: 2,
+            generations: 1,
+            seed: 1,
+        };
+        let c = combine(&pool, settings, &mut |_| true);
+        assert_eq!((c.at_samples, c.oversampled), (at_samples, over));
+    }
+
     /// Guards `combine` on the GA's test pool: it finds the single combination that closes
     /// robustly at every instant, searching exhaustively (30 combinations).
     #[test]

@@ -471,7 +471,7 @@ impl Search<'_> {
         // Fewer pairs from the same bands: leave bands out while the rest still closes.
         let mut left_out = Vec::new();
         while opts.k.is_none() && chosen.len() > first_k(class) {
-            let Some((c2, ch2, out)) = self.drop_one(&stack.bands, &chosen) else {
+            let Some((c2, ch2, out)) = self.drop_one(&stack.bands, &chosen, dx) else {
                 break;
             };
             left_out.push(out);
@@ -588,13 +588,14 @@ impl Search<'_> {
 
     /// After a combination of K bands closed: the best combination over K − 1 of those
     /// bands that still closes, with the band left out; `None` when none does. Each band is
-    /// left out in turn and the others' usable candidates searched again from the closed
-    /// combination's (`combine::improve`: exactly when they are few, else locally). The
-    /// left-out band stays in the stack as a gap.
+    /// left out in turn and the others' usable candidates searched again, by the GA and from
+    /// the closed combination's (`combine::improve`: exactly when they are few, else
+    /// locally). The left-out band stays in the stack as a gap.
     fn drop_one(
         &self,
         bands: &[Vec<Candidate>],
         chosen: &[Candidate],
+        dx: f64,
     ) -> Option<(Combination, Vec<Candidate>, usize)> {
         let usable =
             |b: usize| -> Vec<&Candidate> { bands[b].iter().filter(|c| c.valid).collect() };
@@ -614,7 +615,15 @@ impl Search<'_> {
                         .expect("a chosen candidate is usable in its band")
                 })
                 .collect();
-            let c = combine::improve(&self.pool_of(&valid), start);
+            // The GA's combination or the closed one's, improved; the better of the two.
+            let from_start = combine::improve(&self.pool_of(&valid), start);
+            let (fresh, _) = self.combine_over(&valid, dx);
+            let c = if fresh.oversampled.cmp_better(&from_start.oversampled) == CmpOrdering::Greater
+            {
+                fresh
+            } else {
+                from_start
+            };
             let better = best
                 .as_ref()
                 .is_none_or(|b| c.oversampled.cmp_better(&b.0.oversampled) == CmpOrdering::Greater);
