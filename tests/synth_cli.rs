@@ -39,15 +39,20 @@ fn synth_reduced(
 }
 
 /// Guards the whole pipeline: synth writes an accepted mechanism.json and the report plots,
-/// `--check` re-verifies it from its samples, and a tampered or malformed file is rejected
-/// with a message naming what is wrong.
+/// prints the best figures every K tried reached, `--check` re-verifies the file from its
+/// samples, and a tampered or malformed file is rejected with a message naming what is
+/// wrong.
 #[test]
 fn synth_end_to_end_then_check_and_reject_tampering() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("ht");
     synth_small(&out)
         .success()
-        .stdout(predicate::str::contains("1R"));
+        .stdout(predicate::str::contains("1R"))
+        .stdout(predicate::str::contains(
+            "best reached per K tried (closure margin asked: E_maxDist ≤ −0.02):\n  K = 3, d_x = 6:",
+        ))
+        .stdout(predicate::str::contains("(accepted)"));
     let file = out.join("mechanism.json");
     assert!(file.exists());
     for plot in [
@@ -120,6 +125,28 @@ fn synth_end_to_end_then_check_and_reject_tampering() {
         .assert()
         .failure()
         .stderr(predicate::str::contains("curve_pairs[1].samples.n"));
+}
+
+/// Guards request validation at the command line: a closure margin below ε is refused with
+/// a message saying why, before any work.
+#[test]
+fn synth_refuses_a_margin_below_epsilon() {
+    let dir = tempfile::tempdir().unwrap();
+    Command::cargo_bin("mpc-rig")
+        .unwrap()
+        .args([
+            "synth",
+            MOTION,
+            "-o",
+            dir.path().to_str().unwrap(),
+            "--min-margin",
+            "0.01",
+        ])
+        .assert()
+        .failure()
+        .stderr(predicate::str::contains(
+            "--min-margin 0.01 must lie between ε = 0.02",
+        ));
 }
 
 /// Guards request validation at the command line: K below dof + 1 is refused with a clear

@@ -25,7 +25,7 @@ use crate::rig::config::RigConfig;
 use crate::rig::recording::utc_dir_stamp;
 use crate::rig::session::{self, MeasureOptions, Progress, TargetSpec};
 use crate::rig::sim::plant::PlantConfig;
-use crate::synth::{Mechanism, SynthOptions, SynthProgress};
+use crate::synth::{Mechanism, Outcome, SynthOptions, SynthProgress};
 
 /// Which simulated bench the demo measures on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -160,7 +160,7 @@ fn cache_key(motion_bytes: &[u8], o: &SynthOptions) -> String {
     h.update(motion_bytes);
     h.update(
         format!(
-            "seed={} k={:?} dx={:?} n={} m={} g={} p={} e={} scale={} cone={} version={}",
+            "seed={} k={:?} dx={:?} n={} m={} g={} p={} e={} scale={} cone={} margin={} version={}",
             o.seed,
             o.k,
             o.dx,
@@ -171,6 +171,7 @@ fn cache_key(motion_bytes: &[u8], o: &SynthOptions) -> String {
             o.max_eval,
             o.scale_mm,
             o.cone.label(),
+            o.min_margin,
             env!("CARGO_PKG_VERSION")
         )
         .as_bytes(),
@@ -213,8 +214,15 @@ fn mechanism_for(
         }
     }
     let t0 = Instant::now();
-    let mech = crate::synth::synthesize(motion, &o, &StderrProgress)
-        .with_context(|| format!("synthesizing a mechanism for {}", motion.name()))?;
+    let mech = match crate::synth::synthesize(motion, &o, &StderrProgress)
+        .with_context(|| format!("synthesizing a mechanism for {}", motion.name()))?
+    {
+        Outcome::Accepted(m) => m,
+        Outcome::Infeasible { reason, .. } => {
+            bail!("no mechanism for {} was accepted: {reason}", motion.name())
+        }
+        Outcome::Cancelled { .. } => bail!("synthesis cancelled"),
+    };
     mech.save(&file)
         .with_context(|| format!("saving {}", file.display()))?;
     eprintln!("      synthesized in {:.1} s", t0.elapsed().as_secs_f64());

@@ -27,14 +27,13 @@
 
 use std::f64::consts::TAU;
 
-use nalgebra::{DMatrix, DVector};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::bspline;
 use super::closure::{self, Class};
-use super::dual::V3;
 use super::energy::{PairProblem, Stage, LENGTH_BOUNDS};
+use super::math::{DMatrix, DVector, V3};
 use super::model::{self, ANGLE_CPS, CURVE_CPS, NV};
 use super::optimizer::{Minimizer, SolveStatus};
 
@@ -42,6 +41,8 @@ use super::optimizer::{Minimizer, SolveStatus};
 pub const MAX_RESIDUAL_DEG: f64 = 1.0;
 /// Oversampling factor of the residual and closure checks. Default 4 (conventions).
 pub const OVERSAMPLE: usize = 4;
+/// Why a candidate whose solve returned non-finite numbers is not usable.
+pub const NAN_REASON: &str = "optimizer returned NaN";
 /// Constraint violation tolerated in the feasibility check, in the constraints' own units
 /// (relative length, model units, squared sines). Default 1e-6.
 pub const FEAS_TOL: f64 = 1e-6;
@@ -51,6 +52,8 @@ pub const FEAS_TOL: f64 = 1e-6;
 pub struct Candidate {
     /// Band index k.
     pub band: usize,
+    /// The band's [z_min, z_max].
+    pub slab: [f64; 2],
     /// Candidate index within the band.
     pub index: usize,
     /// Design vector.
@@ -65,33 +68,30 @@ pub struct Candidate {
     pub reason: Option<String>,
     /// Worst conjugation residual at OVERSAMPLE× density, degrees.
     pub residual_deg: f64,
-    /// Per sample: ñ (zero-padded) or None when it vanishes.
+    /// Per instant at [`OVERSAMPLE`]× the sample density (entry `OVERSAMPLE·i` is sample
+    /// i): ñ (zero-padded), or None when it vanishes. Empty for a candidate that is not
+    /// usable.
     pub ntilde: Vec<Option<[f64; 3]>>,
-    /// Per sample: whether the contact counts for the robust closure.
+    /// Per instant as `ntilde`: whether the contact counts for the robust closure (3R: for
+    /// the cone the search uses).
     pub robust: Vec<bool>,
     /// Objective evaluations used.
     pub evals: usize,
 }
 
-/// Signed normalized ẑ×p̂ circumferential direction made perpendicular to t.
-fn circumferential_normal(p: [f64; 3], t: [f64; 3], sign: f64) -> [f64; 3] {
-    let c = [-p[1], p[0], 0.0];
-    let tl = (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt().max(1e-12);
-    let th = [t[0] / tl, t[1] / tl, t[2] / tl];
-    let d = c[0] * th[0] + c[1] * th[1] + c[2] * th[2];
-    let mut n = [c[0] - d * th[0], c[1] - d * th[1], c[2] - d * th[2]];
-    let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+/// Signed normalized ẑ×p̂ circumferential direction made perpendicular to t (t × p where
+/// the two are parallel).
+fn circumferential_normal(p: V3<f64>, t: V3<f64>, sign: f64) -> V3<f64> {
+    let c = V3::new(-p.y, p.x, 0.0);
+    let tl = t.norm().max(1e-12);
+    let th = V3::new(t.x / tl, t.y / tl, t.z / tl);
+    let mut n = c - th.scalec(c.dot(th));
+    let mut l = n.norm();
     if l < 1e-9 {
-        // Fall back to t × p.
-        n = [
-            th[1] * p[2] - th[2] * p[1],
-            th[2] * p[0] - th[0] * p[2],
-            th[0] * p[1] - th[1] * p[0],
-        ];
-        let l = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt().max(1e-12);
-        return [sign * n[0] / l, sign * n[1] / l, sign * n[2] / l];
+        n = th.cross(p);
+        l = n.norm().max(1e-12);
     }
-    [sign * n[0] / l, sign * n[1] / l, sign * n[2] / l]
+    V3::new(sign * n.x / l, sign * n.y / l, sign * n.z / l)
 }
 
 /// Least-squares fit of closed-spline control points to samples at tᵢ = i/N (per column).
@@ -124,10 +124,7 @@ fn fit_spline(n_cps: usize, values: &[Vec<f64>]) -> Vec<Vec<f64>> {
 fn curve_length(x: &[f64], n: usize) -> f64 {
     let cps = model::curve_cps(x);
     (0..n)
-        .map(|i| {
-            let d = bspline::eval_point(&cps, i as f64 / n as f64)[1];
-            (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
-        })
+        .map(|i| V3::from(bspline::eval_point(&cps, i as f64 / n as f64)[1]).norm())
         .sum::<f64>()
         / n as f64
 }
@@ -383,17 +380,17 @@ fn start_angles(pb: &PairProblem, x: &mut [f64], sign: f64, r3_loop: bool) {
         .iter()
         .map(|pose| model::contact_f64(x, pose, pb.dx))
         .collect();
-    let wants: Vec<[f64; 3]> = match pb.class {
+    let wants: Vec<V3<f64>> = match pb.class {
         Class::R3 if r3_loop => contacts
             .iter()
-            .map(|c| r3_start_normal(c, sign, pb.cone.max_abs_dot()).vals())
+            .map(|c| r3_start_normal(c, sign, pb.cone.max_abs_dot()))
             .collect(),
         Class::R3 => contacts
             .iter()
             .map(|c| {
                 let v = c.t2.unit().cross(c.p.unit());
                 let l = v.norm().max(1e-12);
-                v.scalec(sign / l).vals()
+                v.scalec(sign / l)
             })
             .collect(),
         _ => {
@@ -407,7 +404,7 @@ fn start_angles(pb: &PairProblem, x: &mut [f64], sign: f64, r3_loop: bool) {
                 } else if let Some(pv) = prev {
                     (pv - t2.scale(pv.dot(t2))).unit()
                 } else {
-                    V3::cst(circumferential_normal(c.p.vals(), c.t2.vals(), 1.0))
+                    circumferential_normal(c.p, c.t2, 1.0)
                 };
                 if let Some(pv) = prev {
                     if v.dot(pv) < 0.0 {
@@ -423,13 +420,12 @@ fn start_angles(pb: &PairProblem, x: &mut [f64], sign: f64, r3_loop: bool) {
                 .map(|(v, c)| c.p.cross(*v).z)
                 .sum();
             let flip = if torque * sign < 0.0 { -1.0 } else { 1.0 };
-            out.iter().map(|v| v.scalec(flip).vals()).collect()
+            out.iter().map(|v| v.scalec(flip)).collect()
         }
     };
     let mut thetas = Vec::with_capacity(n);
     let mut prev: Option<f64> = None;
-    for ((pose, c), want) in poses.iter().zip(&contacts).zip(&wants) {
-        let want = *want;
+    for ((pose, c), &want) in poses.iter().zip(&contacts).zip(&wants) {
         // Express in the local frame: θ = atan2(n·B, n·N) with N, B rotated into R.
         let th0 = model::contact_f64(
             &{
@@ -442,15 +438,10 @@ fn start_angles(pb: &PairProblem, x: &mut [f64], sign: f64, r3_loop: bool) {
             pose,
             pb.dx,
         );
-        let nn = th0.n.vals(); // θ = 0 → N
-        let tt = c.t2.unit().vals();
-        let bb = [
-            tt[1] * nn[2] - tt[2] * nn[1],
-            tt[2] * nn[0] - tt[0] * nn[2],
-            tt[0] * nn[1] - tt[1] * nn[0],
-        ];
-        let dn = want[0] * nn[0] + want[1] * nn[1] + want[2] * nn[2];
-        let db = want[0] * bb[0] + want[1] * bb[1] + want[2] * bb[2];
+        let nn = th0.n; // θ = 0 → N
+        let bb = c.t2.unit().cross(nn);
+        let dn = want.dot(nn);
+        let db = want.dot(bb);
         let mut a = db.atan2(dn);
         if let Some(pv) = prev {
             while a - pv > std::f64::consts::PI {
@@ -526,17 +517,28 @@ pub fn align_start(
     (x, ra.evals)
 }
 
-/// Worst conjugation residual (degrees) at `over`× the sample density.
-pub fn worst_residual(pb: &PairProblem, x: &[f64], over: usize) -> f64 {
-    let m = pb.poses.len() * over;
-    (0..m)
-        .map(|i| {
-            let t = i as f64 / m as f64;
-            let pose = (pb.poses.at)(t);
-            let c = model::contact_f64(x, &pose, pb.dx);
-            model::conjugation_residual_deg(c.n.vals(), c.t1.vals(), c.t2.vals())
-        })
-        .fold(0.0, f64::max)
+/// A design at [`OVERSAMPLE`]× the sample density: its worst conjugation residual (degrees)
+/// and, per instant, ñ and whether the contact counts for the robust closure. For 3R the
+/// combination counts the contacts that the chosen cone allows (all of them, since it is a
+/// hard constraint); the file still reports the conventions' robust figure (see
+/// `search::assemble`).
+fn oversampled(pb: &PairProblem, x: &[f64]) -> (f64, Vec<Option<[f64; 3]>>, Vec<bool>) {
+    let m = pb.poses.len() * OVERSAMPLE;
+    let (mut residual, mut ntilde, mut robust) =
+        (0.0f64, Vec::with_capacity(m), Vec::with_capacity(m));
+    for i in 0..m {
+        // Entry OVERSAMPLE·j has t = j/N exactly, the pose of sample j.
+        let pose = (pb.poses.at)(i as f64 / m as f64);
+        let c = model::contact_f64(x, &pose, pb.dx);
+        residual = residual.max(model::conjugation_residual_deg(c.n, c.t1, c.t2));
+        let (p, n) = (c.p.vals(), c.n.vals());
+        ntilde.push(closure::project(pb.class, p, n));
+        robust.push(match pb.class {
+            Class::R3 => pb.cone.allows(p, n),
+            _ => closure::is_robust(pb.class, p, n),
+        });
+    }
+    (residual, ntilde, robust)
 }
 
 /// Solve one candidate and run the checks.
@@ -558,13 +560,28 @@ pub fn solve(
         evals = ea;
         cap = (max_eval as f64 * R3_TANGENT_EVAL_SCALE).round() as usize;
     }
-    let res = minimizer.minimize(pb, &x0, cap);
+    solve_from(pb, minimizer, &x0, cap, band, index, evals)
+}
+
+/// Solve one candidate from the start `x0` with at most `max_eval` evaluations and run the
+/// checks; `evals` were already spent on its start. Also what a refinement of a chosen
+/// candidate runs (see `search`).
+pub fn solve_from(
+    pb: &PairProblem,
+    minimizer: &dyn Minimizer,
+    x0: &[f64],
+    max_eval: usize,
+    band: usize,
+    index: usize,
+    evals: usize,
+) -> Candidate {
+    let res = minimizer.minimize(pb, x0, max_eval);
     let x = res.x;
     let mut reason = None;
     let finite = x.iter().all(|v| v.is_finite()) && res.f.is_finite();
     let (mut ntilde, mut robust, mut residual) = (Vec::new(), Vec::new(), f64::INFINITY);
     if !finite {
-        reason = Some("optimizer returned NaN".to_string());
+        reason = Some(NAN_REASON.to_string());
     } else {
         let ev = pb.evaluate(&x);
         if !pb.feasible(&x, &ev, FEAS_TOL) {
@@ -577,27 +594,20 @@ pub fn solve(
                 .unwrap_or_default();
             reason = Some(format!("infeasible ({:?}): {worst}", res.status));
         }
-        residual = worst_residual(pb, &x, OVERSAMPLE);
+        (residual, ntilde, robust) = oversampled(pb, &x);
         if reason.is_none() && residual > MAX_RESIDUAL_DEG {
             reason = Some(format!(
                 "conjugation residual {residual:.2}° > {MAX_RESIDUAL_DEG}°"
             ));
         }
-        for pose in &pb.poses.samples {
-            let c = model::contact_f64(&x, pose, pb.dx);
-            let (p, n) = (c.p.vals(), c.n.vals());
-            ntilde.push(closure::project(pb.class, p, n));
-            // For 3R the GA counts the contacts that the chosen cone allows (all of them,
-            // since it is a hard constraint); the file still reports the conventions' robust
-            // figure (see `search::assemble`).
-            robust.push(match pb.class {
-                Class::R3 => pb.cone.allows(p, n),
-                _ => closure::is_robust(pb.class, p, n),
-            });
+        if reason.is_some() {
+            // Never combined: keep the memory.
+            (ntilde, robust) = (Vec::new(), Vec::new());
         }
     }
     Candidate {
         band,
+        slab: [pb.band.0, pb.band.1],
         index,
         f: res.f,
         valid: reason.is_none(),
@@ -637,10 +647,7 @@ pub(crate) mod tests {
             band: (-0.5, 0.5),
             vary: None,
             w_closure: W_CLOSURE,
-            w_robust: std::env::var("WROB")
-                .ok()
-                .and_then(|v| v.parse().ok())
-                .unwrap_or(W_ROBUST),
+            w_robust: W_ROBUST,
             cone: closure::NormalCone::Tangent,
             focus: None,
             stage: Stage::Full,
@@ -727,10 +734,11 @@ pub(crate) mod tests {
         ))
         .unwrap();
         let poses = Arc::new(PoseTrack::from_motion(&m, 360));
-        let pb = crate::synth::search::band_problem(
+        let pb = crate::synth::bands::band_problem(
             Class::R3,
             &poses,
             7.5,
+            crate::synth::bands::BandLayout::default(),
             1,
             closure::NormalCone::Tangent,
         );
@@ -773,9 +781,8 @@ pub(crate) mod tests {
             // K = 7, d_x = 7.5: usable per band [6, 2, 1, 0, 3, 1, 1, 3] and closed, against
             // [9, 0, 1, 0, 0, 1, 0, 0, 0] with the angles kept).
             let median_residual = |x: &[f64]| {
-                let r = per_sample_sorted(&pb, x, |c| {
-                    model::conjugation_residual_deg(c.n.vals(), c.t1.vals(), c.t2.vals())
-                });
+                let r =
+                    per_sample_sorted(&pb, x, |c| model::conjugation_residual_deg(c.n, c.t1, c.t2));
                 r[r.len() / 2]
             };
             let mut kept = x.clone();
@@ -791,47 +798,5 @@ pub(crate) mod tests {
             sums.0,
             sums.1
         );
-    }
-
-    /// Exploration aid (ignored): solve a few 1R candidates and print what happened.
-    #[test]
-    #[ignore]
-    fn explore_candidates_1r() {
-        let w: f64 = std::env::var("WCL")
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(W_CLOSURE);
-        let mut pb = problem_1r(360);
-        pb.w_closure = w;
-        let mut tot = 0;
-        for i in 0..12 {
-            let t0 = std::time::Instant::now();
-            let x0 = initial_guess(&pb, 1, 0, i);
-            let e0 = pb.evaluate(&x0);
-            eprintln!(
-                "start cons {:?}",
-                e0.cons_exact
-                    .iter()
-                    .map(|v| format!("{v:.3}"))
-                    .collect::<Vec<_>>()
-            );
-            let c = solve(&pb, &SlsqpRs, 1, 0, i, 400);
-            let nrob = c.robust.iter().filter(|r| **r).count();
-            let pos = c
-                .ntilde
-                .iter()
-                .zip(&c.robust)
-                .filter(|(v, r)| **r && v.is_some_and(|v| v[0] > 0.0))
-                .count();
-            eprintln!(
-                "cand {i}: f={:.2} status={:?} evals={} valid={} reason={:?} res={:.3}° robust={} pos={} {:.2}s",
-                c.f, c.status, c.evals, c.valid, c.reason, c.residual_deg, nrob, pos,
-                t0.elapsed().as_secs_f64()
-            );
-            if c.valid {
-                tot += nrob;
-            }
-        }
-        eprintln!("total robust samples over valid candidates: {tot}");
     }
 }

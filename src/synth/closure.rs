@@ -13,6 +13,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::math::V3;
+
 /// Signed distance reported when the hull has no interior in its dimension. Default 1000:
 /// the conventions ask for "+∞ or a large positive number"; JSON has no ∞ and every real
 /// distance of unit vectors is within [−1, 1], so 1000 cannot be mistaken for one.
@@ -57,8 +59,9 @@ impl NormalCone {
 
     /// Whether a 3R contact (p, n) meets this bound.
     pub fn allows(self, p: [f64; 3], n: [f64; 3]) -> bool {
-        let l = norm(p);
-        l > 0.0 && (dot(n, p) / l).abs() <= self.max_abs_dot()
+        let (p, n) = (V3::from(p), V3::from(n));
+        let l = p.norm();
+        l > 0.0 && (n.dot(p) / l).abs() <= self.max_abs_dot()
     }
 
     /// Name as written in files and on the command line.
@@ -111,27 +114,10 @@ impl Class {
     }
 }
 
-pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-pub(crate) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
-}
-
 /// ñ for one contact (p, n in frame R), zero-padded to 3 components; `None` when the
 /// projection vanishes (the contact cannot act in the motion space at all).
 pub fn project(class: Class, p: [f64; 3], n: [f64; 3]) -> Option<[f64; 3]> {
-    let m = cross(p, n);
+    let m = V3::from(p).cross(V3::from(n)).vals();
     match class {
         Class::R1 => {
             if m[2] > 0.0 {
@@ -148,21 +134,27 @@ pub fn project(class: Class, p: [f64; 3], n: [f64; 3]) -> Option<[f64; 3]> {
             (l > 0.0).then(|| [a / l, b / l, 0.0])
         }
         Class::R3 => {
-            let l = norm(m);
+            let l = V3::from(m).norm();
             (l > 0.0).then(|| [m[0] / l, m[1] / l, m[2] / l])
         }
+    }
+}
+
+/// Signed torque arm about the z axis per unit radius, (p × n)·ẑ / |p_xy| (0 on the axis):
+/// what the 1R and 1R1T robust closure look at.
+pub fn torque_arm(p: [f64; 3], n: [f64; 3]) -> f64 {
+    let pxy = (p[0] * p[0] + p[1] * p[1]).sqrt();
+    if pxy > 0.0 {
+        V3::from(p).cross(V3::from(n)).z / pxy
+    } else {
+        0.0
     }
 }
 
 /// Whether a contact counts for the robust closure (conventions: "Robust closure").
 pub fn is_robust(class: Class, p: [f64; 3], n: [f64; 3]) -> bool {
     let s = GAMMA0_DEG.to_radians().sin();
-    let pxy = (p[0] * p[0] + p[1] * p[1]).sqrt();
-    let arm = if pxy > 0.0 {
-        cross(p, n)[2].abs() / pxy
-    } else {
-        0.0
-    };
+    let arm = torque_arm(p, n).abs();
     match class {
         Class::R1 => arm >= s,
         Class::R1T1 => n[2].abs().max(arm) >= s,
@@ -263,52 +255,46 @@ pub fn signed_dist_2d(pts: &[[f64; 2]]) -> f64 {
 }
 
 /// Closest point to the origin on triangle abc (Ericson's region tests), returned as distance.
-fn dist_to_triangle(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> f64 {
-    let p = [0.0; 3];
-    let ab = sub(b, a);
-    let ac = sub(c, a);
-    let ap = sub(p, a);
-    let d1 = dot(ab, ap);
-    let d2 = dot(ac, ap);
+fn dist_to_triangle(a: V3<f64>, b: V3<f64>, c: V3<f64>) -> f64 {
+    let ab = b - a;
+    let ac = c - a;
+    let ap = -a;
+    let d1 = ab.dot(ap);
+    let d2 = ac.dot(ap);
     if d1 <= 0.0 && d2 <= 0.0 {
-        return norm(a);
+        return a.norm();
     }
-    let bp = sub(p, b);
-    let d3 = dot(ab, bp);
-    let d4 = dot(ac, bp);
+    let bp = -b;
+    let d3 = ab.dot(bp);
+    let d4 = ac.dot(bp);
     if d3 >= 0.0 && d4 <= d3 {
-        return norm(b);
+        return b.norm();
     }
     let vc = d1 * d4 - d3 * d2;
     if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
         let v = d1 / (d1 - d3);
-        return norm([a[0] + v * ab[0], a[1] + v * ab[1], a[2] + v * ab[2]]);
+        return (a + ab.scalec(v)).norm();
     }
-    let cp = sub(p, c);
-    let d5 = dot(ab, cp);
-    let d6 = dot(ac, cp);
+    let cp = -c;
+    let d5 = ab.dot(cp);
+    let d6 = ac.dot(cp);
     if d6 >= 0.0 && d5 <= d6 {
-        return norm(c);
+        return c.norm();
     }
     let vb = d5 * d2 - d1 * d6;
     if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
         let w = d2 / (d2 - d6);
-        return norm([a[0] + w * ac[0], a[1] + w * ac[1], a[2] + w * ac[2]]);
+        return (a + ac.scalec(w)).norm();
     }
     let va = d3 * d6 - d5 * d4;
     if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
         let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-        let bc = sub(c, b);
-        return norm([b[0] + w * bc[0], b[1] + w * bc[1], b[2] + w * bc[2]]);
+        return (b + (c - b).scalec(w)).norm();
     }
     let denom = 1.0 / (va + vb + vc);
     let v = vb * denom;
     let w = vc * denom;
-    norm([
-        a[0] + ab[0] * v + ac[0] * w,
-        a[1] + ab[1] * v + ac[1] * w,
-        a[2] + ab[2] * v + ac[2] * w,
-    ])
+    (a + ab.scalec(v) + ac.scalec(w)).norm()
 }
 
 /// Signed distance from the origin to the boundary of the hull of 3-D points.
@@ -328,19 +314,20 @@ pub fn signed_dist_3d(pts: &[[f64; 3]]) -> f64 {
     for i in 0..m {
         for j in i + 1..m {
             for k in j + 1..m {
-                let nrm = cross(sub(pts[j], pts[i]), sub(pts[k], pts[i]));
-                let l = norm(nrm);
+                let (a, b, c) = (V3::from(pts[i]), V3::from(pts[j]), V3::from(pts[k]));
+                let nrm = (b - a).cross(c - a);
+                let l = nrm.norm();
                 if l <= HULL_TOL {
                     continue;
                 }
-                let u = [nrm[0] / l, nrm[1] / l, nrm[2] / l];
-                let off = dot(u, pts[i]);
+                let u = V3::new(nrm.x / l, nrm.y / l, nrm.z / l);
+                let off = u.dot(a);
                 let (mut pos, mut neg) = (false, false);
                 for (q, pt) in pts.iter().enumerate() {
                     if q == i || q == j || q == k {
                         continue;
                     }
-                    let s = dot(u, *pt) - off;
+                    let s = u.dot(V3::from(*pt)) - off;
                     if s > HULL_TOL {
                         pos = true;
                     } else if s < -HULL_TOL {
@@ -355,19 +342,14 @@ pub fn signed_dist_3d(pts: &[[f64; 3]]) -> f64 {
                     return NO_INTERIOR_DIST;
                 }
                 any_facet = true;
-                // Orient u outward (away from the other points).
-                let (u, off) = if pos {
-                    ([-u[0], -u[1], -u[2]], -off)
-                } else {
-                    (u, off)
-                };
-                // Signed distance of the origin below the plane, positive when inside.
-                let s0 = off - 0.0 * u[0];
+                // The origin's signed distance below the facet plane (u oriented away from
+                // the other points), positive when inside.
+                let s0 = if pos { -off } else { off };
                 if s0 <= 0.0 {
                     inside = false;
                 }
                 min_plane = min_plane.min(s0);
-                min_tri = min_tri.min(dist_to_triangle(pts[i], pts[j], pts[k]));
+                min_tri = min_tri.min(dist_to_triangle(a, b, c));
             }
         }
     }
@@ -460,14 +442,18 @@ mod tests {
     /// Independent reference: dist = −min over unit directions u of max_k u·ñ_k (support
     /// function), evaluated on a dense Fibonacci sphere and refined locally.
     fn support_dist_3d(pts: &[[f64; 3]]) -> f64 {
-        let h = |u: [f64; 3]| pts.iter().map(|p| dot(*p, u)).fold(f64::MIN, f64::max);
+        let h = |u: V3<f64>| {
+            pts.iter()
+                .map(|&p| V3::from(p).dot(u))
+                .fold(f64::MIN, f64::max)
+        };
         let n = 20000;
-        let mut best = (f64::INFINITY, [0.0; 3]);
+        let mut best = (f64::INFINITY, V3::zero());
         for i in 0..n {
             let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
             let r = (1.0 - z * z).sqrt();
             let a = i as f64 * 2.399_963_229_728_653;
-            let u = [r * a.cos(), r * a.sin(), z];
+            let u = V3::new(r * a.cos(), r * a.sin(), z);
             let v = h(u);
             if v < best.0 {
                 best = (v, u);
@@ -478,18 +464,12 @@ mod tests {
         let mut rad = 0.05;
         for _ in 0..60 {
             for _ in 0..200 {
-                let d: [f64; 3] = [
+                let d = V3::new(
                     rng.random_range(-1.0..1.0),
                     rng.random_range(-1.0..1.0),
                     rng.random_range(-1.0..1.0),
-                ];
-                let mut u = [
-                    best.1[0] + rad * d[0],
-                    best.1[1] + rad * d[1],
-                    best.1[2] + rad * d[2],
-                ];
-                let l = norm(u);
-                u = [u[0] / l, u[1] / l, u[2] / l];
+                );
+                let u = (best.1 + d.scalec(rad)).unit();
                 let v = h(u);
                 if v < best.0 {
                     best = (v, u);
@@ -597,13 +577,13 @@ mod tests {
             let bias: f64 = if trial % 3 == 0 { 0.9 } else { 0.0 };
             let pts: Vec<[f64; 3]> = (0..k)
                 .map(|_| {
-                    let v = [
+                    V3::new(
                         rng.random_range(-1.0..1.0) + bias,
                         rng.random_range(-1.0..1.0),
                         rng.random_range(-1.0..1.0),
-                    ];
-                    let l = norm(v);
-                    [v[0] / l, v[1] / l, v[2] / l]
+                    )
+                    .unit()
+                    .vals()
                 })
                 .collect();
             let exact = signed_dist_3d(&pts);

@@ -1,68 +1,16 @@
 //! Forward-mode automatic differentiation for the synthesis energies.
 //!
-//! Owns the [`Scalar`] trait the curve-pair model is written against, implemented for plain
-//! `f64` (values only) and for [`Dual`] (value plus a fixed-size gradient over a *local* set
-//! of design variables), and the small 3-vector type [`V3`] used by that generic code. It
-//! does not know which design variables a gradient slot stands for: callers map local slots
-//! to global variable indices (see `energy`).
+//! Owns [`Dual`] (value plus a fixed-size gradient over a *local* set of design variables)
+//! and its implementation of [`Scalar`], the number trait of `math` that the curve-pair
+//! model is written against. It does not know which design variables a gradient slot stands
+//! for: callers map local slots to global variable indices (see `energy`).
 //!
 //! Gradients are exact (to round-off): no finite differences are used anywhere in the
 //! optimizer's path; finite differences appear only in tests that check these gradients.
 
 use std::ops::{Add, AddAssign, Div, Mul, Neg, Sub};
 
-/// A real number the curve-pair model can be evaluated with: `f64` or a [`Dual`].
-pub trait Scalar:
-    Copy
-    + Add<Output = Self>
-    + Sub<Output = Self>
-    + Mul<Output = Self>
-    + Div<Output = Self>
-    + Neg<Output = Self>
-    + Add<f64, Output = Self>
-    + Sub<f64, Output = Self>
-    + Mul<f64, Output = Self>
-    + AddAssign
-{
-    /// A constant (zero derivative).
-    fn cst(v: f64) -> Self;
-    /// The value part.
-    fn val(self) -> f64;
-    /// Square root.
-    fn sqrt(self) -> Self;
-    /// Sine.
-    fn sin(self) -> Self;
-    /// Cosine.
-    fn cos(self) -> Self;
-    /// Exponential.
-    fn exp(self) -> Self;
-    /// Natural logarithm.
-    fn ln(self) -> Self;
-}
-
-impl Scalar for f64 {
-    fn cst(v: f64) -> Self {
-        v
-    }
-    fn val(self) -> f64 {
-        self
-    }
-    fn sqrt(self) -> Self {
-        f64::sqrt(self)
-    }
-    fn sin(self) -> Self {
-        f64::sin(self)
-    }
-    fn cos(self) -> Self {
-        f64::cos(self)
-    }
-    fn exp(self) -> Self {
-        f64::exp(self)
-    }
-    fn ln(self) -> Self {
-        f64::ln(self)
-    }
-}
+use super::math::Scalar;
 
 /// A dual number: value `v` and gradient `g` over `D` local variables.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -197,104 +145,6 @@ impl<const D: usize> Scalar for Dual<D> {
     }
     fn ln(self) -> Self {
         self.chain(self.v.ln(), 1.0 / self.v)
-    }
-}
-
-/// A 3-vector over any [`Scalar`].
-#[derive(Clone, Copy, Debug)]
-pub struct V3<S> {
-    /// x
-    pub x: S,
-    /// y
-    pub y: S,
-    /// z
-    pub z: S,
-}
-
-impl<S: Scalar> V3<S> {
-    /// From components.
-    pub fn new(x: S, y: S, z: S) -> Self {
-        Self { x, y, z }
-    }
-    /// A constant vector.
-    pub fn cst(v: [f64; 3]) -> Self {
-        Self::new(S::cst(v[0]), S::cst(v[1]), S::cst(v[2]))
-    }
-    /// The zero vector.
-    pub fn zero() -> Self {
-        Self::cst([0.0; 3])
-    }
-    /// Dot product.
-    pub fn dot(self, o: Self) -> S {
-        self.x * o.x + self.y * o.y + self.z * o.z
-    }
-    /// Dot product with a constant vector.
-    pub fn dotc(self, o: [f64; 3]) -> S {
-        self.x * o[0] + self.y * o[1] + self.z * o[2]
-    }
-    /// Cross product.
-    pub fn cross(self, o: Self) -> Self {
-        Self::new(
-            self.y * o.z - self.z * o.y,
-            self.z * o.x - self.x * o.z,
-            self.x * o.y - self.y * o.x,
-        )
-    }
-    /// Squared norm.
-    pub fn norm2(self) -> S {
-        self.dot(self)
-    }
-    /// Norm.
-    pub fn norm(self) -> S {
-        self.norm2().sqrt()
-    }
-    /// Scaled by a scalar.
-    pub fn scale(self, s: S) -> Self {
-        Self::new(self.x * s, self.y * s, self.z * s)
-    }
-    /// Scaled by a constant.
-    pub fn scalec(self, s: f64) -> Self {
-        Self::new(self.x * s, self.y * s, self.z * s)
-    }
-    /// Unit vector (the caller guarantees a non-zero norm).
-    pub fn unit(self) -> Self {
-        let inv = S::cst(1.0) / self.norm();
-        self.scale(inv)
-    }
-    /// Apply a constant 3×3 matrix (row-major).
-    pub fn rot(self, m: &[[f64; 3]; 3]) -> Self {
-        Self::new(self.dotc(m[0]), self.dotc(m[1]), self.dotc(m[2]))
-    }
-    /// Apply the transpose of a constant 3×3 matrix (row-major).
-    pub fn rot_t(self, m: &[[f64; 3]; 3]) -> Self {
-        Self::new(
-            self.x * m[0][0] + self.y * m[1][0] + self.z * m[2][0],
-            self.x * m[0][1] + self.y * m[1][1] + self.z * m[2][1],
-            self.x * m[0][2] + self.y * m[1][2] + self.z * m[2][2],
-        )
-    }
-    /// Values only.
-    pub fn vals(self) -> [f64; 3] {
-        [self.x.val(), self.y.val(), self.z.val()]
-    }
-}
-
-impl<S: Scalar> Add for V3<S> {
-    type Output = Self;
-    fn add(self, o: Self) -> Self {
-        Self::new(self.x + o.x, self.y + o.y, self.z + o.z)
-    }
-}
-impl<S: Scalar> Sub for V3<S> {
-    type Output = Self;
-    fn sub(self, o: Self) -> Self {
-        Self::new(self.x - o.x, self.y - o.y, self.z - o.z)
-    }
-}
-impl<S: Scalar> Neg for V3<S> {
-    type Output = Self;
-    fn neg(self) -> Self {
-        Self::new(-self.x, -self.y, -self.z)
     }
 }
 

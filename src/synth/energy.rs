@@ -37,7 +37,8 @@
 
 use super::bspline::Basis;
 use super::closure::{Class, NormalCone};
-use super::dual::{Dual, Scalar, V3};
+use super::dual::Dual;
+use super::math::{Scalar, V3};
 use super::model::{self, ANGLE_CPS, CURVE_CPS, NV};
 use super::pose::PoseTrack;
 use std::cell::RefCell;
@@ -402,8 +403,9 @@ impl PairProblem {
             let mut gi = [0.0; DT];
             let mut gj = [0.0; DT];
             for (ui, uj) in units[i].iter().zip(&units[j]) {
-                let d = (V3::<f64>::cst(uj.vals()) - V3::cst(ui.vals())).vals();
-                e += d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+                let d = V3::<f64>::cst(uj.vals()) - V3::cst(ui.vals());
+                e += d.norm2();
+                let d = d.vals();
                 for (a, b) in gi.iter_mut().zip(dot_grad(d, ui)) {
                     *a -= 2.0 * b;
                 }
@@ -596,22 +598,16 @@ impl PairProblem {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::synth::math::{UnitQuaternion, Vector3};
     use crate::synth::pose::{pose_1r, Pose, PoseFn, PoseTrack};
 
     fn problem(class: Class) -> (PairProblem, Vec<f64>) {
         let at: PoseFn = match class {
             Class::R3 => Arc::new(|t: f64| {
                 let a = std::f64::consts::TAU * t;
-                let q =
-                    nalgebra::UnitQuaternion::from_euler_angles(0.3 * a.sin(), 0.2 * a.cos(), a);
-                let w = nalgebra::Vector3::new(0.3, -0.1, 1.0) * std::f64::consts::TAU;
-                Pose::new(
-                    t,
-                    &q,
-                    nalgebra::Vector3::zeros(),
-                    w,
-                    nalgebra::Vector3::zeros(),
-                )
+                let q = UnitQuaternion::from_euler_angles(0.3 * a.sin(), 0.2 * a.cos(), a);
+                let w = Vector3::new(0.3, -0.1, 1.0) * std::f64::consts::TAU;
+                Pose::new(t, &q, Vector3::zeros(), w, Vector3::zeros())
             }),
             _ => Arc::new(move |t: f64| {
                 let a = std::f64::consts::TAU;
@@ -761,8 +757,7 @@ mod tests {
             .iter()
             .map(|pose| {
                 let c = model::contact_f64(&x, pose, pb.dx);
-                let (p, nn) = (c.p.vals(), c.n.vals());
-                (nn[1] * p[0] - nn[0] * p[1]) / (p[0] * p[0] + p[1] * p[1]).sqrt()
+                crate::synth::closure::torque_arm(c.p.vals(), c.n.vals())
             })
             .collect();
         for sign in [1.0, -1.0] {

@@ -1,15 +1,27 @@
-//! Errors of the synthesis module.
+//! Errors of the synthesis module: a request that cannot be served ([`SynthError`]), a
+//! mechanism file that cannot be read, validated or written ([`MechanismFileError`]) and a
+//! report that cannot be drawn ([`ReportError`]).
 //!
-//! Owns [`SynthError`]; every variant names what went wrong and where (file, field, K/d_x),
-//! and the infeasible/cancelled variants carry the best mechanism found so far.
+//! A search that ends without an accepted design (infeasible or cancelled) is not an error:
+//! it is an [`Outcome`](super::Outcome) carrying the best design reached. This module does
+//! not know the mechanism type.
 
 use std::path::PathBuf;
 
-use super::mechanism::Mechanism;
-
-/// Everything that can go wrong in synthesis, in reading or writing a mechanism file.
+/// A synthesis request that cannot be served.
 #[derive(Debug, thiserror::Error)]
 pub enum SynthError {
+    /// Bad option values.
+    #[error("bad synthesis request: {0}")]
+    BadRequest(String),
+    /// The optimizer produced non-finite numbers for every candidate of a band.
+    #[error("numerical failure: {0}")]
+    Numerical(String),
+}
+
+/// A `mechanism.json` that cannot be read, is malformed or invalid, or cannot be written.
+#[derive(Debug, thiserror::Error)]
+pub enum MechanismFileError {
     /// File system error.
     #[error("{path}: {source}")]
     Io {
@@ -41,27 +53,21 @@ pub enum SynthError {
         /// What is wrong.
         message: String,
     },
-    /// A request that cannot be served (bad option values).
-    #[error("bad synthesis request: {0}")]
-    BadRequest(String),
-    /// No tried K/d_x gave an accepted mechanism.
-    #[error("{message}")]
-    Infeasible {
-        /// Best E_valiTime reached, worst samples and what to try.
-        message: String,
-        /// The best combination found (not accepted), for inspection.
-        best: Option<Box<Mechanism>>,
+}
+
+/// The synthesis report could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    /// Creating the report directory failed.
+    #[error("{path}: {source}")]
+    Io {
+        /// The directory.
+        path: PathBuf,
+        /// The cause.
+        #[source]
+        source: std::io::Error,
     },
-    /// The optimizer produced non-finite numbers for every candidate of a band.
-    #[error("numerical failure: {0}")]
-    Numerical(String),
-    /// Stopped by the user (Ctrl-C); carries the best so far, marked partial.
-    #[error("synthesis cancelled{}", if .partial.is_some() { " (best design so far kept, marked partial)" } else { " before any design was found" })]
-    Cancelled {
-        /// Best so far.
-        partial: Option<Box<Mechanism>>,
-    },
-    /// Writing a report plot failed.
+    /// Drawing a plot failed.
     #[error("report plot: {0}")]
     Plot(#[from] crate::plot::PlotError),
 }

@@ -1,19 +1,10 @@
-//! Stage B: genetic combination of candidates, one per height band (paper §5.2.3).
+//! The genetic algorithm of stage B (paper §5.2.3): one candidate index per height band.
 //!
-//! Owns the genome (one candidate index per band), the lexicographic fitness and the
-//! generational loop: truncation selection, one-point crossover, per-gene mutation,
-//! elitism, a fitness cache, and parallel fitness evaluation (deterministic: results are
-//! collected in population order). It does not solve candidates or decide acceptance.
-//!
-//! **Fitness** (compared lexicographically, better first):
-//! 1. E_valiTime, higher (paper);
-//! 2. robust E_valiTime, higher (ours: the robust closure of `docs/conventions.md`);
-//! 3. E_maxDist, lower (paper);
-//! 4. robust E_maxDist, lower (ours).
-//!
-//! The paper ranks by (1, 3). Putting the robust validity second means that among designs
-//! meeting the paper's criterion the robust one wins, which 1R needs: there every valid
-//! design has E_maxDist = −1 exactly, so (3) never separates them.
+//! Owns the genome, the generational loop (truncation selection, one-point crossover,
+//! per-gene mutation, elitism), a fitness cache, and parallel fitness evaluation
+//! (deterministic: results are collected in population order). Fitness is that of
+//! `combine` over the N samples. It does not solve candidates, search combinations
+//! exhaustively or decide acceptance (see `combine` and `search`).
 
 use std::cmp::Ordering;
 use std::collections::HashMap;
@@ -22,7 +13,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
-use super::closure::{self, Class, ClosureSummary};
+use super::combine::{Density, Fitness, Pool};
 
 /// Population size. Default 48: with truncation to 12 parents this keeps enough diversity
 /// for K ≤ 6 bands of 30 candidates, and 48 × 300 fitness evaluations (most of them cache
@@ -37,79 +28,6 @@ pub const MUTATION_PER_GENOME: f64 = 1.0;
 pub const GENERATIONS: usize = 300;
 /// Stop early after this many generations without improvement of the best. Default 100.
 pub const STALL_GENERATIONS: usize = 100;
-
-/// Fitness of one combination.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Fitness {
-    /// E_valiTime.
-    pub vali_time: f64,
-    /// Robust E_valiTime.
-    pub robust_vali_time: f64,
-    /// E_maxDist.
-    pub max_dist: f64,
-    /// Robust E_maxDist.
-    pub robust_max_dist: f64,
-}
-
-impl Fitness {
-    /// From a closure summary.
-    pub fn of(s: &ClosureSummary) -> Self {
-        Self {
-            vali_time: s.vali_time,
-            robust_vali_time: s.robust_vali_time,
-            max_dist: s.max_dist,
-            robust_max_dist: s.robust_max_dist,
-        }
-    }
-
-    /// Lexicographic order: `Greater` means `self` is better.
-    pub fn cmp_better(&self, o: &Self) -> Ordering {
-        self.vali_time
-            .total_cmp(&o.vali_time)
-            .then(self.robust_vali_time.total_cmp(&o.robust_vali_time))
-            .then(o.max_dist.total_cmp(&self.max_dist))
-            .then(o.robust_max_dist.total_cmp(&self.robust_max_dist))
-    }
-}
-
-/// One candidate as the GA sees it: ñ per sample (None where it vanishes) and whether the
-/// contact counts for the robust closure per sample.
-pub type CandidateView<'a> = (&'a [Option<[f64; 3]>], &'a [bool]);
-
-/// What the GA needs of a candidate: per-sample ñ and robust flags.
-pub struct Pool<'a> {
-    /// Class.
-    pub class: Class,
-    /// Per band: the usable candidates' (ñ per sample, robust per sample).
-    pub bands: Vec<Vec<CandidateView<'a>>>,
-}
-
-impl Pool<'_> {
-    /// Closure summary of a genome.
-    pub fn summary(&self, genome: &[usize]) -> ClosureSummary {
-        let n = self.bands[0][genome[0]].0.len();
-        let mut dist = Vec::with_capacity(n);
-        let mut rdist = Vec::with_capacity(n);
-        let mut all = Vec::with_capacity(genome.len());
-        let mut rob = Vec::with_capacity(genome.len());
-        for i in 0..n {
-            all.clear();
-            rob.clear();
-            for (k, &g) in genome.iter().enumerate() {
-                let (nt, r) = self.bands[k][g];
-                if let Some(v) = nt[i] {
-                    all.push(v);
-                    if r[i] {
-                        rob.push(v);
-                    }
-                }
-            }
-            dist.push(closure::signed_dist(self.class, &all));
-            rdist.push(closure::signed_dist(self.class, &rob));
-        }
-        ClosureSummary::from_dists(dist, rdist)
-    }
-}
 
 /// Result of a GA run.
 #[derive(Clone, Debug)]
@@ -162,7 +80,7 @@ pub fn run(pool: &Pool, s: GaSettings, on_generation: &mut dyn FnMut(usize) -> b
         fresh.dedup();
         let fits: Vec<Fitness> = fresh
             .par_iter()
-            .map(|g| Fitness::of(&pool.summary(g)))
+            .map(|g| pool.fitness(g, Density::Samples))
             .collect();
         for (g, f) in fresh.into_iter().zip(fits) {
             cache.insert(g, f);
@@ -209,50 +127,18 @@ pub fn run(pool: &Pool, s: GaSettings, on_generation: &mut dyn FnMut(usize) -> b
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
+    use crate::synth::closure::Class;
 
-    fn f(v: f64, rv: f64, m: f64, rm: f64) -> Fitness {
-        Fitness {
-            vali_time: v,
-            robust_vali_time: rv,
-            max_dist: m,
-            robust_max_dist: rm,
-        }
-    }
+    /// One candidate's views (ñ, robust) at every instant.
+    pub(crate) type OwnedCandidate = (Vec<Option<[f64; 3]>>, Vec<bool>);
 
-    /// Guards the lexicographic fitness order: validity first, then robust validity, then
-    /// the lower (more negative) maximum distance, then the robust one.
-    #[test]
-    fn fitness_ordering_is_lexicographic() {
-        use Ordering::*;
-        assert_eq!(
-            f(1.0, 0.1, 0.5, 9.0).cmp_better(&f(0.9, 1.0, -1.0, -1.0)),
-            Greater
-        );
-        assert_eq!(
-            f(1.0, 1.0, -0.1, -0.1).cmp_better(&f(1.0, 0.9, -1.0, -1.0)),
-            Greater
-        );
-        assert_eq!(
-            f(1.0, 1.0, -0.3, 5.0).cmp_better(&f(1.0, 1.0, -0.2, -1.0)),
-            Greater
-        );
-        assert_eq!(
-            f(1.0, 1.0, -1.0, -0.5).cmp_better(&f(1.0, 1.0, -1.0, -0.4)),
-            Greater
-        );
-        assert_eq!(
-            f(1.0, 1.0, -1.0, -0.5).cmp_better(&f(1.0, 1.0, -1.0, -0.5)),
-            Equal
-        );
-    }
-
-    /// Builds a 1R pool where only one combination closes robustly at every sample.
-    type OwnedCandidate = (Vec<Option<[f64; 3]>>, Vec<bool>);
-
-    fn pool_data() -> Vec<Vec<OwnedCandidate>> {
+    /// A 1R pool of 3 bands × 10 candidates (20 samples) where only one combination closes
+    /// robustly at every sample.
+    pub(crate) fn pool_data() -> Vec<Vec<OwnedCandidate>> {
         let n = 20;
+        let over = crate::synth::candidate::OVERSAMPLE;
         let mut bands = Vec::new();
         for band in 0..3 {
             let mut cands = Vec::new();
@@ -270,8 +156,9 @@ mod tests {
                         }
                     }
                 };
-                let nt = (0..n)
-                    .map(|i| {
+                let nt = (0..n * over)
+                    .map(|e| {
+                        let i = e / over;
                         let s = if (band, c) == (0, 4)
                             || (band, c) == (1, 7)
                             || (band, c) == (2, 3)
@@ -284,8 +171,8 @@ mod tests {
                         Some([s, 0.0, 0.0])
                     })
                     .collect();
-                let rob = (0..n)
-                    .map(|i| (band, c) == (0, 4) || (band, c) == (2, 3) || i % 3 == 0)
+                let rob = (0..n * over)
+                    .map(|e| (band, c) == (0, 4) || (band, c) == (2, 3) || (e / over) % 3 == 0)
                     .collect();
                 cands.push((nt, rob));
             }

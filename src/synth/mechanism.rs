@@ -12,7 +12,8 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::closure::{self, Class, EPSILON, GAMMA0_DEG};
-use super::error::SynthError;
+use super::error::MechanismFileError;
+use super::math::{mat3_of_wxyz, rz, V3};
 
 /// The format tag.
 pub const FORMAT: &str = "mpcmech-mechanism/1";
@@ -158,12 +159,35 @@ pub struct Attempt {
     pub robust_vali_time: f64,
     /// Best E_maxDist.
     pub max_dist: f64,
-    /// Meets the acceptance criteria (paper and robust closure, every candidate's residual
-    /// ≤ 1°), whether or not the search went on for a larger closure margin.
+    /// Its robust E_maxDist (ours; absent in older files).
+    #[serde(default = "no_interior")]
+    pub robust_max_dist: f64,
+    /// Its closure at 4× the sample density, where acceptance is judged (absent in older
+    /// files and when no combination could be scored).
+    #[serde(default)]
+    pub oversampled: Option<OversampledClosure>,
+    /// The combination was found by searching every combination of the bands' usable
+    /// candidates (else by the GA and a local search).
+    #[serde(default)]
+    pub exhaustive: bool,
+    /// Bands laid out with usable candidates but left out of this combination (a K − 1
+    /// combination found by leaving bands out of a K one that closed); a gap in the stack.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub left_out: Vec<usize>,
+    /// Meets the acceptance criteria: paper and robust closure at every instant of the 4×
+    /// check with E_maxDist ≤ −`solve.min_margin`, every candidate's residual ≤ 1°.
     #[serde(default)]
     pub closes: bool,
     /// The attempt the mechanism was taken from.
     pub accepted: bool,
+}
+
+fn no_interior() -> f64 {
+    closure::NO_INTERIOR_DIST
+}
+
+fn epsilon() -> f64 {
+    EPSILON
 }
 
 /// How the mechanism was found.
@@ -201,6 +225,10 @@ pub struct SolveInfo {
     /// Bound on the 3R contact normals used (absent in older files: the default).
     #[serde(default)]
     pub normal_cone: closure::NormalCone,
+    /// Closure margin asked of the accepted design (E_maxDist ≤ −min_margin; absent in
+    /// older files: ε).
+    #[serde(default = "epsilon")]
+    pub min_margin: f64,
 }
 
 /// A mechanism: the content of `mechanism.json`.
@@ -285,24 +313,10 @@ impl std::fmt::Display for CheckReport {
     }
 }
 
-fn qrot(q: [f64; 4], v: [f64; 3]) -> [f64; 3] {
-    let [w, x, y, z] = q;
-    let uq = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
-    let r = uq * nalgebra::Vector3::new(v[0], v[1], v[2]);
-    [r.x, r.y, r.z]
-}
-fn rzv(a: f64, v: [f64; 3]) -> [f64; 3] {
-    let (s, c) = a.sin_cos();
-    [c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]]
-}
-fn dist3(a: [f64; 3], b: [f64; 3]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
-}
-
 impl Mechanism {
     /// Write as pretty JSON.
-    pub fn save(&self, path: &Path) -> Result<(), SynthError> {
-        let io = |source| SynthError::Io {
+    pub fn save(&self, path: &Path) -> Result<(), MechanismFileError> {
+        let io = |source| MechanismFileError::Io {
             path: path.to_path_buf(),
             source,
         };
@@ -311,7 +325,7 @@ impl Mechanism {
                 std::fs::create_dir_all(dir).map_err(io)?;
             }
         }
-        let text = serde_json::to_string_pretty(self).map_err(|e| SynthError::Invalid {
+        let text = serde_json::to_string_pretty(self).map_err(|e| MechanismFileError::Invalid {
             path: path.to_path_buf(),
             field: "(whole file)".into(),
             message: e.to_string(),
@@ -320,17 +334,17 @@ impl Mechanism {
     }
 
     /// Read a mechanism from a file or from a directory holding `mechanism.json`.
-    pub fn load(path: &Path) -> Result<Mechanism, SynthError> {
+    pub fn load(path: &Path) -> Result<Mechanism, MechanismFileError> {
         let file: PathBuf = if path.is_dir() {
             path.join("mechanism.json")
         } else {
             path.to_path_buf()
         };
-        let text = std::fs::read_to_string(&file).map_err(|source| SynthError::Io {
+        let text = std::fs::read_to_string(&file).map_err(|source| MechanismFileError::Io {
             path: file.clone(),
             source,
         })?;
-        let m: Mechanism = serde_json::from_str(&text).map_err(|e| SynthError::Parse {
+        let m: Mechanism = serde_json::from_str(&text).map_err(|e| MechanismFileError::Parse {
             path: file.clone(),
             line: e.line(),
             column: e.column(),
@@ -341,8 +355,8 @@ impl Mechanism {
     }
 
     /// Structural validation: format tag, array lengths, finite numbers.
-    pub fn validate(&self, file: &Path) -> Result<(), SynthError> {
-        let bad = |field: String, message: String| SynthError::Invalid {
+    pub fn validate(&self, file: &Path) -> Result<(), MechanismFileError> {
+        let bad = |field: String, message: String| MechanismFileError::Invalid {
             path: file.to_path_buf(),
             field,
             message,
@@ -435,29 +449,22 @@ impl Mechanism {
         let mut r = CheckReport::default();
         let n = self.samples;
         let dt = 1.0 / n as f64;
-        let d = [self.driver_offset, 0.0, 0.0];
+        let d = V3::new(self.driver_offset, 0.0, 0.0);
         let tau = std::f64::consts::TAU;
         // Coincident points and opposite normals.
         let (mut e2, mut e1, mut en2, mut en1, mut eu) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0.0f64);
         for cp in &self.curve_pairs {
             let s = &cp.samples;
-            for i in 0..n {
-                let fm = &self.follower_motion[i];
-                let phi = tau * i as f64 * dt;
-                let q = fm.rotation;
-                let p2 = qrot(q, s.c2[i]);
-                let p2 = [
-                    p2[0] + fm.translation[0],
-                    p2[1] + fm.translation[1],
-                    p2[2] + fm.translation[2],
-                ];
-                e2 = e2.max(dist3(p2, s.p[i]));
-                let p1 = rzv(phi, s.c1[i]);
-                e1 = e1.max(dist3([p1[0] + d[0], p1[1], p1[2]], s.p[i]));
-                let m2 = qrot(q, s.n2[i]);
-                en2 = en2.max(dist3(m2, [-s.n[i][0], -s.n[i][1], -s.n[i][2]]));
-                en1 = en1.max(dist3(rzv(phi, s.n1[i]), s.n[i]));
-                eu = eu.max((dist3(s.n[i], [0.0; 3]) - 1.0).abs());
+            for (i, fm) in self.follower_motion.iter().enumerate() {
+                let r2 = mat3_of_wxyz(fm.rotation);
+                let r1 = rz(tau * i as f64 * dt);
+                let (p, nn) = (V3::from(s.p[i]), V3::from(s.n[i]));
+                let p2 = V3::from(s.c2[i]).rot(&r2) + V3::from(fm.translation);
+                e2 = e2.max((p2 - p).norm());
+                e1 = e1.max((V3::from(s.c1[i]).rot(&r1) + d - p).norm());
+                en2 = en2.max((V3::from(s.n2[i]).rot(&r2) + nn).norm());
+                en1 = en1.max((V3::from(s.n1[i]).rot(&r1) - nn).norm());
+                eu = eu.max((nn.norm() - 1.0).abs());
             }
         }
         r.add(
@@ -475,20 +482,15 @@ impl Mechanism {
         let mut worst_at = (0, 0);
         for (k, cp) in self.curve_pairs.iter().enumerate() {
             let s = &cp.samples;
-            let der = |arr: &[[f64; 3]], i: usize| -> [f64; 3] {
-                let g = |o: isize| arr[((i as isize + o).rem_euclid(n as isize)) as usize];
-                let (a, b, c, e) = (g(-2), g(-1), g(1), g(2));
-                let mut out = [0.0; 3];
-                for x in 0..3 {
-                    out[x] = (a[x] - 8.0 * b[x] + 8.0 * c[x] - e[x]) / (12.0 * dt);
-                }
-                out
+            let der = |arr: &[[f64; 3]], i: usize| -> V3<f64> {
+                let g =
+                    |o: isize| V3::from(arr[((i as isize + o).rem_euclid(n as isize)) as usize]);
+                (g(-2) - g(-1).scalec(8.0) + g(1).scalec(8.0) - g(2)).scalec(1.0 / (12.0 * dt))
             };
-            for i in 0..n {
-                let fm = &self.follower_motion[i];
-                let t2 = qrot(fm.rotation, der(&s.c2, i));
-                let t1 = rzv(tau * i as f64 * dt, der(&s.c1, i));
-                let res = super::model::conjugation_residual_deg(s.n[i], t1, t2);
+            for (i, fm) in self.follower_motion.iter().enumerate() {
+                let t2 = der(&s.c2, i).rot(&mat3_of_wxyz(fm.rotation));
+                let t1 = der(&s.c1, i).rot(&rz(tau * i as f64 * dt));
+                let res = super::model::conjugation_residual_deg(V3::from(s.n[i]), t1, t2);
                 if res > worst {
                     worst = res;
                     worst_at = (k, i);
@@ -595,9 +597,9 @@ impl Mechanism {
             let sg = cone.max_abs_dot();
             let mut w = 0.0f64;
             for cp in &self.curve_pairs {
-                for (p, nn) in cp.samples.p.iter().zip(&cp.samples.n) {
-                    let l = dist3(*p, [0.0; 3]).max(1e-300);
-                    w = w.max(((p[0] * nn[0] + p[1] * nn[1] + p[2] * nn[2]) / l).abs());
+                for (&p, &nn) in cp.samples.p.iter().zip(&cp.samples.n) {
+                    let p = V3::from(p);
+                    w = w.max((p.dot(V3::from(nn)) / p.norm().max(1e-300)).abs());
                 }
             }
             r.add(

@@ -5,25 +5,29 @@
 //! combination, the K/d_x search and the `mechanism.json` file. It does not build meshes or
 //! talk to hardware.
 
+pub mod assemble;
+pub mod bands;
 pub mod bspline;
 pub mod candidate;
 pub mod closure;
+pub mod combine;
 pub mod dual;
 pub mod energy;
 pub mod error;
-#[cfg(test)]
-mod explore_r3;
 pub mod ga;
+pub mod math;
 pub mod mechanism;
 pub mod model;
 pub mod optimizer;
+pub mod outcome;
 pub mod pose;
 pub mod report;
 pub mod search;
 
 pub use closure::Class;
-pub use error::SynthError;
+pub use error::{MechanismFileError, ReportError, SynthError};
 pub use mechanism::{CheckReport, Mechanism};
+pub use outcome::Outcome;
 pub use search::{synthesize_track, NoProgress, SynthOptions, SynthProgress};
 
 use std::sync::Arc;
@@ -41,18 +45,13 @@ impl From<MotionClass> for Class {
 }
 
 /// Synthesize a mechanism for a motion: K conjugate curve pairs with dynamic form closure
-/// (paper and robust) at every sample, or a typed error saying why not.
+/// (paper and robust) at every instant. The [`Outcome`] says whether a design was accepted
+/// and carries the best one reached otherwise; an error is a request that cannot be served.
 pub fn synthesize(
     motion: &Motion,
     opts: &SynthOptions,
     progress: &dyn SynthProgress,
-) -> Result<Mechanism, SynthError> {
-    if opts.samples < 8 {
-        return Err(SynthError::BadRequest(format!(
-            "--samples {} is too few (at least 8; the paper uses 360)",
-            opts.samples
-        )));
-    }
+) -> Result<Outcome, SynthError> {
     let poses = Arc::new(pose::PoseTrack::from_motion(motion, opts.samples));
     let source = motion
         .source()

@@ -19,7 +19,7 @@
 //! It does not sum energies or know about constraints (see `energy`).
 
 use super::bspline::Basis;
-use super::dual::{Scalar, V3};
+use super::math::{rz, Scalar, V3};
 use super::pose::Pose;
 
 /// Control points of each follower curve c²ₖ: 8 (paper §5.1).
@@ -56,12 +56,6 @@ pub struct Contact<S> {
     pub c1d: V3<S>,
     /// Regularized unit curvature direction of c² in R.
     pub kappa: V3<S>,
-}
-
-/// The rotation Rz(a) as a row-major matrix.
-pub fn rz(a: f64) -> [[f64; 3]; 3] {
-    let (s, c) = a.sin_cos();
-    [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
 }
 
 /// c², ċ², c̈² from the active control points and basis.
@@ -160,13 +154,13 @@ pub fn contact_f64(x: &[f64], pose: &Pose, dx: f64) -> Contact<f64> {
 
 /// Conjugation residual in degrees: the worst angle between n and the normal planes of T¹
 /// and T², i.e. asin(max(|n·T̂¹|, |n·T̂²|)).
-pub fn conjugation_residual_deg(n: [f64; 3], t1: [f64; 3], t2: [f64; 3]) -> f64 {
-    let f = |t: [f64; 3]| {
-        let l = (t[0] * t[0] + t[1] * t[1] + t[2] * t[2]).sqrt();
+pub fn conjugation_residual_deg(n: V3<f64>, t1: V3<f64>, t2: V3<f64>) -> f64 {
+    let f = |t: V3<f64>| {
+        let l = t.norm();
         if l == 0.0 {
             0.0
         } else {
-            ((n[0] * t[0] + n[1] * t[1] + n[2] * t[2]) / l).abs()
+            (n.dot(t) / l).abs()
         }
     };
     f(t1).max(f(t2)).min(1.0).asin().to_degrees()

@@ -8,15 +8,15 @@
 
 use std::sync::Arc;
 
-use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use super::math::{mat3_of, quaternion_of, Mat3, UnitQuaternion, Vector3, V3};
 
 /// One follower pose with first derivatives, in frame R.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Pose {
     /// t ∈ [0, 1).
     pub t: f64,
-    /// R₂(t), row-major.
-    pub rot: [[f64; 3]; 3],
+    /// R₂(t).
+    pub rot: Mat3,
     /// T₂(t).
     pub trans: [f64; 3],
     /// ω (`dR₂/dt = [ω]ₓ R₂`), per unit t.
@@ -34,16 +34,9 @@ impl Pose {
         omega: Vector3<f64>,
         vel: Vector3<f64>,
     ) -> Self {
-        let m: Matrix3<f64> = *q.to_rotation_matrix().matrix();
-        let mut rot = [[0.0; 3]; 3];
-        for (r, row) in rot.iter_mut().enumerate() {
-            for (c, x) in row.iter_mut().enumerate() {
-                *x = m[(r, c)];
-            }
-        }
         Self {
             t,
-            rot,
+            rot: mat3_of(q),
             trans: trans.into(),
             omega: omega.into(),
             vel: vel.into(),
@@ -52,8 +45,7 @@ impl Pose {
 
     /// Rotation as a unit quaternion.
     pub fn quaternion(&self) -> UnitQuaternion<f64> {
-        let m = Matrix3::from_fn(|r, c| self.rot[r][c]);
-        UnitQuaternion::from_matrix(&m)
+        quaternion_of(&self.rot)
     }
 }
 
@@ -108,6 +100,26 @@ impl PoseTrack {
     /// Whether there are no samples.
     pub fn is_empty(&self) -> bool {
         self.samples.is_empty()
+    }
+
+    /// Share of the samples at which the follower stands still (|ω| and |dT₂/dt| at most
+    /// [`STILL_SPEED`]).
+    pub fn still_share(&self) -> f64 {
+        let still = self.samples.iter().filter(|p| p.is_still()).count();
+        still as f64 / self.len().max(1) as f64
+    }
+}
+
+/// Follower speed below which a pose counts as standing still: angular speed in radians per
+/// period and linear speed in model units per period. Default 1e-6: a dwell of the motion
+/// schemes is exactly still (zero to round-off), and no sample of the examples without
+/// dwells comes below it (`bands::tests::only_the_dwell_example_gets_the_dwell_layout`).
+pub const STILL_SPEED: f64 = 1e-6;
+
+impl Pose {
+    /// Whether the follower stands still at this pose.
+    pub fn is_still(&self) -> bool {
+        V3::from(self.omega).norm() <= STILL_SPEED && V3::from(self.vel).norm() <= STILL_SPEED
     }
 }
 

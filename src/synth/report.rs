@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use crate::plot::{Chart, Series};
 
 use super::closure::{self, Class, EPSILON, NO_INTERIOR_DIST};
-use super::error::SynthError;
+use super::error::ReportError;
 use super::mechanism::Mechanism;
 
 /// dist values above this are drawn clipped (no-interior samples carry
@@ -19,8 +19,8 @@ use super::mechanism::Mechanism;
 pub const DIST_PLOT_CLIP: f64 = 1.2;
 
 /// Write every report plot into `dir`; returns the files written.
-pub fn write_report(m: &Mechanism, dir: &Path) -> Result<Vec<PathBuf>, SynthError> {
-    std::fs::create_dir_all(dir).map_err(|source| SynthError::Io {
+pub fn write_report(m: &Mechanism, dir: &Path) -> Result<Vec<PathBuf>, ReportError> {
+    std::fs::create_dir_all(dir).map_err(|source| ReportError::Io {
         path: dir.to_path_buf(),
         source,
     })?;
@@ -81,10 +81,7 @@ pub fn write_report(m: &Mechanism, dir: &Path) -> Result<Vec<PathBuf>, SynthErro
                 .iter()
                 .zip(&cp.samples.n)
                 .enumerate()
-                .map(|(i, (p, nn))| {
-                    let pxy = (p[0] * p[0] + p[1] * p[1]).sqrt().max(1e-12);
-                    (i as f64 / n, (p[0] * nn[1] - p[1] * nn[0]) / pxy)
-                })
+                .map(|(i, (&p, &nn))| (i as f64 / n, closure::torque_arm(p, nn)))
                 .collect();
             c.series.push(Series::line(format!("pair {k}"), pts, k));
         }

@@ -1,67 +1,112 @@
-//! The outer search: band layout, K and d_x loops, acceptance, and assembling the
-//! [`Mechanism`] from the chosen candidates.
+//! The outer search: K and d_x loops, stage A (candidates, in parallel with rayon) and
+//! stage B (`combine`) per attempt, acceptance, and the outcome.
 //!
-//! Owns [`SynthOptions`], [`SynthProgress`] and the driver of stages A (candidates, in
-//! parallel with rayon) and B (GA). It does not evaluate energies or hulls itself.
+//! Owns [`SynthOptions`], [`SynthProgress`], the loop and the acceptance rule. It does not
+//! evaluate energies or hulls, lay out bands (see `bands`) or build the file (see
+//! `assemble`).
 //!
-//! **Loop order.** d_x is the outer loop (from small to large, [`DX_GRID`]) and K the inner
-//! one (from the minimum dof + 1 up to [`max_extra_k`] more). Bands are laid out so that K
-//! bands are a prefix of K + 1 bands (band k is centred at s(k)·([`BAND_HEIGHT`] +
-//! [`BAND_GAP`]) with s = 0, +1, −1, +2, −2, …), so growing K only solves candidates for the
-//! new band and the GA reuses the others. K counts curve pairs: a band in which no candidate
-//! passes the checks is left empty (a gap in the stack) and the next one laid out, up to
-//! K + [`MAX_EMPTY_BANDS`] bands. The first (d_x, K) whose GA winner meets the
-//! paper's criteria (E_valiTime = 1, E_maxDist ≤ −ε) **and** robust closure at every
-//! sample is accepted; every candidate in it already has a conjugation residual ≤ 1° at 4×
-//! the sample density. For 1R1T the winner must also reach the paper's margin
-//! ([`margin_target`]); failing that, the widest margin that closed at that d_x is taken.
+//! **Loop order.** d_x is the outer loop ([`dx_grid`], per class) and K the inner one (from
+//! [`first_k`] up to dof + 1 + [`max_extra_k`]). Growing K only solves candidates for the
+//! new band (see `bands`); an empty band is skipped, so K counts curve pairs.
 //!
-//! **Gap-filling bands (1R).** Once the GA's combination at some K holds robust closure at
+//! **Acceptance.** The first (d_x, K) whose combination holds the paper's closure and the
+//! robust closure at every instant of the [`OVERSAMPLE`]× check, with E_maxDist (paper and
+//! robust) ≤ −[`SynthOptions::min_margin`] (default ε), is accepted: the smallest K that
+//! closes at the first d_x where any K does. Every candidate in it has a conjugation
+//! residual ≤ 1° at that density too. Then bands are left out while the others still close
+//! (`Search::drop_one`), so the pairs of the accepted design are as few as those bands
+//! allow. A wider margin is what `min_margin` asks for; K then grows until a combination
+//! reaches it. Each attempt records the figures of its best combination at the samples and
+//! at 4×, so the file shows what every K tried reached.
+//!
+//! **Refinement (1R).** A combination that misses closure but holds robust closure at
+//! [`FOCUS_MIN_ROBUST`] of the samples or more has its contacts solved again, asked for a
+//! robust arm where the combination lacks one (`Search::refine`), up to [`REFINE_ROUNDS`]
+//! rounds while each improves it.
+//!
+//! **Gap-filling bands (1R).** Once the combination at some K holds robust closure at
 //! [`FOCUS_MIN_ROBUST`] of the samples or more, the next band's candidates are asked (by
 //! E_focus, see [`W_FOCUS`](super::energy::W_FOCUS)) for a robust torque of the sign the
-//! combination lacks, at the samples where it lacks it (see `focus_of`). An ordinary band
-//! adds contacts wherever its random starts happen to drive; quarter-turn-dwell's remaining
-//! gaps sit inside its fast steps, where few random contacts have a torque arm.
+//! combination lacks, at the samples where it lacks it (see `bands::focus_of`).
 //!
 //! **Determinism.** Every candidate is seeded from (seed, band, index) and solved
 //! independently; the GA evaluates fitness in parallel but collects results in population
-//! order. Results therefore do not depend on the thread count.
+//! order, and the exact and local searches break ties by index order. Results therefore
+//! do not depend on the thread count.
 
+use std::cmp::Ordering as CmpOrdering;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::candidate::{self, Candidate, OVERSAMPLE};
-use super::closure::{self, Class, ClosureSummary, NormalCone};
-use super::energy::{PairProblem, Stage, LENGTH_BOUNDS, W_CLOSURE, W_ROBUST};
+use super::assemble::assemble;
+use super::bands::{
+    band_problem, dwell_1r, focus_of, refine_focus, usable_bands, used_bands, BandLayout, Focus,
+    FOCUS_MIN_ROBUST, MAX_EMPTY_BANDS,
+};
+use super::candidate::{self, Candidate, NAN_REASON, OVERSAMPLE};
+use super::closure::{self, Class, NormalCone, EPSILON};
+use super::combine::{self, Combination, Fitness, Pool};
 use super::error::SynthError;
-use super::ga::{self, Fitness, GaSettings, Pool};
-use super::mechanism::*;
-use super::model::{self, ANGLE_CPS, CURVE_CPS};
-use super::optimizer::{default_minimizer, Minimizer, MAX_EVAL};
+use super::ga::{self, GaSettings};
+use super::mechanism::{
+    Attempt, Mechanism, MotionInfo, OversampledClosure, SolveInfo, DEFAULT_SCALE_MM,
+};
+use super::optimizer::{default_minimizer, Minimizer, SolveStatus, MAX_EVAL};
+use super::outcome::Outcome;
 use super::pose::PoseTrack;
 
-/// Height of each band, model units. Default 1.0 (10 mm at the default scale): room for a
-/// contact curve with some vertical waviness and for the swept cross-section.
-pub const BAND_HEIGHT: f64 = 1.0;
-/// Gap between bands, model units. Default 0.5 (5 mm): keeps neighbouring swept contact
-/// surfaces apart when printed.
-pub const BAND_GAP: f64 = 0.5;
-/// d_x values tried in order when the user does not fix d_x. Default 6, 7.5, 9: the paper
-/// used 6 for 1R/1R1T and 4.4–9.7 for 3R. Starting at 5 was measured: for half-turn-2to1
-/// no K ≤ 5 reached robust closure at d_x = 5 (150 candidates spent for nothing) while
-/// d_x = 6 succeeded at K = 4, so the search starts at the paper's value.
+/// d_x values tried in order for 1R1T and 3R when the user does not fix d_x. Default 6,
+/// 7.5, 9: the paper used 6 for 1R1T and 4.4–9.7 for 3R, and every example of these classes
+/// closes at 6.
 pub const DX_GRID: [f64; 3] = [6.0, 7.5, 9.0];
+/// d_x values tried in order for 1R. Default 7.5, 9, 6: robust closure with K = 3 was
+/// reached more often at 7.5 and 9 than at 6 (half-turn-2to1, refined, seeds 1–3: 7.5
+/// closed seed 1 and reached 0.998 and 0.904; 9 closed seed 1 and reached 0.990 and
+/// 0.904; 6 reached 0.889 at seed 1); see `docs/synthesis.md`. d_x = 5 was measured
+/// before: no K ≤ 5 reached robust closure there.
+pub const DX_GRID_1R: [f64; 3] = [7.5, 9.0, 6.0];
+/// d_x values tried in order for a 1R motion with dwells (`bands::dwell_1r`). Default 9,
+/// 12: quarter-turn-dwell closed at K = 5 with d_x = 9 and at K = 4 with 12, but needed
+/// K = 6 at 6 (K = 5 reached 0.999); see `docs/synthesis.md`.
+pub const DX_GRID_DWELL: [f64; 2] = [9.0, 12.0];
+
+/// The d_x values the search tries, in order: per class, and for a 1R motion with dwells.
+pub fn dx_grid(class: Class, dwell: bool) -> &'static [f64] {
+    match class {
+        Class::R1 if dwell => &DX_GRID_DWELL,
+        Class::R1 => &DX_GRID_1R,
+        Class::R1T1 | Class::R3 => &DX_GRID,
+    }
+}
+
 /// How many K beyond the minimum to try for 1R1T and 3R. Default 3 (1R1T: 3..6, 3R: 4..7);
 /// the paper's results used at most minimum + 2.
 pub const MAX_EXTRA_K: usize = 3;
-/// How many K beyond the minimum to try for 1R. Default 8 (K = 2..10): 1R bands are cheap
-/// (about 2 s each here) and robust closure of an indexing motion with dwells
-/// (quarter-turn-dwell) needed K = 9–10, with gap-filling bands, while half-turn-2to1 stops
-/// at K = 4.
-pub const MAX_EXTRA_K_1R: usize = 8;
+/// How many K beyond the minimum to try for 1R at each d_x. Default 4 (K up to 6): with
+/// the exact combination and refinement, quarter-turn-dwell closes at K = 6 even at
+/// d_x = 6 (at K = 5 with the dwell grid's 9) and half-turn-2to1 at K = 3–4; before them
+/// quarter-turn-dwell needed K = 9–10, and a motion that does not close by K = 6 is better
+/// tried at the next d_x.
+pub const MAX_EXTRA_K_1R: usize = 4;
+
+/// The K the search starts from: dof + 1, except 1R, where it starts at 3. A 1R design
+/// closes robustly only if at every instant one contact pushes each way with a torque arm;
+/// a contact's height along its closed curve turns at least twice a period, and there its
+/// tangent is horizontal, so its conjugate normal (perpendicular to that tangent and to the
+/// horizontal relative velocity) is vertical and has no arm. Two contacts therefore leave
+/// instants with one sign missing, unless both turn exactly where their tangents lie along
+/// the relative velocity. Measured: K = 2 reached robust closure at 0.51 and 0.83 of the
+/// samples (half-turn-2to1, seed 1, d_x = 6, before and with refinement) and 0.40
+/// (quarter-turn-dwell). `--k 2` is still allowed.
+pub fn first_k(class: Class) -> usize {
+    match class {
+        Class::R1 => 3,
+        Class::R1T1 | Class::R3 => class.min_k(),
+    }
+}
 
 /// How many K beyond the minimum the search tries for `class`.
 pub fn max_extra_k(class: Class) -> usize {
@@ -73,47 +118,21 @@ pub fn max_extra_k(class: Class) -> usize {
 }
 /// Candidates per band (the paper's M). Default 30 (supplementary notes).
 pub const CANDIDATES: usize = 30;
-/// How many bands beyond K may be laid out when some are left empty (no candidate passed
-/// the checks), so that K still counts curve pairs. Default 2: spherical-four-bar's band 5
-/// had no usable candidate at d_x = 7.5 and 9, which used to end the search at that d_x
-/// although band 6 had 9; skipping it, the default search accepts it at K = 6, d_x = 7.5.
-pub const MAX_EMPTY_BANDS: usize = 2;
-
-/// Closure margin the search asks of a 1R1T mechanism: E_maxDist ≤ −0.24, the paper's
-/// figure for its 1R1T example. Default 0.24. A (d_x, K) attempt that closes with a thinner
-/// margin is kept, and K grows; at the end of the K range for that d_x the best attempt that
-/// closed is accepted. Measured on screw-bob (seed 1, d_x = 6): K = 4 closes with
-/// E_maxDist −0.022 (barely past ε = 0.02), K = 5 with −0.137, K = 6 with −0.319.
-pub const MARGIN_TARGET_1R1T: f64 = 0.24;
-
-/// The closure margin m the search asks for (E_maxDist ≤ −m) before it stops at the first
-/// attempt that closes: [`MARGIN_TARGET_1R1T`] for 1R1T; ε for 1R, whose closed designs
-/// always reach −1, and for 3R, where the paper's own results lie at −0.021 to −0.081.
-pub fn margin_target(class: Class) -> f64 {
-    match class {
-        Class::R1T1 => MARGIN_TARGET_1R1T,
-        Class::R1 | Class::R3 => closure::EPSILON,
-    }
-}
-
-/// Widening of a gap-filling band's focus (see `focus_of`), as a share of the period on
-/// each side of a gap. Default 0.01 (3.6 samples of 360): the arm must build up before the
-/// gap, not at its edge.
-pub const FOCUS_WIDEN: f64 = 0.01;
-/// Robust closure (share of samples) the previous combination must reach before the next 1R
-/// band becomes a gap-filling band. Default 0.5: below it the gaps are too wide for the one
-/// candidate a band contributes; aiming every band at the gaps (threshold 0) left 0–1 of 30
-/// candidates usable in quarter-turn-dwell's bands 3 and 4.
-pub const FOCUS_MIN_ROBUST: f64 = 0.5;
+/// Rounds of refinement of a 1R combination that misses closure (see `Search::refine`);
+/// they stop early when a round does not improve the combination. Default 8, a bound rather
+/// than a tuning: a round costs K candidate solves, and the rounds measured stopped by
+/// themselves within five (quarter-turn-dwell's K = 5 attempt at d_x = 6 improved in four,
+/// robust 0.914 → 0.9986 at 4×).
+pub const REFINE_ROUNDS: usize = 8;
 
 /// Options of [`synthesize`](super::synthesize).
 #[derive(Clone, Debug)]
 pub struct SynthOptions {
     /// Seed of every random choice.
     pub seed: u64,
-    /// Fix K (else search from the minimum).
+    /// Fix K (else search from [`first_k`]).
     pub k: Option<usize>,
-    /// Fix d_x (else search [`DX_GRID`]).
+    /// Fix d_x (else search [`dx_grid`]).
     pub dx: Option<f64>,
     /// Samples N per period.
     pub samples: usize,
@@ -137,6 +156,10 @@ pub struct SynthOptions {
     pub source: Option<String>,
     /// Bound on the 3R contact normals (default: Eq. 30 as printed, as the conventions).
     pub cone: NormalCone,
+    /// Closure margin m asked of an accepted design: E_maxDist ≤ −m, paper and robust, at
+    /// every instant of the 4× check. Default ε ([`EPSILON`], the conventions' validity
+    /// bar), so the smallest K that closes is accepted; a wider margin costs curve pairs.
+    pub min_margin: f64,
 }
 
 impl Default for SynthOptions {
@@ -155,6 +178,7 @@ impl Default for SynthOptions {
             scale_mm: DEFAULT_SCALE_MM,
             source: None,
             cone: NormalCone::default(),
+            min_margin: EPSILON,
         }
     }
 }
@@ -176,313 +200,607 @@ pub trait SynthProgress: Sync {
 pub struct NoProgress;
 impl SynthProgress for NoProgress {}
 
-/// Band k's [z_min, z_max].
-pub fn band(k: usize) -> (f64, f64) {
-    let s = if k == 0 {
-        0.0
-    } else if k % 2 == 1 {
-        k.div_ceil(2) as f64
-    } else {
-        -((k / 2) as f64)
-    };
-    let c = s * (BAND_HEIGHT + BAND_GAP);
-    (c - 0.5 * BAND_HEIGHT, c + 0.5 * BAND_HEIGHT)
-}
-
 fn cancelled(opts: &SynthOptions) -> bool {
     opts.cancel
         .as_ref()
         .is_some_and(|c| c.load(Ordering::Relaxed))
 }
 
-/// Synthesize from a sampled follower motion (the motion-independent core).
+/// Synthesize from a sampled follower motion (the motion-independent core). `source` is the
+/// motion's name (and its file name unless [`SynthOptions::source`] says otherwise).
 pub fn synthesize_track(
     class: Class,
     poses: Arc<PoseTrack>,
     source: &str,
     opts: &SynthOptions,
     progress: &dyn SynthProgress,
-) -> Result<Mechanism, SynthError> {
+) -> Result<Outcome, SynthError> {
+    let bad = |m: String| Err(SynthError::BadRequest(m));
     if opts.samples < 8 {
-        return Err(SynthError::BadRequest(format!(
+        return bad(format!(
             "--samples {} is too few (at least 8; the paper uses 360)",
             opts.samples
-        )));
+        ));
     }
     if let Some(k) = opts.k {
         if k < class.min_k() {
-            return Err(SynthError::BadRequest(format!(
+            return bad(format!(
                 "--k {k} is below the minimum {} for class {} (dof + 1)",
                 class.min_k(),
                 class.label()
-            )));
+            ));
         }
     }
     if let Some(dx) = opts.dx {
         if !(dx.is_finite() && dx > 0.0) {
-            return Err(SynthError::BadRequest(format!(
-                "--dx {dx} must be a positive number"
-            )));
+            return bad(format!("--dx {dx} must be a positive number"));
         }
     }
-    if opts.candidates == 0 || opts.population < 2 || opts.generations == 0 {
-        return Err(SynthError::BadRequest(
-            "candidates, population (≥ 2) and generations must be positive".into(),
+    if !(opts.min_margin >= EPSILON && opts.min_margin <= 1.0) {
+        return bad(format!(
+            "--min-margin {} must lie between ε = {EPSILON} (a sample is closed when its \
+             dist < −ε) and 1 (dist of unit vectors never goes below −1)",
+            opts.min_margin
         ));
+    }
+    if opts.candidates == 0 || opts.population < 2 || opts.generations == 0 {
+        return bad("candidates, population (≥ 2) and generations must be positive".into());
     }
     let threads = opts.threads.unwrap_or(0);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
         .map_err(|e| SynthError::BadRequest(format!("cannot start {threads} threads: {e}")))?;
-    let used_threads = pool.current_num_threads();
-    pool.install(|| search(class, poses, source, opts, progress, used_threads))
+    let search = Search {
+        class,
+        motion: MotionInfo {
+            source: opts.source.clone().unwrap_or_else(|| source.to_string()),
+            name: source.to_string(),
+        },
+        layout: BandLayout::for_motion(class, &poses),
+        poses,
+        opts,
+        progress,
+        minimizer: default_minimizer(),
+        threads: pool.current_num_threads(),
+        start: Instant::now(),
+        attempts: Vec::new(),
+        k_tried: Vec::new(),
+        dx_tried: Vec::new(),
+        best: None,
+    };
+    pool.install(|| search.run())
 }
 
+/// One search: the request and what has been tried so far.
+struct Search<'a> {
+    class: Class,
+    motion: MotionInfo,
+    poses: Arc<PoseTrack>,
+    opts: &'a SynthOptions,
+    progress: &'a dyn SynthProgress,
+    minimizer: &'static dyn Minimizer,
+    /// The height bands (taller for a 1R motion with dwells).
+    layout: BandLayout,
+    threads: usize,
+    start: Instant,
+    attempts: Vec<Attempt>,
+    k_tried: Vec<usize>,
+    dx_tried: Vec<f64>,
+    /// The best combination so far (at the oversampled density), kept for a partial file.
+    best: Option<Best>,
+}
+
+/// A combination worth keeping: its fitness at the oversampled density and its candidates.
 struct Best {
     fitness: Fitness,
     dx: f64,
     chosen: Vec<Candidate>,
-    /// Index of its attempt in the attempt list.
-    attempt: usize,
 }
 
-fn search(
-    class: Class,
-    poses: Arc<PoseTrack>,
-    source: &str,
-    opts: &SynthOptions,
-    progress: &dyn SynthProgress,
-    threads: usize,
-) -> Result<Mechanism, SynthError> {
-    let start = Instant::now();
-    let minimizer = default_minimizer();
-    let k_list: Vec<usize> = match opts.k {
-        Some(k) => vec![k],
-        None => (class.min_k()..=class.min_k() + max_extra_k(class)).collect(),
-    };
-    let dx_list: Vec<f64> = match opts.dx {
-        Some(d) => vec![d],
-        None => DX_GRID.to_vec(),
-    };
-    let mut attempts: Vec<Attempt> = Vec::new();
-    let mut best: Option<Best> = None;
-    let mut k_tried = Vec::new();
-    let mut dx_tried = Vec::new();
-    let info =
-        |attempts: &[Attempt], k_tried: &[usize], dx_tried: &[f64], accepted, partial| SolveInfo {
+/// The bands solved at one d_x, and what the next 1R band is asked for.
+struct Stack {
+    dx: f64,
+    bands: Vec<Vec<Candidate>>,
+    /// 1R: the focus of the next band, once a combination nearly holds robust closure.
+    focus: Option<Focus>,
+}
+
+impl Search<'_> {
+    fn run(mut self) -> Result<Outcome, SynthError> {
+        let k_list: Vec<usize> = match self.opts.k {
+            Some(k) => vec![k],
+            None => (first_k(self.class)..=self.class.min_k() + max_extra_k(self.class)).collect(),
+        };
+        let dx_list: Vec<f64> = match self.opts.dx {
+            Some(d) => vec![d],
+            None => dx_grid(self.class, dwell_1r(self.class, &self.poses)).to_vec(),
+        };
+        'dx: for dx in dx_list {
+            self.dx_tried.push(dx);
+            let mut stack = Stack {
+                dx,
+                bands: Vec::new(),
+                focus: None,
+            };
+            for &k in &k_list {
+                if !self.k_tried.contains(&k) {
+                    self.k_tried.push(k);
+                }
+                self.fill_bands(&mut stack, k)?;
+                if cancelled(self.opts) {
+                    break 'dx;
+                }
+                if let Some(chosen) = self.attempt(&mut stack, k) {
+                    let info = self.solve_info(true, false);
+                    return Ok(Outcome::Accepted(self.mechanism(dx, &chosen, info)));
+                }
+                if cancelled(self.opts) {
+                    break 'dx;
+                }
+            }
+        }
+        Ok(self.not_accepted())
+    }
+
+    /// Solve bands until `k` of them have usable candidates or `k` + [`MAX_EMPTY_BANDS`]
+    /// are laid out (a band without a usable candidate is left empty, a gap in the stack).
+    fn fill_bands(&self, stack: &mut Stack, k: usize) -> Result<(), SynthError> {
+        let (opts, progress) = (self.opts, self.progress);
+        let mut announced = k.saturating_sub(usable_bands(&stack.bands));
+        progress.attempt_started(k, stack.dx, announced * opts.candidates);
+        while usable_bands(&stack.bands) < k && stack.bands.len() < k + MAX_EMPTY_BANDS {
+            if announced == 0 {
+                // An empty band left a gap: announce the bands still to fill.
+                announced = k - usable_bands(&stack.bands);
+                progress.attempt_started(k, stack.dx, announced * opts.candidates);
+            }
+            announced -= 1;
+            let b = stack.bands.len();
+            let cands = self.solve_band(stack.dx, b, stack.focus.as_ref());
+            if cancelled(opts) {
+                return Ok(());
+            }
+            if cands
+                .iter()
+                .all(|c| c.reason.as_deref() == Some(NAN_REASON))
+            {
+                return Err(SynthError::Numerical(format!(
+                    "every candidate of band {b} at d_x = {} came back as NaN from SLSQP ({})",
+                    stack.dx,
+                    self.minimizer.name()
+                )));
+            }
+            stack.bands.push(cands);
+        }
+        Ok(())
+    }
+
+    /// Solve the candidates of band `b` (in parallel), with a gap-filling focus if given.
+    fn solve_band(&self, dx: f64, b: usize, focus: Option<&Focus>) -> Vec<Candidate> {
+        let (class, opts) = (self.class, self.opts);
+        let n = self.poses.len();
+        let m = opts.candidates;
+        (0..m)
+            .into_par_iter()
+            .map(|i| {
+                let mut pb = band_problem(class, &self.poses, dx, self.layout, b, opts.cone);
+                if class != Class::R1 {
+                    pb.vary = Some((i * n / m) % n);
+                }
+                if let Some((e, o)) = focus {
+                    pb.focus = Some(if i % 2 == 0 { e.clone() } else { o.clone() });
+                }
+                let c = if cancelled(opts) {
+                    Candidate {
+                        band: b,
+                        slab: [pb.band.0, pb.band.1],
+                        index: i,
+                        x: Vec::new(),
+                        f: f64::NAN,
+                        status: SolveStatus::Failed("cancelled".into()),
+                        valid: false,
+                        reason: Some("cancelled".into()),
+                        residual_deg: f64::INFINITY,
+                        ntilde: Vec::new(),
+                        robust: Vec::new(),
+                        evals: 0,
+                    }
+                } else {
+                    candidate::solve(&pb, self.minimizer, opts.seed, b, i, opts.max_eval)
+                };
+                tracing::debug!(
+                    band = b,
+                    index = i,
+                    evals = c.evals,
+                    residual_deg = c.residual_deg,
+                    "candidate {}: {}",
+                    if c.valid { "usable" } else { "rejected" },
+                    c.reason.as_deref().unwrap_or("passed the checks")
+                );
+                self.progress.candidate_done();
+                c
+            })
+            .collect()
+    }
+
+    /// Combine the stack's first `k` usable bands (1R: refining the chosen contacts while
+    /// that helps) and record the attempt; the chosen candidates when the combination is
+    /// accepted.
+    fn attempt(&mut self, stack: &mut Stack, k: usize) -> Option<Vec<Candidate>> {
+        let (class, opts, dx) = (self.class, self.opts, stack.dx);
+        let Some((mut c, mut chosen)) = self.combine(&stack.bands, k, dx) else {
+            let a = unscored_attempt(k, dx, used_bands(&stack.bands, k).1);
+            self.progress.attempt_finished(&a);
+            self.attempts.push(a);
+            return None;
+        };
+        let mut round = 0;
+        while class == Class::R1
+            && round < REFINE_ROUNDS
+            && !c.oversampled.closes(opts.min_margin)
+            && c.at_samples.robust_vali_time >= FOCUS_MIN_ROBUST
+            && !cancelled(opts)
+        {
+            let refined = self.refine(&chosen, dx, round);
+            if refined.is_empty() {
+                break;
+            }
+            for r in refined {
+                stack.bands[r.band].push(r);
+            }
+            let Some(next) = self.combine(&stack.bands, k, dx) else {
+                break;
+            };
+            let improved = next.0.oversampled.cmp_better(&c.oversampled) == CmpOrdering::Greater;
+            if !improved {
+                break;
+            }
+            (c, chosen) = next;
+            round += 1;
+        }
+        stack.focus = (class == Class::R1 && c.at_samples.robust_vali_time >= FOCUS_MIN_ROBUST)
+            .then(|| focus_of(&chosen, self.poses.len()))
+            .flatten();
+        let accepted = c.oversampled.closes(opts.min_margin) && !cancelled(opts);
+        let counts = used_bands(&stack.bands, k).1;
+        self.record(k, dx, counts.clone(), &c, &chosen, accepted, Vec::new());
+        if !accepted {
+            return None;
+        }
+        // Fewer pairs from the same bands: leave bands out while the rest still closes.
+        let mut left_out = Vec::new();
+        while opts.k.is_none() && chosen.len() > first_k(class) {
+            let Some((c2, ch2, out)) = self.drop_one(&stack.bands, &chosen, dx) else {
+                break;
+            };
+            left_out.push(out);
+            left_out.sort_unstable();
+            if let Some(prev) = self.attempts.last_mut() {
+                prev.accepted = false;
+            }
+            self.record(
+                chosen.len() - 1,
+                dx,
+                counts.clone(),
+                &c2,
+                &ch2,
+                true,
+                left_out.clone(),
+            );
+            chosen = ch2;
+        }
+        Some(chosen)
+    }
+
+    /// Record an attempt (and report it), keeping its combination if it is the best so far.
+    #[allow(clippy::too_many_arguments)]
+    fn record(
+        &mut self,
+        k: usize,
+        dx: f64,
+        valid_candidates: Vec<usize>,
+        c: &Combination,
+        chosen: &[Candidate],
+        accepted: bool,
+        left_out: Vec<usize>,
+    ) {
+        let a = Attempt {
+            k,
+            dx,
+            valid_candidates,
+            vali_time: c.at_samples.vali_time,
+            robust_vali_time: c.at_samples.robust_vali_time,
+            max_dist: c.at_samples.max_dist,
+            robust_max_dist: c.at_samples.robust_max_dist,
+            oversampled: Some(OversampledClosure {
+                factor: OVERSAMPLE,
+                vali_time: c.oversampled.vali_time,
+                max_dist: c.oversampled.max_dist,
+                robust_vali_time: c.oversampled.robust_vali_time,
+                robust_max_dist: c.oversampled.robust_max_dist,
+            }),
+            exhaustive: c.exact,
+            left_out,
+            closes: accepted,
+            accepted,
+        };
+        self.progress.attempt_finished(&a);
+        self.attempts.push(a);
+        let better = self
+            .best
+            .as_ref()
+            .is_none_or(|b| c.oversampled.cmp_better(&b.fitness) == CmpOrdering::Greater);
+        if better {
+            self.best = Some(Best {
+                fitness: c.oversampled.clone(),
+                dx,
+                chosen: chosen.to_vec(),
+            });
+        }
+    }
+
+    /// The best combination of the first `k` bands with usable candidates, and its
+    /// candidates; `None` when fewer than `k` bands have any.
+    fn combine(
+        &self,
+        bands: &[Vec<Candidate>],
+        k: usize,
+        dx: f64,
+    ) -> Option<(Combination, Vec<Candidate>)> {
+        let (valid, _) = used_bands(bands, k);
+        (valid.len() == k).then(|| self.combine_over(&valid, dx))
+    }
+
+    /// The best combination of one candidate from each of the lists `valid` (the usable
+    /// candidates of the bands used), and its candidates.
+    fn combine_over(&self, valid: &[Vec<&Candidate>], dx: f64) -> (Combination, Vec<Candidate>) {
+        let (opts, k) = (self.opts, valid.len());
+        let settings = GaSettings {
+            population: opts.population,
+            generations: opts.generations,
+            seed: opts.seed ^ ((k as u64) << 32) ^ dx.to_bits(),
+        };
+        let total = opts.generations;
+        let progress = self.progress;
+        let c = combine::combine(&self.pool_of(valid), settings, &mut |g| {
+            progress.generation(g + 1, total);
+            !cancelled(opts)
+        });
+        let chosen = chosen_of(&c, valid);
+        (c, chosen)
+    }
+
+    /// The combination's view of the usable candidates of the bands used.
+    fn pool_of<'c>(&self, valid: &'c [Vec<&'c Candidate>]) -> Pool<'c> {
+        Pool {
+            class: self.class,
+            bands: valid
+                .iter()
+                .map(|b| {
+                    b.iter()
+                        .map(|c| (c.ntilde.as_slice(), c.robust.as_slice()))
+                        .collect()
+                })
+                .collect(),
+        }
+    }
+
+    /// After a combination of K bands closed: the best combination over K − 1 of those
+    /// bands that still closes, with the band left out; `None` when none does. Each band is
+    /// left out in turn and the others' usable candidates searched again, by the GA and from
+    /// the closed combination's (`combine::improve`: exactly when they are few, else
+    /// locally). The left-out band stays in the stack as a gap.
+    fn drop_one(
+        &self,
+        bands: &[Vec<Candidate>],
+        chosen: &[Candidate],
+        dx: f64,
+    ) -> Option<(Combination, Vec<Candidate>, usize)> {
+        let usable =
+            |b: usize| -> Vec<&Candidate> { bands[b].iter().filter(|c| c.valid).collect() };
+        let mut best: Option<(Combination, Vec<Candidate>, usize)> = None;
+        for out in chosen.iter().map(|c| c.band) {
+            if cancelled(self.opts) {
+                return None;
+            }
+            let kept: Vec<&Candidate> = chosen.iter().filter(|c| c.band != out).collect();
+            let valid: Vec<Vec<&Candidate>> = kept.iter().map(|c| usable(c.band)).collect();
+            let start: Vec<usize> = kept
+                .iter()
+                .zip(&valid)
+                .map(|(c, v)| {
+                    v.iter()
+                        .position(|u| u.index == c.index)
+                        .expect("a chosen candidate is usable in its band")
+                })
+                .collect();
+            // The GA's combination or the closed one's, improved; the better of the two.
+            let from_start = combine::improve(&self.pool_of(&valid), start);
+            let (fresh, _) = self.combine_over(&valid, dx);
+            let c = if fresh.oversampled.cmp_better(&from_start.oversampled) == CmpOrdering::Greater
+            {
+                fresh
+            } else {
+                from_start
+            };
+            let better = best
+                .as_ref()
+                .is_none_or(|b| c.oversampled.cmp_better(&b.0.oversampled) == CmpOrdering::Greater);
+            if c.oversampled.closes(self.opts.min_margin) && better {
+                let ch = chosen_of(&c, &valid);
+                best = Some((c, ch, out));
+            }
+        }
+        best
+    }
+
+    /// 1R: solve each chosen contact again from where it is, asked (by E_focus) for a robust
+    /// arm where the combination lacks one of its sign and it pushes in that sign without
+    /// the arm (see `bands::refine_focus`). The usable results, as new candidates of their
+    /// bands.
+    fn refine(&self, chosen: &[Candidate], dx: f64, round: usize) -> Vec<Candidate> {
+        let opts = self.opts;
+        let asks = refine_focus(chosen, self.poses.len());
+        let jobs: Vec<(usize, &Candidate, Arc<Vec<f64>>)> = chosen
+            .iter()
+            .zip(asks)
+            .enumerate()
+            .filter_map(|(j, (c, a))| a.map(|a| (j, c, a)))
+            .collect();
+        jobs.into_par_iter()
+            .map(|(j, c, ask)| {
+                let mut pb =
+                    band_problem(self.class, &self.poses, dx, self.layout, c.band, opts.cone);
+                pb.focus = Some(ask);
+                // New indices after the band's own candidates.
+                let index = opts.candidates * (1 + round) + j;
+                let r = candidate::solve_from(
+                    &pb,
+                    self.minimizer,
+                    &c.x,
+                    opts.max_eval,
+                    c.band,
+                    index,
+                    0,
+                );
+                tracing::debug!(
+                    band = c.band,
+                    index,
+                    residual_deg = r.residual_deg,
+                    "refined candidate {}: {}",
+                    if r.valid { "usable" } else { "rejected" },
+                    r.reason.as_deref().unwrap_or("passed the checks")
+                );
+                r
+            })
+            .filter(|r| r.valid)
+            .collect()
+    }
+
+    fn solve_info(&self, accepted: bool, partial: bool) -> SolveInfo {
+        let opts = self.opts;
+        SolveInfo {
             seed: opts.seed,
-            seconds: start.elapsed().as_secs_f64(),
-            k_tried: k_tried.to_vec(),
-            dx_tried: dx_tried.to_vec(),
-            backend: minimizer.name().to_string(),
-            threads,
+            seconds: self.start.elapsed().as_secs_f64(),
+            k_tried: self.k_tried.clone(),
+            dx_tried: self.dx_tried.clone(),
+            backend: self.minimizer.name().to_string(),
+            threads: self.threads,
             candidates_per_band: opts.candidates,
             generations: opts.generations,
-            attempts: attempts.to_vec(),
+            attempts: self.attempts.clone(),
             accepted,
             partial,
             normal_cone: opts.cone,
-        };
-    'dx: for &dx in &dx_list {
-        dx_tried.push(dx);
-        // The best attempt at this d_x that closes but misses the margin target.
-        let mut closed: Option<Best> = None;
-        let mut bands: Vec<Vec<Candidate>> = Vec::new();
-        // 1R: what the next band is asked for, once a combination nearly holds robust
-        // closure (gap-filling band).
-        let mut next_focus: Option<Focus> = None;
-        for &k in &k_list {
-            if !k_tried.contains(&k) {
-                k_tried.push(k);
-            }
-            let mut announced = k.saturating_sub(usable_bands(&bands));
-            progress.attempt_started(k, dx, announced * opts.candidates);
-            // K counts curve pairs: a band without a usable candidate is left empty (a gap
-            // in the stack) and the next one is laid out instead, up to K + MAX_EMPTY_BANDS
-            // bands.
-            while usable_bands(&bands) < k && bands.len() < k + MAX_EMPTY_BANDS {
-                if announced == 0 {
-                    // An empty band left a gap: announce the bands still to fill.
-                    announced = k - usable_bands(&bands);
-                    progress.attempt_started(k, dx, announced * opts.candidates);
-                }
-                announced -= 1;
-                let b = bands.len();
-                let cands = solve_band(
-                    class,
-                    &poses,
-                    dx,
-                    b,
-                    opts,
-                    minimizer,
-                    progress,
-                    next_focus.as_ref(),
-                );
-                if cancelled(opts) {
-                    break 'dx;
-                }
-                if cands
-                    .iter()
-                    .all(|c| c.reason.as_deref() == Some("optimizer returned NaN"))
-                {
-                    return Err(SynthError::Numerical(format!(
-                        "every candidate of band {b} at d_x = {dx} came back as NaN from SLSQP ({})",
-                        minimizer.name()
-                    )));
-                }
-                bands.push(cands);
-            }
-            let (valid, counts) = used_bands(&bands, k);
-            if valid.len() < k {
-                let a = unscored_attempt(k, dx, counts);
-                progress.attempt_finished(&a);
-                attempts.push(a);
-                continue;
-            }
-            let pool = Pool {
-                class,
-                bands: valid
-                    .iter()
-                    .map(|b| {
-                        b.iter()
-                            .map(|c| (c.ntilde.as_slice(), c.robust.as_slice()))
-                            .collect()
-                    })
-                    .collect(),
-            };
-            let settings = GaSettings {
-                population: opts.population,
-                generations: opts.generations,
-                seed: opts.seed ^ ((k as u64) << 32) ^ dx.to_bits(),
-            };
-            let total = opts.generations;
-            let res = ga::run(&pool, settings, &mut |g| {
-                progress.generation(g + 1, total);
-                !cancelled(opts)
-            });
-            let chosen: Vec<Candidate> = res
-                .genome
-                .iter()
-                .enumerate()
-                .map(|(b, &g)| valid[b][g].clone())
-                .collect();
-            next_focus = (class == Class::R1 && res.fitness.robust_vali_time >= FOCUS_MIN_ROBUST)
-                .then(|| focus_of(&chosen, poses.len()))
-                .flatten();
-            let summary = pool.summary(&res.genome);
-            let closes = summary.accepted();
-            let accepted = closes && res.fitness.max_dist <= -margin_target(class);
-            let a = Attempt {
-                k,
-                dx,
-                valid_candidates: counts,
-                vali_time: res.fitness.vali_time,
-                robust_vali_time: res.fitness.robust_vali_time,
-                max_dist: res.fitness.max_dist,
-                closes,
-                accepted,
-            };
-            progress.attempt_finished(&a);
-            attempts.push(a);
-            let this = || Best {
-                fitness: res.fitness.clone(),
-                dx,
-                chosen: chosen.clone(),
-                attempt: attempts.len() - 1,
-            };
-            let beats = |b: &Option<Best>| {
-                b.as_ref().is_none_or(|b| {
-                    res.fitness.cmp_better(&b.fitness) == std::cmp::Ordering::Greater
-                })
-            };
-            if beats(&best) {
-                best = Some(this());
-            }
-            if accepted {
-                let info = info(&attempts, &k_tried, &dx_tried, true, false);
-                return Ok(assemble(class, &poses, source, dx, &chosen, opts, info));
-            }
-            if closes && beats(&closed) {
-                closed = Some(this());
-            }
-            if cancelled(opts) {
-                break 'dx;
-            }
-        }
-        // The K range is spent without the margin target: take the best attempt that closed.
-        if let Some(c) = closed {
-            attempts[c.attempt].accepted = true;
-            let info = info(&attempts, &k_tried, &dx_tried, true, false);
-            return Ok(assemble(class, &poses, source, c.dx, &c.chosen, opts, info));
+            min_margin: opts.min_margin,
         }
     }
-    let partial = best.as_ref().map(|b| {
-        Box::new(assemble(
-            class,
-            &poses,
-            source,
-            b.dx,
-            &b.chosen,
-            opts,
-            info(&attempts, &k_tried, &dx_tried, false, true),
-        ))
-    });
-    if cancelled(opts) {
-        return Err(SynthError::Cancelled { partial });
+
+    fn mechanism(&self, dx: f64, chosen: &[Candidate], info: SolveInfo) -> Mechanism {
+        assemble(
+            self.class,
+            &self.poses,
+            self.motion.clone(),
+            self.opts.scale_mm,
+            dx,
+            chosen,
+            info,
+        )
     }
-    let few_bands = few_bands_message(class, opts, &attempts, &k_tried, &dx_tried);
-    let message = match (&partial, few_bands) {
-        (None, Some(m)) => m,
-        (None, _) => format!(
-            "no usable candidates for class {} at any tried K {:?} and d_x {:?}: every candidate \
-             failed its feasibility or 1° conjugation check. Try other --dx values or more \
-             --samples; the motion may be too wild for curves of length 4π–6π.",
-            class.label(),
-            k_tried,
-            dx_tried
-        ),
-        (Some(m), _) => {
-            let mut worst: Vec<(usize, f64)> = m
-                .closure
-                .dist
-                .iter()
-                .cloned()
-                .enumerate()
-                .zip(m.closure.robust_dist.iter())
-                .map(|((i, d), r)| (i, d.max(*r)))
-                .collect();
-            worst.sort_by(|a, b| b.1.total_cmp(&a.1));
-            let shown: Vec<String> = worst
-                .iter()
-                .take(5)
-                .map(|(i, d)| {
-                    format!(
-                        "t = {:.3} (dist {:.3})",
-                        *i as f64 / m.samples as f64,
-                        d.min(99.0)
-                    )
-                })
-                .collect();
-            format!(
-                "motion too wild for the tried K {:?} and d_x {:?}: best E_valiTime {:.3} \
-                 (robust {:.3}, E_maxDist {:.3}) at K = {}, d_x = {}; worst samples: {}. \
-                 Try a larger --k, another --dx, or a different --seed.",
-                k_tried,
-                dx_tried,
-                m.closure.vali_time,
-                m.closure.robust_vali_time,
-                m.closure.max_dist.min(99.0),
-                m.curve_pairs.len(),
-                m.driver_offset,
-                shown.join(", ")
+
+    /// The search ended without an accepted design: cancelled, or infeasible with the best
+    /// figures reached and what to try.
+    fn not_accepted(self) -> Outcome {
+        let partial = self.best.as_ref().map(|b| {
+            let info = self.solve_info(false, true);
+            self.mechanism(b.dx, &b.chosen, info)
+        });
+        if cancelled(self.opts) {
+            return Outcome::Cancelled { best: partial };
+        }
+        let reason = match &partial {
+            Some(m) => self.best_reached_message(m),
+            None => few_bands_message(
+                self.class,
+                self.opts,
+                &self.attempts,
+                &self.k_tried,
+                &self.dx_tried,
             )
+            .unwrap_or_else(|| {
+                format!(
+                    "no usable candidates for class {} at any tried K {:?} and d_x {:?}: every \
+                     candidate failed its feasibility or 1° conjugation check. Try other --dx \
+                     values or more --samples; the motion may be too wild for curves of length \
+                     4π–6π.",
+                    self.class.label(),
+                    self.k_tried,
+                    self.dx_tried
+                )
+            }),
+        };
+        Outcome::Infeasible {
+            reason,
+            best: partial,
         }
-    };
-    Err(SynthError::Infeasible {
-        message,
-        best: partial,
-    })
+    }
+
+    /// What the best combination reached, where it fails, and what to try.
+    fn best_reached_message(&self, m: &Mechanism) -> String {
+        let mut worst: Vec<(usize, f64)> = m
+            .closure
+            .dist
+            .iter()
+            .zip(&m.closure.robust_dist)
+            .map(|(d, r)| d.max(*r))
+            .enumerate()
+            .collect();
+        worst.sort_by(|a, b| b.1.total_cmp(&a.1));
+        let shown: Vec<String> = worst
+            .iter()
+            .take(5)
+            .map(|(i, d)| {
+                format!(
+                    "t = {:.3} (dist {:.3})",
+                    *i as f64 / m.samples as f64,
+                    d.min(99.0)
+                )
+            })
+            .collect();
+        let over = m.closure.oversampled.as_ref();
+        format!(
+            "no tried K {:?} and d_x {:?} closed at every instant with E_maxDist ≤ −{}: the \
+             best reached E_valiTime {:.3} (robust {:.3}, E_maxDist {:.3}; at {OVERSAMPLE}× \
+             the samples {:.3} and robust {:.3}) at K = {}, d_x = {}; worst samples: {}. Try \
+             a larger --k, another --dx, or a different --seed{}.",
+            self.k_tried,
+            self.dx_tried,
+            self.opts.min_margin,
+            m.closure.vali_time,
+            m.closure.robust_vali_time,
+            m.closure.max_dist.min(99.0),
+            over.map_or(f64::NAN, |o| o.vali_time),
+            over.map_or(f64::NAN, |o| o.robust_vali_time),
+            m.curve_pairs.len(),
+            m.driver_offset,
+            shown.join(", "),
+            if self.opts.min_margin > EPSILON {
+                ", or a smaller --min-margin"
+            } else {
+                ""
+            }
+        )
+    }
+}
+
+/// The candidates a combination chose, one per band of `valid`.
+fn chosen_of(c: &Combination, valid: &[Vec<&Candidate>]) -> Vec<Candidate> {
+    c.genome
+        .iter()
+        .enumerate()
+        .map(|(b, &g)| valid[b][g].clone())
+        .collect()
 }
 
 /// The record of an attempt with fewer usable bands than K: no GA ran, nothing closes.
@@ -494,6 +812,10 @@ fn unscored_attempt(k: usize, dx: f64, valid_candidates: Vec<usize>) -> Attempt 
         vali_time: 0.0,
         robust_vali_time: 0.0,
         max_dist: closure::NO_INTERIOR_DIST,
+        robust_max_dist: closure::NO_INTERIOR_DIST,
+        oversampled: None,
+        exhaustive: false,
+        left_out: Vec::new(),
         closes: false,
         accepted: false,
     }
@@ -535,294 +857,6 @@ fn few_bands_message(
     ))
 }
 
-/// The candidate problem of band `b`.
-pub fn band_problem(
-    class: Class,
-    poses: &Arc<PoseTrack>,
-    dx: f64,
-    b: usize,
-    cone: NormalCone,
-) -> PairProblem {
-    PairProblem {
-        class,
-        poses: poses.clone(),
-        dx,
-        band: band(b),
-        vary: None,
-        w_closure: W_CLOSURE,
-        w_robust: W_ROBUST,
-        cone,
-        focus: None,
-        stage: Stage::Full,
-    }
-}
-
-/// Per-sample torque signs that a gap-filling 1R band is asked for (see
-/// [`W_FOCUS`](super::energy::W_FOCUS)): the samples where the chosen candidates lack a
-/// robust contact of one sign, widened by [`FOCUS_WIDEN`] of the period on each side. Where
-/// both signs are missing, even-indexed candidates are asked for + and odd-indexed for −.
-/// Returns the (even, odd) arrays, or `None` when nothing is missing.
-fn focus_of(chosen: &[Candidate], n: usize) -> Option<Focus> {
-    let has = |i: usize, s: f64| {
-        chosen.iter().any(|c| {
-            c.robust.get(i).copied().unwrap_or(false)
-                && c.ntilde
-                    .get(i)
-                    .copied()
-                    .flatten()
-                    .is_some_and(|v| v[0] * s > 0.0)
-        })
-    };
-    let lack: Vec<(bool, bool)> = (0..n).map(|i| (!has(i, 1.0), !has(i, -1.0))).collect();
-    if lack.iter().all(|&(p, m)| !p && !m) {
-        return None;
-    }
-    let w = ((FOCUS_WIDEN * n as f64).round() as usize).min(n / 2);
-    let widened = |i: usize| -> (bool, bool) {
-        (0..=2 * w).fold((false, false), |acc, d| {
-            let j = (i + n + d - w) % n;
-            (acc.0 || lack[j].0, acc.1 || lack[j].1)
-        })
-    };
-    let (mut even, mut odd) = (vec![0.0; n], vec![0.0; n]);
-    for i in 0..n {
-        match widened(i) {
-            (true, true) => {
-                even[i] = 1.0;
-                odd[i] = -1.0;
-            }
-            (true, false) => {
-                even[i] = 1.0;
-                odd[i] = 1.0;
-            }
-            (false, true) => {
-                even[i] = -1.0;
-                odd[i] = -1.0;
-            }
-            (false, false) => {}
-        }
-    }
-    Some((Arc::new(even), Arc::new(odd)))
-}
-
-/// A gap-filling band's per-sample torque signs for its even- and odd-indexed candidates.
-type Focus = (Arc<Vec<f64>>, Arc<Vec<f64>>);
-
-/// The usable candidates of the first `k` bands that have any (fewer when there are not
-/// enough), and the usable counts of every band laid out up to the last one used (0 for a
-/// band left empty), as shown in the attempt's summary.
-fn used_bands(bands: &[Vec<Candidate>], k: usize) -> (Vec<Vec<&Candidate>>, Vec<usize>) {
-    let all: Vec<Vec<&Candidate>> = bands
-        .iter()
-        .map(|b| b.iter().filter(|c| c.valid).collect())
-        .collect();
-    let mut shown = 0;
-    let mut valid = Vec::new();
-    for (i, v) in all.iter().enumerate() {
-        if valid.len() == k {
-            break;
-        }
-        shown = i + 1;
-        if !v.is_empty() {
-            valid.push(v.clone());
-        }
-    }
-    let counts = all[..shown].iter().map(|v| v.len()).collect();
-    (valid, counts)
-}
-
-/// Bands with at least one usable candidate.
-fn usable_bands(bands: &[Vec<Candidate>]) -> usize {
-    bands.iter().filter(|b| b.iter().any(|c| c.valid)).count()
-}
-
-#[allow(clippy::too_many_arguments)]
-fn solve_band(
-    class: Class,
-    poses: &Arc<PoseTrack>,
-    dx: f64,
-    b: usize,
-    opts: &SynthOptions,
-    minimizer: &dyn Minimizer,
-    progress: &dyn SynthProgress,
-    focus: Option<&Focus>,
-) -> Vec<Candidate> {
-    let n = poses.len();
-    let m = opts.candidates;
-    (0..m)
-        .into_par_iter()
-        .map(|i| {
-            let mut pb = band_problem(class, poses, dx, b, opts.cone);
-            if class != Class::R1 {
-                pb.vary = Some((i * n / m) % n);
-            }
-            if let Some((e, o)) = focus {
-                pb.focus = Some(if i % 2 == 0 { e.clone() } else { o.clone() });
-            }
-            let c = if cancelled(opts) {
-                Candidate {
-                    band: b,
-                    index: i,
-                    x: Vec::new(),
-                    f: f64::NAN,
-                    status: super::optimizer::SolveStatus::Failed("cancelled".into()),
-                    valid: false,
-                    reason: Some("cancelled".into()),
-                    residual_deg: f64::INFINITY,
-                    ntilde: Vec::new(),
-                    robust: Vec::new(),
-                    evals: 0,
-                }
-            } else {
-                candidate::solve(&pb, minimizer, opts.seed, b, i, opts.max_eval)
-            };
-            tracing::debug!(
-                band = b,
-                index = i,
-                evals = c.evals,
-                residual_deg = c.residual_deg,
-                "candidate {}: {}",
-                if c.valid { "usable" } else { "rejected" },
-                c.reason.as_deref().unwrap_or("passed the checks")
-            );
-            progress.candidate_done();
-            c
-        })
-        .collect()
-}
-
-fn neg(v: [f64; 3]) -> [f64; 3] {
-    [-v[0], -v[1], -v[2]]
-}
-
-/// Build the mechanism file content from chosen candidates (one per band).
-pub fn assemble(
-    class: Class,
-    poses: &Arc<PoseTrack>,
-    source: &str,
-    dx: f64,
-    chosen: &[Candidate],
-    opts: &SynthOptions,
-    solve: SolveInfo,
-) -> Mechanism {
-    let n = poses.len();
-    let tau = std::f64::consts::TAU;
-    let mut pairs = Vec::with_capacity(chosen.len());
-    for c in chosen {
-        let mut s = PairSamples {
-            p: Vec::with_capacity(n),
-            n: Vec::with_capacity(n),
-            c1: Vec::with_capacity(n),
-            n1: Vec::with_capacity(n),
-            c2: Vec::with_capacity(n),
-            n2: Vec::with_capacity(n),
-        };
-        for pose in &poses.samples {
-            let ct = model::contact_f64(&c.x, pose, dx);
-            let nn = ct.n.vals();
-            s.p.push(ct.p.vals());
-            s.n.push(nn);
-            s.c1.push(ct.c1.vals());
-            s.c2.push(ct.c2.vals());
-            let phi = tau * pose.t;
-            let n1 = super::dual::V3::<f64>::cst(nn)
-                .rot_t(&model::rz(phi))
-                .vals();
-            s.n1.push(n1);
-            let n2 = super::dual::V3::<f64>::cst(neg(nn)).rot_t(&pose.rot).vals();
-            s.n2.push(n2);
-        }
-        let (zlo, zhi) = band(c.band);
-        pairs.push(CurvePair {
-            slab: [zlo, zhi],
-            follower_curve: SplineCurve {
-                degree: 3,
-                closed: true,
-                control_points: model::curve_cps(&c.x),
-            },
-            normal_angle: SplineAngle {
-                degree: 3,
-                closed: true,
-                control_points: model::angle_cps(&c.x),
-            },
-            samples: s,
-            residual_deg: c.residual_deg,
-        });
-    }
-    let contacts_at = |i: usize| -> Vec<([f64; 3], [f64; 3])> {
-        pairs
-            .iter()
-            .map(|p| (p.samples.p[i], p.samples.n[i]))
-            .collect()
-    };
-    let (dist, rdist): (Vec<f64>, Vec<f64>) = (0..n)
-        .map(|i| closure::dist_at(class, &contacts_at(i)))
-        .unzip();
-    let summary = ClosureSummary::from_dists(dist, rdist);
-    // Oversampled closure from the splines.
-    let m = n * OVERSAMPLE;
-    let (od, ord): (Vec<f64>, Vec<f64>) = (0..m)
-        .map(|i| {
-            let pose = (poses.at)(i as f64 / m as f64);
-            let cs: Vec<_> = chosen
-                .iter()
-                .map(|c| {
-                    let ct = model::contact_f64(&c.x, &pose, dx);
-                    (ct.p.vals(), ct.n.vals())
-                })
-                .collect();
-            closure::dist_at(class, &cs)
-        })
-        .unzip();
-    let over = ClosureSummary::from_dists(od, ord);
-    let worst_residual = chosen.iter().map(|c| c.residual_deg).fold(0.0, f64::max);
-    debug_assert_eq!(CURVE_CPS, pairs[0].follower_curve.control_points.len());
-    debug_assert_eq!(ANGLE_CPS, pairs[0].normal_angle.control_points.len());
-    Mechanism {
-        format: FORMAT.to_string(),
-        class,
-        driver_offset: dx,
-        samples: n,
-        scale_mm: opts.scale_mm,
-        length_bounds: LENGTH_BOUNDS,
-        motion: MotionInfo {
-            source: opts.source.clone().unwrap_or_else(|| source.to_string()),
-            name: source.to_string(),
-        },
-        follower_motion: poses
-            .samples
-            .iter()
-            .map(|p| {
-                let q = p.quaternion();
-                FollowerPose {
-                    t: p.t,
-                    rotation: [q.w, q.i, q.j, q.k],
-                    translation: p.trans,
-                }
-            })
-            .collect(),
-        curve_pairs: pairs,
-        closure: ClosureBlock {
-            epsilon: summary.epsilon,
-            dist: summary.dist.clone(),
-            vali_time: summary.vali_time,
-            max_dist: summary.max_dist,
-            robust_vali_time: summary.robust_vali_time,
-            robust_max_dist: summary.robust_max_dist,
-            robust_dist: summary.robust_dist.clone(),
-            oversampled: Some(OversampledClosure {
-                factor: OVERSAMPLE,
-                vali_time: over.vali_time,
-                max_dist: over.max_dist,
-                robust_vali_time: over.robust_vali_time,
-                robust_max_dist: over.robust_max_dist,
-            }),
-            worst_residual_deg: worst_residual,
-        },
-        solve,
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -843,10 +877,9 @@ mod tests {
         }
     }
 
-    fn outcome(r: Result<Mechanism, SynthError>) -> Mechanism {
+    fn outcome(r: Result<Outcome, SynthError>) -> Mechanism {
         match r {
-            Ok(m) => m,
-            Err(SynthError::Infeasible { best: Some(m), .. }) => *m,
+            Ok(o) => o.into_mechanism().expect("a design was scored"),
             Err(e) => panic!("unexpected error {e}"),
         }
     }
@@ -907,13 +940,14 @@ mod tests {
         );
     }
 
-    /// Guards the 1R1T margin target: an attempt that closes with a thinner margin than
-    /// [`MARGIN_TARGET_1R1T`] does not end the K loop, and when the K range ends without the
-    /// target the attempt with the widest margin among those that closed is accepted (and
-    /// is what the file holds). Reduced screw-bob (N = 90, M = 8, d_x = 6): K = 5 and 6
-    /// both close short of −0.24 here.
+    /// Guards the smallest-K acceptance: the search stops at the first K whose combination
+    /// closes at every instant of the 4× check (paper and robust, E_maxDist ≤ −ε) or at the
+    /// combination with fewest pairs found by leaving bands out of it; no attempt with fewer
+    /// pairs closes; the file holds the accepted attempt's design with its figures; and a
+    /// wider `min_margin` is met by what it accepts (or by nothing, then not accepted).
+    /// Reduced screw-bob (N = 90, M = 8, d_x = 6).
     #[test]
-    fn thin_1r1t_margin_goes_on_and_the_widest_closed_margin_wins() {
+    fn the_smallest_k_that_closes_is_accepted() {
         let path =
             std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/motions/screw-bob.toml");
         let motion = crate::motion::Motion::from_file(&path).unwrap();
@@ -925,27 +959,67 @@ mod tests {
             generations: 30,
             ..Default::default()
         };
-        let m = crate::synth::synthesize(&motion, &opts, &NoProgress).unwrap();
+        let m = match crate::synth::synthesize(&motion, &opts, &NoProgress).unwrap() {
+            Outcome::Accepted(m) => m,
+            o => panic!("not accepted: {o:?}"),
+        };
         let at = &m.solve.attempts;
-        let short: Vec<&Attempt> = at.iter().filter(|a| a.closes && !a.accepted).collect();
+        let last = at.last().unwrap();
+        assert!(last.accepted && last.closes, "{at:?}");
+        assert_eq!(at.iter().filter(|a| a.accepted).count(), 1, "{at:?}");
+        let over = |a: &Attempt| a.oversampled.clone().unwrap();
+        let o = over(last);
+        assert!(o.vali_time >= 1.0 && o.robust_vali_time >= 1.0, "{last:?}");
         assert!(
-            !short.is_empty(),
-            "no attempt closed short of the target: {at:?}"
+            o.max_dist <= -EPSILON && o.robust_max_dist <= -EPSILON,
+            "{last:?}"
         );
-        let accepted: Vec<&Attempt> = at.iter().filter(|a| a.accepted).collect();
-        assert_eq!(accepted.len(), 1, "{at:?}");
-        let a = accepted[0];
-        assert!(a.closes);
-        assert!(
-            a.max_dist <= -MARGIN_TARGET_1R1T || short.iter().all(|s| s.max_dist >= a.max_dist),
-            "accepted {a:?} although a closed attempt had more margin: {at:?}"
-        );
+        // The first attempt that closes ends the growth of K; only attempts leaving bands
+        // out of it follow, each with one pair fewer.
+        let first = at.iter().position(|a| a.closes).unwrap();
+        for a in &at[..first] {
+            assert!(!a.closes && a.left_out.is_empty(), "{at:?}");
+            if let Some(o) = &a.oversampled {
+                assert!(
+                    o.vali_time < 1.0 || o.robust_vali_time < 1.0 || o.robust_max_dist > -EPSILON,
+                    "{a:?} closes but was passed over"
+                );
+            }
+        }
+        for (i, a) in at[first..].iter().enumerate() {
+            assert_eq!(a.k, at[first].k - i, "{at:?}");
+            assert_eq!(a.left_out.len(), i, "{at:?}");
+        }
+        assert!(at.iter().filter(|a| a.closes).all(|a| a.k >= last.k));
         assert!(m.solve.accepted && !m.solve.partial);
-        assert_eq!(m.curve_pairs.len(), a.k);
-        assert_eq!(m.closure.max_dist, a.max_dist);
-        // 1R and 3R keep the paper's criterion: the first attempt that closes is taken.
-        assert_eq!(margin_target(Class::R1), closure::EPSILON);
-        assert_eq!(margin_target(Class::R3), closure::EPSILON);
+        assert_eq!(m.solve.min_margin, EPSILON);
+        assert_eq!(m.curve_pairs.len(), last.k);
+        assert_eq!(m.closure.max_dist, last.max_dist);
+        let mo = m.closure.oversampled.clone().unwrap();
+        assert_eq!((mo.vali_time, mo.robust_vali_time), (1.0, 1.0));
+        assert!(mo.robust_max_dist <= -EPSILON);
+        // A wider margin: what is accepted meets it.
+        let margin = (-last.robust_max_dist + 0.03).min(1.0);
+        let wide = SynthOptions {
+            min_margin: margin,
+            ..opts
+        };
+        match crate::synth::synthesize(&motion, &wide, &NoProgress).unwrap() {
+            Outcome::Accepted(w) => {
+                let a = w.solve.attempts.last().unwrap();
+                assert!(over(a).robust_max_dist <= -margin && over(a).max_dist <= -margin);
+                assert_eq!(w.solve.min_margin, margin);
+            }
+            Outcome::Infeasible { best, .. } => {
+                let b = best.unwrap();
+                assert!(b.solve.attempts.iter().all(|a| !a.closes));
+                assert!(b.solve.attempts.iter().all(|a| a
+                    .oversampled
+                    .as_ref()
+                    .is_none_or(|o| o.robust_max_dist > -margin || o.vali_time < 1.0)));
+            }
+            o => panic!("{o:?}"),
+        }
     }
 
     /// Guards the failure message when bands, not candidates, run out: it names how many
@@ -987,120 +1061,15 @@ mod tests {
         assert!(e.to_string().contains("--k 1"), "{e}");
         let mut o = small_opts(1);
         o.dx = Some(-1.0);
-        let e = synthesize_track(Class::R1, track, "t", &o, &NoProgress).unwrap_err();
+        let e = synthesize_track(Class::R1, track.clone(), "t", &o, &NoProgress).unwrap_err();
         assert!(e.to_string().contains("--dx"), "{e}");
-    }
-
-    /// A 1R candidate for `focus_of` tests: per sample, ñ sign (+1/−1) and robustness.
-    fn contact_1r(signs: &[(f64, bool)]) -> Candidate {
-        Candidate {
-            band: 0,
-            index: 0,
-            x: Vec::new(),
-            f: 0.0,
-            status: crate::synth::optimizer::SolveStatus::Converged,
-            valid: true,
-            reason: None,
-            residual_deg: 0.0,
-            ntilde: signs.iter().map(|&(s, _)| Some([s, 0.0, 0.0])).collect(),
-            robust: signs.iter().map(|&(_, r)| r).collect(),
-            evals: 0,
-        }
-    }
-
-    /// Guards the skipping of empty bands: K counts bands with usable candidates, an empty
-    /// band is passed over (and shown as 0), and too few usable bands are reported as such.
-    #[test]
-    fn empty_bands_are_skipped_and_k_counts_curve_pairs() {
-        let band = |usable: usize| -> Vec<Candidate> {
-            (0..3)
-                .map(|i| {
-                    let mut c = contact_1r(&[(1.0, true)]);
-                    c.valid = i < usable;
-                    c
-                })
-                .collect()
-        };
-        let bands = vec![band(2), band(0), band(3), band(1)];
-        let lens = |v: &Vec<Vec<&Candidate>>| v.iter().map(|b| b.len()).collect::<Vec<_>>();
-        let (v, counts) = used_bands(&bands, 2);
-        assert_eq!((lens(&v), counts), (vec![2, 3], vec![2, 0, 3]));
-        let (v, counts) = used_bands(&bands, 3);
-        assert_eq!((lens(&v), counts), (vec![2, 3, 1], vec![2, 0, 3, 1]));
-        let (v, counts) = used_bands(&bands, 4);
-        assert_eq!((lens(&v), counts), (vec![2, 3, 1], vec![2, 0, 3, 1]));
-        assert_eq!(usable_bands(&bands), 3);
-    }
-
-    /// Guards the gap-filling focus: a band is asked for + where no chosen contact drives
-    /// robustly in +, for − where none drives in −, for either sign by candidate parity where
-    /// both are missing, widened by `FOCUS_WIDEN` of the period; nothing is asked when
-    /// robust closure holds everywhere.
-    #[test]
-    fn gap_filling_focus_asks_for_the_missing_sign() {
-        let n = 200;
-        let w = (FOCUS_WIDEN * n as f64).round() as usize;
-        assert_eq!(w, 2);
-        // Contact a: robust + everywhere except 50..60; contact b: robust − everywhere except
-        // 55..70 (non-robust + there).
-        let a: Vec<_> = (0..n).map(|i| (1.0, !(50..60).contains(&i))).collect();
-        let b: Vec<_> = (0..n)
-            .map(|i| {
-                if (55..70).contains(&i) {
-                    (1.0, false)
-                } else {
-                    (-1.0, true)
-                }
-            })
-            .collect();
-        let (even, odd) = focus_of(&[contact_1r(&a), contact_1r(&b)], n).expect("gaps");
-        for i in 0..n {
-            let lack_p = (50 - w..60 + w).contains(&i);
-            let lack_m = (55 - w..70 + w).contains(&i);
-            let (e, o) = match (lack_p, lack_m) {
-                (true, true) => (1.0, -1.0),
-                (true, false) => (1.0, 1.0),
-                (false, true) => (-1.0, -1.0),
-                (false, false) => (0.0, 0.0),
+        for margin in [0.01, 1.5, f64::NAN] {
+            let o = SynthOptions {
+                min_margin: margin,
+                ..small_opts(1)
             };
-            assert_eq!((even[i], odd[i]), (e, o), "sample {i}");
+            let e = synthesize_track(Class::R1, track.clone(), "t", &o, &NoProgress).unwrap_err();
+            assert!(e.to_string().contains("--min-margin"), "{e}");
         }
-        let full: Vec<_> = (0..n).map(|_| (1.0, true)).collect();
-        let neg: Vec<_> = (0..n).map(|_| (-1.0, true)).collect();
-        assert!(focus_of(&[contact_1r(&full), contact_1r(&neg)], n).is_none());
-    }
-
-    /// Guards the band layout: bands are disjoint, equal height, and K bands are a prefix of
-    /// K + 1 bands.
-    #[test]
-    fn bands_are_disjoint_and_nested() {
-        let b: Vec<_> = (0..7).map(band).collect();
-        for i in 0..7 {
-            assert!((b[i].1 - b[i].0 - BAND_HEIGHT).abs() < 1e-12);
-            for j in i + 1..7 {
-                assert!(b[i].1 + BAND_GAP - 1e-12 <= b[j].0 || b[j].1 + BAND_GAP - 1e-12 <= b[i].0);
-            }
-        }
-    }
-
-    /// Exploration aid (ignored): full 1R search on a half-turn-like motion.
-    #[test]
-    #[ignore]
-    fn explore_search_1r() {
-        let t0 = Instant::now();
-        let opts = SynthOptions {
-            candidates: 16,
-            dx: Some(6.0),
-            ..Default::default()
-        };
-        let r = synthesize_track(Class::R1, half_turn_like(360), "test", &opts, &NoProgress);
-        match r {
-            Ok(m) => {
-                eprintln!("{:#?}", m.solve.attempts);
-                eprintln!("{}", m.check());
-            }
-            Err(e) => eprintln!("ERR {e}"),
-        }
-        eprintln!("{:.1}s", t0.elapsed().as_secs_f64());
     }
 }
