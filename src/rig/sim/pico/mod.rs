@@ -338,18 +338,17 @@ impl Attached {
     fn pin(&mut self, gpio: u8, level: Level) {
         // An undriven input of the driver reads low: the worst case for EN (enabled).
         let high = level == Level::High;
-        let pin: &mut dyn OutputPin<Error = PinFault> =
-            match wiring::driver_input(gpio) {
-                Some(DriverInput::Step) => &mut self.step,
-                Some(DriverInput::Dir) => &mut self.dir,
-                Some(DriverInput::Enable) => &mut self.enable,
-                None => {
-                    if level != Level::Undriven {
-                        self.report_unwired_gpio(gpio, high);
-                    }
-                    return;
+        let pin: &mut dyn OutputPin<Error = PinFault> = match wiring::driver_input(gpio) {
+            Some(DriverInput::Step) => &mut self.step,
+            Some(DriverInput::Dir) => &mut self.dir,
+            Some(DriverInput::Enable) => &mut self.enable,
+            None => {
+                if level != Level::Undriven {
+                    self.report_unwired_gpio(gpio, high);
                 }
-            };
+                return;
+            }
+        };
         let _ = if high { pin.set_high() } else { pin.set_low() };
     }
 
