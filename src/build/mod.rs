@@ -15,7 +15,7 @@
 //! | module | owns |
 //! |---|---|
 //! | [`dims`] | every dimension with its reason |
-//! | [`bench`] | which motor coupling and follower sensors, from a rig |
+//! | [`bench`](mod@bench) | which motor coupling and follower sensors, from a rig |
 //! | [`kinematics`] | the parts' relative motion in mm, speed bounds |
 //! | [`swept`] | coarse swept-volume fields and the exact swept distance |
 //! | [`shapes`] | rims, webs, bands from the curve pairs |

@@ -124,8 +124,8 @@ pub fn sweep_cover(s: &Sweep, frame: Frame) -> Balls {
 }
 
 /// Sample points covering a web's fan (centre `tris[i][0]`, rim core `tris[i][1]`), about
-/// [`WEB_COVER_SPACING_MM`] apart: rings of points at fractions of the way from the centre
-/// to the core, each ring thinned to that spacing; with the radius that covers the
+/// `WEB_COVER_SPACING_MM` (1.4 mm) apart: rings of points at fractions of the way from the
+/// centre to the core, each ring thinned to that spacing; with the radius that covers the
 /// thickened web. `keep` filters the points (what survives of a web).
 pub fn web_cover(tris: &[[Vec3; 3]], keep: impl Fn(Vec3) -> bool) -> Balls {
     let mut centers = Vec::new();
