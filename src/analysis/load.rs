@@ -223,9 +223,7 @@ pub fn load_run(dir: &Path) -> Result<LoadedRecording, AnalysisError> {
     })
 }
 
-/// Millimetres per model unit when the target is a motion file (no mechanism to say):
-/// the rig plant's default, so simulated benches and analysis agree.
-pub const DEFAULT_SCALE_MM: f64 = crate::rig::sim::plant::DEFAULT_SCALE_MM;
+use crate::motion::DEFAULT_SCALE_MM;
 
 /// Where the target law comes from.
 #[derive(Debug, Clone, PartialEq)]

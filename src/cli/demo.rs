@@ -206,7 +206,7 @@ fn mechanism_for(
         motion.name(),
         cache_key(&bytes, &o)
     ));
-    let file = dir.join("mechanism.json");
+    let file = dir.join(crate::motion::MECHANISM_FILE);
     if file.exists() && !args.resynthesize {
         match Mechanism::load(&file) {
             Ok(_) => return Ok((file, true)),

@@ -11,6 +11,7 @@ use crate::motion::{self, Motion, MotionClass, DEFAULT_SAMPLES};
 /// Work with motion specifications (.toml keyframes, .csv dense samples).
 #[derive(Debug, Args)]
 pub struct MotionArgs {
+    /// What to do with a motion.
     #[command(subcommand)]
     pub command: MotionCommand,
 }

@@ -28,6 +28,7 @@ use crate::rig::target;
 /// Serve a simulated device on a pseudo-terminal.
 #[derive(Debug, Args)]
 pub struct SimDeviceArgs {
+    /// Which bench to simulate.
     #[command(subcommand)]
     pub device: SimDevice,
 }
@@ -54,6 +55,7 @@ pub enum SimDevice {
 /// Options of `sim-device mixed`.
 #[derive(Debug, Args)]
 pub struct SimMixedArgs {
+    /// The motion to serve.
     #[command(flatten)]
     pub target: TargetArgs,
     /// The mixed rig (e.g. rigs/sim-dynamixel-imu.toml): driver servo ID and gear, the
@@ -81,6 +83,7 @@ pub struct TargetArgs {
 /// Options of `sim-device dynamixel`.
 #[derive(Debug, Args)]
 pub struct SimDynamixelArgs {
+    /// The motion to serve.
     #[command(flatten)]
     pub target: TargetArgs,
     /// Plant imperfection or link fault, `key=value`, repeatable (e.g. backlash_deg=0.5,
@@ -113,6 +116,7 @@ pub struct SimDynamixelArgs {
 /// Options of `sim-device stepper`.
 #[derive(Debug, Args)]
 pub struct SimStepperArgs {
+    /// The motion to serve.
     #[command(flatten)]
     pub target: TargetArgs,
     /// Plant imperfection or link fault, `key=value`, repeatable: backlash_deg,

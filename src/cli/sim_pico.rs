@@ -20,6 +20,7 @@ use crate::rig::sim::stepper::Mechanics;
 /// Options of `sim-device pico`.
 #[derive(Debug, Args)]
 pub struct SimPicoArgs {
+    /// The motion to serve.
     #[command(flatten)]
     pub target: TargetArgs,
     /// Plant imperfection or byte fault, `key=value`, repeatable (as for `sim-device

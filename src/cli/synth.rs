@@ -253,7 +253,7 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     match outcome {
         Outcome::Accepted(m) => {
-            let file = out.join("mechanism.json");
+            let file = out.join(crate::motion::MECHANISM_FILE);
             m.save(&file)?;
             // A partial file from an earlier failed or cancelled run would now be stale.
             let stale = out.join("mechanism.partial.json");

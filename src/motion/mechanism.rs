@@ -15,6 +15,13 @@ use super::{dense, DenseRow, Location, Motion, MotionClass, MotionError};
 /// Name of the mechanism file inside a mechanism directory.
 pub const MECHANISM_FILE: &str = "mechanism.json";
 
+/// Default millimetres per model unit (a mechanism file's `scale_mm`, and the scale of a
+/// target given as a motion file). Default 10: a follower curve of length 4π–6π units
+/// becomes a part about 50–60 mm across, printable on any desktop printer and large enough
+/// for 0.4 mm nozzles to render the contact curves. The one owner: synthesis, the simulated
+/// benches and analysis all read it from here.
+pub const DEFAULT_SCALE_MM: f64 = 10.0;
+
 pub(crate) fn load(path: &Path) -> Result<Motion, MotionError> {
     let file: PathBuf = if path.is_dir() {
         path.join(MECHANISM_FILE)

@@ -52,7 +52,7 @@ use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 pub use angle::AngleScheme;
 pub use class::{MotionClass, UnknownClass};
 pub use error::{Location, MotionError, MotionWarning, WarningKind};
-pub use mechanism::MECHANISM_FILE;
+pub use mechanism::{DEFAULT_SCALE_MM, MECHANISM_FILE};
 
 use angle::AngleLaw;
 use rotation::RotationLaw;

@@ -10,7 +10,6 @@ use crate::rig::config::ConfigError;
 use crate::rig::recording::RecordingError;
 use crate::rig::sim::plant::PlantError;
 
-/// Anything that can go wrong at the bench.
 /// [`RigError::WrongDevice`] on a port where our firmware was expected.
 pub const NOT_OUR_FIRMWARE: &str =
     "does not speak the mpc-rig firmware protocol (is it a Dynamixel bus or another device?)";
@@ -19,6 +18,7 @@ pub const NOT_OUR_FIRMWARE: &str =
 pub const NOT_THE_SERVOS: &str =
     "is not the Dynamixel bus the rig describes (is it our firmware board or another device?)";
 
+/// Anything that can go wrong at the bench.
 #[derive(Debug, thiserror::Error)]
 pub enum RigError {
     /// The rig configuration is invalid.

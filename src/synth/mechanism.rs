@@ -17,10 +17,7 @@ use super::math::{mat3_of_wxyz, rz, V3};
 
 /// The format tag.
 pub const FORMAT: &str = "mpcmech-mechanism/1";
-/// Default millimetres per model unit. Default 10: a follower curve of length 4π–6π units
-/// becomes a part about 50–60 mm across, printable on any desktop printer and large enough
-/// for 0.4 mm nozzles to render the contact curves.
-pub const DEFAULT_SCALE_MM: f64 = 10.0;
+pub use crate::motion::DEFAULT_SCALE_MM;
 /// Tolerance of the coincidence and normal checks, model units / unit-vector components.
 /// Default 1e-6: the file stores full double precision, so anything above is a real error.
 pub const CHECK_TOL: f64 = 1e-6;
@@ -336,7 +333,7 @@ impl Mechanism {
     /// Read a mechanism from a file or from a directory holding `mechanism.json`.
     pub fn load(path: &Path) -> Result<Mechanism, MechanismFileError> {
         let file: PathBuf = if path.is_dir() {
-            path.join("mechanism.json")
+            path.join(crate::motion::MECHANISM_FILE)
         } else {
             path.to_path_buf()
         };

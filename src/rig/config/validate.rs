@@ -248,7 +248,10 @@ fn driver(rig: &RigConfig) -> Result<(), Failure> {
                 f64::from(s.steps_per_rev),
                 Bounds::POSITIVE,
             )?;
-            if s.microsteps == 0 || !s.microsteps.is_power_of_two() || s.microsteps > 256 {
+            // The firmware's rule, from the wire crate that states it.
+            let valid = u16::try_from(s.microsteps)
+                .is_ok_and(|m| mpc_wire::command::VALID_MICROSTEPS.contains(&m));
+            if !valid {
                 return fail(path(&at, "microsteps"), "must be a power of two, 1..=256");
             }
             number(&at, "gear_ratio", s.gear_ratio, limits::GEAR_RATIO)?;

@@ -18,7 +18,7 @@ use crate::rig::config::{DriverConfig, RigConfig, SensorConfig};
 use crate::rig::sim::dynamixel::{
     self, BusConfig, MotionTarget, SimDynamixelHandle, SimDynamixelOptions,
 };
-use crate::rig::sim::plant::{DriverAngleSource, PlantConfig, TargetLaw};
+use crate::rig::sim::plant::{DriverAngleSource, PlantConfig, PlantLaw};
 use crate::rig::sim::stepper::{self, Mechanics, SimHandle, SimStepperOptions};
 use crate::rig::RigError;
 
@@ -101,7 +101,7 @@ pub fn spawn_with(
         SensorConfig::Dynamixel(d) => Some(d),
         _ => None,
     });
-    let law: Arc<dyn TargetLaw> = match follower {
+    let law: Arc<dyn PlantLaw> = match follower {
         Some(_) => Arc::new(MotionTarget::new(target.clone())?),
         None => Arc::new(target.clone()),
     };

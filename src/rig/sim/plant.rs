@@ -34,9 +34,7 @@ use rand_chacha::ChaCha8Rng;
 /// Default seed of the simulated imperfections (any fixed value; runs are reproducible).
 pub const DEFAULT_SEED: u64 = 0x6d70_6372_6967;
 
-/// Default millimetres per model unit for heights, the mechanism file's conventional
-/// `scale_mm` (conventions.md: the project's default is 10 mm per model unit).
-pub const DEFAULT_SCALE_MM: f64 = 10.0;
+use crate::motion::DEFAULT_SCALE_MM;
 
 /// Axis of the simulated IMU bias rotation: fixed (not random) and tilted off every
 /// coordinate axis so a bias shows up in all three angles.
@@ -58,7 +56,7 @@ pub enum PlantError {
 /// The target law the plant follows: the follower pose at a fraction `t` of the period.
 ///
 /// [`crate::motion::Motion`] implements it; tests use small closed-form laws.
-pub trait TargetLaw: Send + Sync {
+pub trait PlantLaw: Send + Sync {
     /// Follower state at `t` (any real `t`; 1R/1R1T angles unwrapped across periods).
     fn follower_at(&self, t: f64) -> FollowerState;
 }
@@ -369,7 +367,7 @@ pub enum LinkByte {
 
 /// A simulated mechanism with its sensors.
 pub struct Plant {
-    target: Box<dyn TargetLaw>,
+    target: Box<dyn PlantLaw>,
     cfg: PlantConfig,
     /// Follower input angle after the backlash gap, rad (None before the first call).
     input: Option<f64>,
@@ -385,7 +383,7 @@ pub struct Plant {
 
 impl Plant {
     /// A plant following `target` with the imperfections of `cfg`.
-    pub fn new<T: TargetLaw + 'static>(target: T, cfg: PlantConfig) -> Plant {
+    pub fn new<T: PlantLaw + 'static>(target: T, cfg: PlantConfig) -> Plant {
         let stream = |n: u64| {
             let mut r = ChaCha8Rng::seed_from_u64(cfg.seed);
             r.set_stream(n);
@@ -513,7 +511,7 @@ impl Plant {
     }
 }
 
-impl TargetLaw for crate::motion::Motion {
+impl PlantLaw for crate::motion::Motion {
     fn follower_at(&self, t: f64) -> FollowerState {
         FollowerState {
             angle_z: self.angle_z(t).map_or(0.0, |a| a[0]),
@@ -531,7 +529,7 @@ pub struct WobbleTurn {
     pub amplitude: f64,
 }
 
-impl TargetLaw for WobbleTurn {
+impl PlantLaw for WobbleTurn {
     fn follower_at(&self, t: f64) -> FollowerState {
         let a = TAU * t + self.amplitude * (TAU * t).sin();
         FollowerState {

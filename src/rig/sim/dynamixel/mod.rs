@@ -41,14 +41,14 @@ use std::time::Instant;
 pub use bus::{Bus, BusConfig, FollowerLaw};
 pub use server::{HardwareFault, ServerEnd, ServerOptions};
 
-use crate::rig::sim::plant::{DriverAngleSource, FollowerState, Plant, PlantConfig, TargetLaw};
+use crate::rig::sim::plant::{DriverAngleSource, FollowerState, Plant, PlantConfig, PlantLaw};
 use crate::rig::RigError;
 
 /// A target law shared between threads (the simulator's plant and its caller).
 #[derive(Clone)]
-pub struct SharedLaw(pub Arc<dyn TargetLaw>);
+pub struct SharedLaw(pub Arc<dyn PlantLaw>);
 
-impl TargetLaw for SharedLaw {
+impl PlantLaw for SharedLaw {
     fn follower_at(&self, t: f64) -> FollowerState {
         self.0.follower_at(t)
     }
@@ -79,7 +79,7 @@ impl MotionTarget {
     }
 }
 
-impl TargetLaw for MotionTarget {
+impl PlantLaw for MotionTarget {
     fn follower_at(&self, t: f64) -> FollowerState {
         let pose = self.0.sample(t);
         FollowerState {
@@ -105,7 +105,7 @@ pub struct SimDynamixelOptions {
 
 impl SimDynamixelOptions {
     /// Default bench (driver ID 1, follower ID 2, direct drive, no faults) for a target law.
-    pub fn new(target: Arc<dyn TargetLaw>) -> Self {
+    pub fn new(target: Arc<dyn PlantLaw>) -> Self {
         Self {
             target: SharedLaw(target),
             plant: PlantConfig::default(),
