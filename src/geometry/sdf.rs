@@ -145,7 +145,7 @@ impl Sdf for Cylinder {
         let dr = r - self.radius;
         let dh = (-h).max(h - self.length);
         if dr > 0.0 && dh > 0.0 {
-            dr.hypot(dh)
+            super::sweep::norm2(dr, dh)
         } else {
             dr.max(dh)
         }
@@ -419,14 +419,19 @@ impl ThickTriangles {
 
 impl Sdf for ThickTriangles {
     fn dist(&self, p: Vec3) -> f64 {
-        let v = self.bvh.min_over(arr(p), |i| {
-            let [a, b, c] = self.tris[i];
-            (p - closest_on_triangle(p, a, b, c)).norm() - self.half_thickness
-        });
-        if v.is_finite() {
+        let v = self
+            .bvh
+            .min_over(arr(p), super::sweep::SWEEP_EXACT_WITHIN_MM, |i, _| {
+                let [a, b, c] = self.tris[i];
+                (p - closest_on_triangle(p, a, b, c)).norm() - self.half_thickness
+            });
+        if v < super::sweep::SWEEP_EXACT_WITHIN_MM {
             v
         } else {
-            self.bvh.bounds().distance(arr(p))
+            self.bvh
+                .bounds()
+                .distance(arr(p))
+                .max(super::sweep::SWEEP_EXACT_WITHIN_MM)
         }
     }
     fn bounds(&self) -> Aabb {

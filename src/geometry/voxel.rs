@@ -123,6 +123,21 @@ impl DistanceField {
         lerp(lerp(x00, x10, fr[1]), lerp(x01, x11, fr[1]), fr[2])
     }
 
+    /// The smaller of two fields on the same grid, voxel by voxel (distance to the union).
+    pub fn min(&self, other: &DistanceField) -> DistanceField {
+        assert_eq!(self.grid, other.grid, "fields on different grids");
+        DistanceField {
+            grid: self.grid,
+            values: self
+                .values
+                .iter()
+                .zip(&other.values)
+                .map(|(a, b)| a.min(*b))
+                .collect(),
+            outside: self.outside.min(other.outside),
+        }
+    }
+
     /// The value at voxel (i, j, k).
     pub fn at(&self, i: [usize; 3]) -> f64 {
         self.values[self.grid.index(i)] as f64
