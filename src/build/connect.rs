@@ -128,29 +128,36 @@ fn nearest_inside(g: &VoxelGrid, p: Vec3) -> Option<[usize; 3]> {
     Some(v)
 }
 
-/// The free voxels among `candidates` (points of the piece to join).
-fn free_sources(field: &DistanceField, candidates: &[Vec3], need: f64) -> Vec<[usize; 3]> {
-    let mut out: Vec<[usize; 3]> = candidates
-        .iter()
-        .filter_map(|p| field.grid.voxel_of(*p))
-        .filter(|v| field.at(*v) >= need)
-        .collect();
-    out.sort();
-    out.dedup();
-    out
+/// Where a strut may start: a free point `at` (clear enough for the strut), and the point
+/// `root` inside the piece it joins that the strut's first segment reaches back to.
+#[derive(Clone, Copy, Debug)]
+pub struct Start {
+    /// Inside the piece (rim, band, hub …).
+    pub root: Vec3,
+    /// In free space.
+    pub at: Vec3,
 }
 
-/// Plan one strut from `candidates` to what is `joined`; its polyline, or an error naming
-/// `what` when no free path exists.
+/// Plan one strut from one of `starts` to what is `joined`; an error naming `what` when
+/// none is free or no free path exists.
 pub fn strut(
     field: &DistanceField,
     joined: &Joined,
-    candidates: &[Vec3],
+    starts: &[Start],
     toward: Vec3,
     what: &str,
 ) -> Result<ThickPolyline, BuildError> {
     let need = STRUT_RADIUS_MM + STRUT_MARGIN_MM;
-    let sources = free_sources(field, candidates, need);
+    let mut sources: Vec<[usize; 3]> = Vec::new();
+    let mut root_of: std::collections::HashMap<[usize; 3], Vec3> = Default::default();
+    for st in starts {
+        if let Some(v) = field.grid.voxel_of(st.at) {
+            if field.at(v) >= need {
+                sources.push(v);
+                root_of.entry(v).or_insert(st.root);
+            }
+        }
+    }
     if sources.is_empty() {
         return Err(BuildError::NoRoom {
             what: what.to_string(),
@@ -159,8 +166,7 @@ pub fn strut(
             ),
         });
     }
-    // The goal must be free too; the heuristic aims at the hub (it is a guide only: any
-    // joined voxel ends the search).
+    // The heuristic aims at the hub (a guide only: any joined voxel ends the search).
     let is_goal = |v: [usize; 3]| joined.contains(v);
     let heuristic = |p: Vec3| 0.5 * (p - toward).norm();
     let q = PathQuery {
@@ -177,10 +183,48 @@ pub fn strut(
             "no path {need:.1} mm clear of the other part's swept volume joins it to the rest of its part"
         ),
     })?;
+    let first = field
+        .grid
+        .voxel_of(path[0])
+        .and_then(|v| root_of.get(&v).copied());
+    let mut points = Vec::with_capacity(path.len() + 1);
+    points.extend(first);
+    points.extend(path);
     Ok(ThickPolyline {
-        points: path,
+        points,
         radius: STRUT_RADIUS_MM,
     })
+}
+
+/// Starts along rays leaving a piece: from each `(root, dir)`, the first point at distance
+/// `from + s` (s = 1, 2, … up to `reach` mm) whose coarse clearance in `field` suffices,
+/// provided `exact` (the exact clearance from the other part's functional surfaces) stays
+/// at least `root_clearance` from the root up to there.
+pub fn ray_starts(
+    rays: &[(Vec3, Vec3)],
+    field: &DistanceField,
+    exact: &(dyn Fn(Vec3) -> f64 + Sync),
+    root_clearance: f64,
+    reach: f64,
+) -> Vec<Start> {
+    use rayon::prelude::*;
+    let need = STRUT_RADIUS_MM + STRUT_MARGIN_MM;
+    rays.par_iter()
+        .filter_map(|&(root, dir)| {
+            let mut s = 1.0;
+            while s <= reach {
+                let p = root + dir * s;
+                if exact(p) < root_clearance {
+                    return None;
+                }
+                if field.sample(p) >= need {
+                    return Some(Start { root, at: p });
+                }
+                s += 1.0;
+            }
+            None
+        })
+        .collect()
 }
 
 /// Points along a polyline, every `step` mm, for covers and marking.

@@ -157,3 +157,42 @@ impl Kinematics {
         std::f64::consts::TAU * (x.xy() - Vector3::new(self.dx_mm, 0.0, 0.0).xy()).norm()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Point3;
+
+    /// Contact points must coincide within this, mm: the file's own coincidence tolerance
+    /// (1e-6 model units, conventions.md) at 10 mm per unit, widened for the law's spline
+    /// between its 360 keys.
+    const COINCIDENT_MM: f64 = 1e-3;
+
+    /// Guards the frames every part is posed in: at each sample of each curve pair, the
+    /// driver point c¹ posed by `driver(t)` and the follower point c² posed by
+    /// `follower(t)` land on the same point p of R (scaled to mm), as the mechanism file
+    /// says (R₂c² + T₂ = p = Rz(φ)c¹ + D).
+    #[test]
+    fn parts_posed_by_the_law_meet_at_the_contacts() {
+        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data/mechanism/half-turn-2to1/mechanism.json");
+        let mech = Mechanism::load(&file).expect("the test mechanism loads");
+        let s = 10.0;
+        let kin = Kinematics::new(&mech, s).expect("its law rebuilds");
+        let mut worst: f64 = 0.0;
+        for cp in &mech.curve_pairs {
+            let n = cp.samples.p.len();
+            for i in (0..n).step_by(7) {
+                let t = i as f64 / n as f64;
+                let mm = |a: [f64; 3]| Point3::new(a[0] * s, a[1] * s, a[2] * s);
+                let by_driver = kin.driver(t) * mm(cp.samples.c1[i]);
+                let by_follower = kin.follower(t) * mm(cp.samples.c2[i]);
+                let p = mm(cp.samples.p[i]);
+                worst = worst
+                    .max((by_driver - p).norm())
+                    .max((by_follower - p).norm());
+            }
+        }
+        assert!(worst < COINCIDENT_MM, "worst {worst} mm");
+    }
+}

@@ -432,7 +432,8 @@ impl Layout {
                     FOLLOWER_HUB_RADIUS_MM + SUPPORT_MARGIN_MM,
                 )));
             } else {
-                // Boss up to just under the hub at its lowest, holding the rod.
+                // Boss up to just under the hub at its lowest, holding the rod. The rod itself
+                // runs inside the hub's bore: it is the joint, not an obstacle.
                 let top = fz0 + self.stroke.0 - c;
                 let boss = Cylinder::z(0.0, 0.0, b1 - 0.5, top, FOLLOWER_HUB_RADIUS_MM - 1.0);
                 p.cover.push(cover_cylinder(&boss, Frame::Reference));
@@ -444,15 +445,6 @@ impl Layout {
                     top + 1.0,
                     0.5 * FOLLOWER_SHAFT_MM,
                 )));
-                // The rod itself stands up to the hub's top at its lowest position.
-                let rod = Cylinder::z(
-                    0.0,
-                    0.0,
-                    top,
-                    self.follower_hub.map_or(top, |h| h.1 + self.stroke.0),
-                    0.5 * FOLLOWER_SHAFT_MM,
-                );
-                p.cover.push(cover_cylinder(&rod, Frame::Reference));
             }
             if self.bench.linear_encoder {
                 // Clamp boss under the base for a plunger encoder pressing on the flange.

@@ -34,9 +34,14 @@ use super::shapes;
 use super::swept::{Balls, ExactSweep, Frame};
 use super::{BuildError, BuildOptions};
 
-/// Beyond this coarse clearance (mm) a web point is certainly clear of the driver's bands;
-/// nearer, the exact swept distance decides.
-const WEB_EXACT_BELOW_MM: f64 = WEB_MARGIN_MM + 2.5;
+/// A strut's root lies this far inside the piece it leaves from (behind the rim's flat
+/// side, in front of the band's back face), mm.
+const ROOT_DEPTH_MM: f64 = 1.0;
+/// Exact clearance the strut's first segment keeps from the other part's functional
+/// surfaces beyond its radius, mm (the coarse field takes over at the start point).
+const ROOT_MARGIN_MM: f64 = 0.3;
+/// How far behind a rim or band a strut may have to reach for free space, mm.
+const RAY_REACH_MM: f64 = 12.0;
 /// The exact carve of the driver is computed only where its value matters: within this many
 /// cells of the surface (values beyond are capped).
 const CARVE_CAP_CELLS: f64 = 3.0;
@@ -63,8 +68,9 @@ pub struct Design {
     pub driver_pieces: Pieces,
     /// Support by rule plus planned ones (post, cup).
     pub support_pieces: Pieces,
-    /// Clearance from the driver's hub and the support (coarse), follower frame.
-    pub follower_other_field: Arc<DistanceField>,
+    /// Clearance from the driver's bands (exact where it matters), hub, column, struts and
+    /// the support, follower frame: what the webs keep clear of.
+    pub band_clearance: Arc<BandClearance>,
     /// Clearance from the whole driver and support (coarse), follower frame.
     pub follower_field: Arc<DistanceField>,
     /// Clearance from the whole follower and support (coarse), driver frame: a lower bound
@@ -134,163 +140,153 @@ pub fn design(
         )?;
     }
 
-    // 4. Follower: clearance from the driver and the support.
-    progress("sweeping the driver through the follower's frame");
-    let mut obstacles: Vec<Balls> = band_covers.clone();
-    let mut others: Vec<Balls> = driver_pieces.cover.clone();
-    others.extend(support_pieces.cover.iter().cloned());
-    obstacles.extend(others.iter().cloned());
+    // 4. Each part's column up its axis from the hub, as far as the other part's functional
+    //    surfaces leave it room (all the way when the curves keep off the other axis).
+    progress("sweeping the rims through the driver's frame and the bands through the follower's");
+    let mut d_bodies: Vec<&Balls> = band_covers.iter().collect();
+    d_bodies.extend(driver_pieces.cover.iter());
+    let dgrid = connect::grid_around(&kin, &d_bodies, Frame::Driver);
     let mut f_bodies: Vec<&Balls> = f_cover.iter().collect();
     f_bodies.extend(follower_pieces.cover.iter());
     let fgrid = connect::grid_around(&kin, &f_bodies, Frame::Follower);
-    let follower_field = Arc::new(connect::clearance(&kin, &obstacles, Frame::Follower, fgrid));
-    let follower_other_field = Arc::new(connect::clearance(&kin, &others, Frame::Follower, fgrid));
-
-    // The webs, kept clear of the swept bands (exact near the edge).
-    let band_union = Arc::new(Union::new(bands.iter().cloned().map(boxed).collect()));
-    let webs: Vec<Arc<ThickTriangles>> = webs_tris.into_iter().map(|(w, _)| Arc::new(w)).collect();
-    let web_clear = WebClearance {
-        kin: kin.clone(),
-        bands: band_union.clone(),
-        coarse: follower_field.clone(),
-        others: follower_other_field.clone(),
-    };
-    // What survives of each web, as cover points for the driver's planning.
-    let web_kept_covers: Vec<Balls> = web_full_covers
+    let d_rims = connect::clearance(&kin, &rim_covers, Frame::Driver, dgrid);
+    let mut d_others_rule: Vec<Balls> = follower_pieces.cover.clone();
+    d_others_rule.extend(support_pieces.cover.iter().cloned());
+    let d_others = connect::clearance(&kin, &d_others_rule, Frame::Driver, dgrid);
+    let mut driver_field = d_rims.min(&d_others);
+    // One field per band, so that the exact sweep is run only for the bands near a point.
+    let band_fields: Vec<DistanceField> = band_covers
         .iter()
-        .map(|c| Balls {
-            frame: Frame::Follower,
-            centers: c
-                .centers
-                .iter()
-                .copied()
-                .filter(|p| web_clear.clearance(*p) >= WEB_MARGIN_MM - 0.5 * c.radius)
-                .collect(),
-            radius: c.radius,
-        })
+        .map(|b| connect::clearance(&kin, std::slice::from_ref(b), Frame::Follower, fgrid))
         .collect();
+    let f_bands = band_fields
+        .iter()
+        .skip(1)
+        .fold(band_fields[0].clone(), |acc, f| acc.min(f));
+    let mut f_others_rule: Vec<Balls> = driver_pieces.cover.clone();
+    f_others_rule.extend(support_pieces.cover.iter().cloned());
+    let mut follower_other_field = connect::clearance(&kin, &f_others_rule, Frame::Follower, fgrid);
+    let driver_top = band_covers
+        .iter()
+        .flat_map(|b| b.centers.iter().map(move |c| c.z + b.radius))
+        .fold(f64::NEG_INFINITY, f64::max);
+    // The columns are checked against the other part's functional surfaces exactly: a
+    // column on the axis is where the coarse fields are most pessimistic.
+    let rim_union = Union::new(rims.iter().cloned().map(boxed).collect());
+    let band_union = Arc::new(Union::new(bands.iter().cloned().map(boxed).collect()));
+    let exact_cap = COLUMN_RADIUS_MM + STRUT_MARGIN_MM + 1.0;
+    let driver_column = column(
+        &|p| {
+            let rims = ExactSweep {
+                kin: &kin,
+                solid: &rim_union,
+                frame: Frame::Follower,
+                target: Frame::Driver,
+                cap: exact_cap,
+                coarse: None,
+            }
+            .value(p);
+            rims.min(d_others.sample(p))
+        },
+        layout.driver_hub.1,
+        driver_top,
+    );
+    let follower_column = layout.follower_hub.and_then(|(_, top)| {
+        let up_to = layout.cap.map_or(layout.z_hi, |c| c.0 + 1.0);
+        column(
+            &|p| {
+                let bands = ExactSweep {
+                    kin: &kin,
+                    solid: band_union.as_ref(),
+                    frame: Frame::Driver,
+                    target: Frame::Follower,
+                    cap: exact_cap,
+                    coarse: None,
+                }
+                .value(p);
+                bands.min(follower_other_field.sample(p))
+            },
+            top,
+            up_to,
+        )
+    });
+    let describe = |c: &Option<Cylinder>| {
+        c.as_ref().map_or("none".to_string(), |c| {
+            format!("{:.0}–{:.0} mm", c.base.z, c.base.z + c.length)
+        })
+    };
+    progress(&format!(
+        "columns: driver {}, follower {}",
+        describe(&driver_column),
+        describe(&follower_column)
+    ));
+    let mut driver_pieces = driver_pieces;
+    if let Some(c) = &driver_column {
+        driver_pieces
+            .cover
+            .insert(1, cover_cylinder(c, Frame::Driver));
+        driver_pieces.add.insert(1, Arc::new(c.clone()));
+        let swept = connect::clearance(&kin, &driver_pieces.cover[1..2], Frame::Follower, fgrid);
+        follower_other_field = follower_other_field.min(&swept);
+    }
+    if let Some(c) = &follower_column {
+        follower_pieces
+            .cover
+            .insert(1, cover_cylinder(c, Frame::Follower));
+        follower_pieces.add.insert(1, Arc::new(c.clone()));
+        let swept = connect::clearance(&kin, &follower_pieces.cover[1..2], Frame::Driver, dgrid);
+        driver_field = driver_field.min(&swept);
+    }
 
+    // 5. The driver's struts first, to its hub or column, through space that the rims,
+    //    the follower's rule-placed features and the support never enter (the webs and
+    //    the follower's struts then make way for them: they are the part that can give).
+    progress("planning the driver's struts");
+    let driver_struts = plan_driver_struts(
+        &kin,
+        &layout,
+        &bands,
+        &band_covers,
+        &rim_union,
+        &driver_field,
+        &driver_pieces,
+        &pairs,
+    )?;
+    let driver_field = Arc::new(driver_field);
+
+    // 6. The follower: webs and struts through space that the driver (bands, hub, column,
+    //    struts) and the support never enter.
+    progress("sweeping the driver's struts through the follower's frame");
+    let strut_covers: Vec<Balls> = driver_struts
+        .iter()
+        .map(|s| connect::strut_cover(s, Frame::Driver))
+        .collect();
+    if !strut_covers.is_empty() {
+        let swept = connect::clearance(&kin, &strut_covers, Frame::Follower, fgrid);
+        follower_other_field = follower_other_field.min(&swept);
+    }
+    let follower_field = Arc::new(f_bands.min(&follower_other_field));
+    let follower_other_field = Arc::new(follower_other_field);
+    let webs: Vec<Arc<ThickTriangles>> = webs_tris.into_iter().map(|(w, _)| Arc::new(w)).collect();
+    let web_clear = Arc::new(BandClearance {
+        kin: kin.clone(),
+        bands: bands.clone(),
+        band_fields,
+        others: follower_other_field.clone(),
+    });
     // 3R: the IMU pad and end-effector on the follower, where nothing passes.
     if kin.class() == Class::R3 && bench.reading == Reading::Imu {
         place_imu_pad(&follower_field, &mut follower_pieces)?;
     }
-
-    // Follower struts: plates and cap to the hub (or ball).
     progress("planning the follower's struts");
-    let mut joined = Joined::new(fgrid);
-    let hub_center = match layout.follower_hub {
-        Some((z0, z1)) => Vec3::new(0.0, 0.0, 0.5 * (z0 + z1)),
-        None => Vec3::zeros(),
-    };
-    // The hub (or ball) is where joining starts.
-    for a in follower_pieces.add.iter().take(1) {
-        joined.mark_solid(a.as_ref());
-    }
-    let mut order: Vec<usize> = (0..rims.len()).collect();
-    let core_of = |k: usize| shapes::rim_core(&rims[k]);
-    order.sort_by(|&a, &b| {
-        let da = core_of(a)
-            .iter()
-            .map(|p| (p - hub_center).norm())
-            .fold(f64::INFINITY, f64::min);
-        let db = core_of(b)
-            .iter()
-            .map(|p| (p - hub_center).norm())
-            .fold(f64::INFINITY, f64::min);
-        da.total_cmp(&db)
-    });
-    let mut follower_struts = Vec::new();
-    for &k in &order {
-        let mut cand = core_of(k);
-        cand.extend(web_kept_covers[k].centers.iter().copied());
-        let st = connect::strut(
-            &follower_field,
-            &joined,
-            &cand,
-            hub_center,
-            &format!("plate {} (curve pair {})", k + 1, pairs[k].0 + 1),
-        )?;
-        joined.mark_balls(&connect::polyline_points(&st, 0.5), st.radius);
-        joined.mark_balls(&cand, 1.5);
-        follower_struts.push(st);
-    }
-    // Rule-placed features other than the hub/ball (cap, flange, pad) joined too.
-    let extra: Vec<Vec<Vec3>> = follower_pieces
-        .cover
-        .iter()
-        .skip(1)
-        .map(|b| b.centers.clone())
-        .collect();
-    for (i, pts) in extra.iter().enumerate() {
-        // A feature touching what is joined already needs no strut.
-        if pts
-            .iter()
-            .any(|p| fgrid.voxel_of(*p).is_some_and(|v| joined.contains(v)))
-        {
-            joined.mark_balls(pts, 1.0);
-            continue;
-        }
-        let st = connect::strut(
-            &follower_field,
-            &joined,
-            pts,
-            hub_center,
-            &format!("follower feature {}", i + 2),
-        )?;
-        joined.mark_balls(&connect::polyline_points(&st, 0.5), st.radius);
-        joined.mark_balls(pts, 1.0);
-        follower_struts.push(st);
-    }
-
-    // 5. Driver: clearance from the whole follower and the support.
-    progress("sweeping the follower through the driver's frame");
-    let mut d_obstacles: Vec<Balls> = rim_covers.clone();
-    d_obstacles.extend(web_kept_covers.iter().cloned());
-    d_obstacles.extend(follower_pieces.cover.iter().cloned());
-    d_obstacles.extend(
-        follower_struts
-            .iter()
-            .map(|s| connect::strut_cover(s, Frame::Follower)),
-    );
-    d_obstacles.extend(support_pieces.cover.iter().cloned());
-    let mut d_bodies: Vec<&Balls> = band_covers.iter().collect();
-    d_bodies.extend(driver_pieces.cover.iter());
-    let dgrid = connect::grid_around(&kin, &d_bodies, Frame::Driver);
-    let driver_field = Arc::new(connect::clearance(&kin, &d_obstacles, Frame::Driver, dgrid));
-    progress("planning the driver's struts");
-    let mut djoined = Joined::new(dgrid);
-    joined_mark_first(&mut djoined, &driver_pieces);
-    let dhub = Vec3::new(0.0, 0.0, 0.5 * (layout.driver_hub.0 + layout.driver_hub.1));
-    let mut dorder: Vec<usize> = (0..bands.len()).collect();
-    dorder.sort_by(|&a, &b| {
-        let d = |k: usize| {
-            band_covers[k]
-                .centers
-                .iter()
-                .map(|p| (p - dhub).norm())
-                .fold(f64::INFINITY, f64::min)
-        };
-        d(a).total_cmp(&d(b))
-    });
-    let mut driver_struts = Vec::new();
-    for &k in &dorder {
-        // Start inside the band behind its groove: the section's centre line.
-        let cand: Vec<Vec3> = bands[k]
-            .frames()
-            .iter()
-            .map(|f| f.o - f.u * (0.5 * BAND_DEPTH_MM))
-            .collect();
-        let st = connect::strut(
-            &driver_field,
-            &djoined,
-            &cand,
-            dhub,
-            &format!("band {} (curve pair {})", k + 1, pairs[k].0 + 1),
-        )?;
-        djoined.mark_balls(&connect::polyline_points(&st, 0.5), st.radius);
-        djoined.mark_balls(&cand, 1.5);
-        driver_struts.push(st);
-    }
+    let follower_struts = plan_follower_struts(
+        &layout,
+        &rims,
+        &web_clear,
+        &follower_field,
+        &follower_pieces,
+        &pairs,
+    )?;
 
     Ok(Design {
         kin,
@@ -303,7 +299,7 @@ pub fn design(
         follower_pieces,
         driver_pieces,
         support_pieces,
-        follower_other_field,
+        band_clearance: web_clear,
         follower_field,
         driver_field,
         cell_mm: opts.cell_mm,
@@ -312,37 +308,225 @@ pub fn design(
     })
 }
 
+/// Radius of each part's column up its axis. 3.5 mm: a 7 mm round post.
+const COLUMN_RADIUS_MM: f64 = 3.5;
+
+/// The column from `z0` up its part's axis towards `z1`, as far as `clearance` allows a
+/// [`COLUMN_RADIUS_MM`] post with the strut margin; `None` when not even 5 mm fit.
+fn column(clearance: &dyn Fn(Vec3) -> f64, z0: f64, z1: f64) -> Option<Cylinder> {
+    let need = COLUMN_RADIUS_MM + STRUT_MARGIN_MM;
+    let mut z = z0;
+    while z < z1 && clearance(Vec3::new(0.0, 0.0, z + 0.5)) >= need {
+        z += 0.5;
+    }
+    (z - z0 >= 5.0).then(|| Cylinder::z(0.0, 0.0, z0 - 1.0, z, COLUMN_RADIUS_MM))
+}
+
+/// Join each plate (nearest the hub first), then the rule-placed features, to the hub.
+fn plan_follower_struts(
+    layout: &Layout,
+    rims: &[Sweep],
+    web_clear: &BandClearance,
+    field: &DistanceField,
+    pieces: &Pieces,
+    pairs: &[(usize, &crate::synth::mechanism::CurvePair)],
+) -> Result<Vec<ThickPolyline>, BuildError> {
+    let fgrid = field.grid;
+    let mut joined = Joined::new(fgrid);
+    let hub_center = match layout.follower_hub {
+        Some((z0, z1)) => Vec3::new(0.0, 0.0, 0.5 * (z0 + z1)),
+        None => Vec3::zeros(),
+    };
+    // The hub (or ball) is where joining starts.
+    joined_mark_first(&mut joined, pieces);
+    let core_of = |k: usize| shapes::rim_core(&rims[k]);
+    let mut order: Vec<usize> = (0..rims.len()).collect();
+    let nearest = |k: usize| {
+        core_of(k)
+            .iter()
+            .map(|p| (p - hub_center).norm())
+            .fold(f64::INFINITY, f64::min)
+    };
+    order.sort_by(|&a, &b| nearest(a).total_cmp(&nearest(b)));
+    let mut struts = Vec::new();
+    let band_clearance = |p: Vec3| web_clear.below(p, STRUT_RADIUS_MM + ROOT_MARGIN_MM);
+    for &k in &order {
+        // Struts leave a rim from behind it, along −n², where the driver's band is not.
+        let rays: Vec<(Vec3, Vec3)> = rims[k]
+            .frames()
+            .iter()
+            .step_by(2)
+            .map(|f| (f.o - f.u * (RIM_DEPTH_MM + ROOT_DEPTH_MM), -f.u))
+            .collect();
+        let starts = connect::ray_starts(
+            &rays,
+            field,
+            &band_clearance,
+            STRUT_RADIUS_MM + ROOT_MARGIN_MM,
+            RAY_REACH_MM,
+        );
+        let st = connect::strut(
+            field,
+            &joined,
+            &starts,
+            hub_center,
+            &format!("plate {} (curve pair {})", k + 1, pairs[k].0 + 1),
+        )?;
+        joined.mark_balls(&connect::polyline_points(&st, 0.5), st.radius);
+        joined.mark_balls(&core_of(k), 1.5);
+        struts.push(st);
+    }
+    // Rule-placed features other than the hub/ball (cap, flange, pad) joined too.
+    for (i, cover) in pieces.cover.iter().enumerate().skip(1) {
+        let pts = &cover.centers;
+        // A feature touching what is joined already needs no strut.
+        if pts
+            .iter()
+            .any(|p| fgrid.voxel_of(*p).is_some_and(|v| joined.contains(v)))
+        {
+            joined.mark_balls(pts, 1.0);
+            continue;
+        }
+        // Rays in the six axis directions from the feature's cover centres.
+        let rays: Vec<(Vec3, Vec3)> = pts
+            .iter()
+            .flat_map(|&p| {
+                [
+                    Vec3::x(),
+                    -Vec3::x(),
+                    Vec3::y(),
+                    -Vec3::y(),
+                    Vec3::z(),
+                    -Vec3::z(),
+                ]
+                .map(|d| (p, d))
+            })
+            .collect();
+        let starts = connect::ray_starts(&rays, field, &|_| f64::INFINITY, 0.0, RAY_REACH_MM);
+        let st = connect::strut(
+            field,
+            &joined,
+            &starts,
+            hub_center,
+            &format!("follower feature {}", i + 1),
+        )?;
+        joined.mark_balls(&connect::polyline_points(&st, 0.5), st.radius);
+        joined.mark_balls(pts, 1.0);
+        struts.push(st);
+    }
+    Ok(struts)
+}
+
+/// Join each band (nearest the hub first) to the driver's hub.
+#[allow(clippy::too_many_arguments)]
+fn plan_driver_struts(
+    kin: &Kinematics,
+    layout: &Layout,
+    bands: &[Sweep],
+    band_covers: &[Balls],
+    rims: &Union,
+    field: &DistanceField,
+    pieces: &Pieces,
+    pairs: &[(usize, &crate::synth::mechanism::CurvePair)],
+) -> Result<Vec<ThickPolyline>, BuildError> {
+    let mut joined = Joined::new(field.grid);
+    joined_mark_first(&mut joined, pieces);
+    let hub = Vec3::new(0.0, 0.0, 0.5 * (layout.driver_hub.0 + layout.driver_hub.1));
+    let mut order: Vec<usize> = (0..bands.len()).collect();
+    let nearest = |k: usize| {
+        band_covers[k]
+            .centers
+            .iter()
+            .map(|p| (p - hub).norm())
+            .fold(f64::INFINITY, f64::min)
+    };
+    order.sort_by(|&a, &b| nearest(a).total_cmp(&nearest(b)));
+    let rim_clearance = |p: Vec3| {
+        ExactSweep {
+            kin,
+            solid: rims,
+            frame: Frame::Follower,
+            target: Frame::Driver,
+            cap: STRUT_RADIUS_MM + STRUT_MARGIN_MM + 1.0,
+            coarse: None,
+        }
+        .value(p)
+    };
+    let mut struts = Vec::new();
+    for &k in &order {
+        // Struts leave a band from behind it, along −n¹, away from the groove.
+        let rays: Vec<(Vec3, Vec3)> = bands[k]
+            .frames()
+            .iter()
+            .step_by(2)
+            .map(|f| (f.o - f.u * (BAND_DEPTH_MM - ROOT_DEPTH_MM), -f.u))
+            .collect();
+        let starts = connect::ray_starts(
+            &rays,
+            field,
+            &rim_clearance,
+            STRUT_RADIUS_MM + ROOT_MARGIN_MM,
+            RAY_REACH_MM,
+        );
+        let st = connect::strut(
+            field,
+            &joined,
+            &starts,
+            hub,
+            &format!("band {} (curve pair {})", k + 1, pairs[k].0 + 1),
+        )?;
+        joined.mark_balls(&connect::polyline_points(&st, 0.5), st.radius);
+        let centre: Vec<Vec3> = bands[k]
+            .frames()
+            .iter()
+            .map(|f| f.o - f.u * (0.5 * BAND_DEPTH_MM))
+            .collect();
+        joined.mark_balls(&centre, 1.5);
+        struts.push(st);
+    }
+    Ok(struts)
+}
+
 fn joined_mark_first(j: &mut Joined, p: &Pieces) {
     if let Some(a) = p.add.first() {
         j.mark_solid(a.as_ref());
     }
 }
 
-/// Clearance of a follower point from the driver's swept bands (exact near the edge) and
-/// from the driver's hub and the support (coarse).
-struct WebClearance {
+/// Clearance of a follower point from the driver's swept bands (exact where it matters) and
+/// from the driver's hub, column, struts and the support (coarse).
+pub struct BandClearance {
     kin: Arc<Kinematics>,
-    bands: Arc<Union>,
-    coarse: Arc<DistanceField>,
+    bands: Vec<Sweep>,
+    /// Coarse swept distance of each band (follower frame).
+    band_fields: Vec<DistanceField>,
     others: Arc<DistanceField>,
 }
 
-impl WebClearance {
-    fn clearance(&self, p: Vec3) -> f64 {
-        let c = self.coarse.sample(p);
-        if c >= WEB_EXACT_BELOW_MM {
-            return c;
+impl BandClearance {
+    /// The clearance at `p`, exact (for the bands) whenever it is below `need`; some value
+    /// not below `need` otherwise. A band's exact sweep runs only where its coarse field
+    /// (a lower bound) does not already settle the question.
+    pub fn below(&self, p: Vec3, need: f64) -> f64 {
+        let mut c = self.others.sample(p);
+        for (band, field) in self.bands.iter().zip(&self.band_fields) {
+            let bound = need.min(c);
+            let coarse = field.sample(p);
+            if coarse >= bound {
+                continue;
+            }
+            let exact = ExactSweep {
+                kin: &self.kin,
+                solid: band,
+                frame: Frame::Driver,
+                target: Frame::Follower,
+                cap: bound,
+                coarse: None,
+            }
+            .value(p);
+            c = c.min(exact);
         }
-        let exact = ExactSweep {
-            kin: &self.kin,
-            solid: self.bands.as_ref(),
-            frame: Frame::Driver,
-            target: Frame::Follower,
-            cap: WEB_EXACT_BELOW_MM,
-            coarse: None,
-        }
-        .value(p);
-        exact.min(self.others.sample(p))
+        c
     }
 }
 
@@ -374,7 +558,8 @@ fn plan_post(
             let az = std::f64::consts::TAU * i as f64 / 40.0;
             let el = -std::f64::consts::FRAC_PI_2 + 0.12 * j as f64;
             let d = Vec3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
-            sources.push(d * (cup_out + PILLAR_RADIUS_MM));
+            let at = d * (cup_out + PILLAR_RADIUS_MM);
+            sources.push(connect::Start { root: at, at });
         }
     }
     let mut base = Joined::new(grid);
@@ -520,12 +705,7 @@ impl Design {
         for w in &self.webs {
             add.push(Box::new(KeptWeb {
                 web: w.clone(),
-                clear: WebClearance {
-                    kin: self.kin.clone(),
-                    bands: Arc::new(Union::new(self.bands.iter().cloned().map(boxed).collect())),
-                    coarse: self.follower_field.clone(),
-                    others: self.follower_other_field.clone(),
-                },
+                clear: self.band_clearance.clone(),
             }));
         }
         for s in &self.follower_struts {
@@ -585,7 +765,7 @@ impl Design {
 /// A web kept clear of the driver's swept bands.
 struct KeptWeb {
     web: Arc<ThickTriangles>,
-    clear: WebClearance,
+    clear: Arc<BandClearance>,
 }
 
 impl Sdf for KeptWeb {
@@ -594,7 +774,8 @@ impl Sdf for KeptWeb {
         if v > 0.0 {
             return v;
         }
-        v.max(WEB_MARGIN_MM - self.clear.clearance(p))
+        // max(v, margin − clearance) differs from v only when clearance < margin − v.
+        v.max(WEB_MARGIN_MM - self.clear.below(p, WEB_MARGIN_MM - v))
     }
     fn bounds(&self) -> Aabb {
         self.web.bounds()

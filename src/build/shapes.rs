@@ -96,30 +96,42 @@ pub fn web(rim: &Sweep) -> (ThickTriangles, Vec<[Vec3; 3]>) {
     )
 }
 
-/// Balls covering a sweep with `section`: one ball per frame around the section's centre.
+/// Balls covering a sweep: per frame, a small grid of balls over the section (two along
+/// the half ellipse's axis; two by two over the rectangle), each radius the half diagonal
+/// of its cell, plus half the largest frame spacing so the cover has no gaps between frames.
 pub fn sweep_cover(s: &Sweep, frame: Frame) -> Balls {
-    let (offset, radius) = match s.section() {
-        Section::HalfEllipse { a, b } => (-0.5 * a, (0.25 * a * a + b * b).sqrt()),
+    // Section cells as (u centre, v centre) with the cell half extents.
+    let (cells, half): (Vec<(f64, f64)>, (f64, f64)) = match s.section() {
+        Section::HalfEllipse { a, b } => (vec![(-0.25 * a, 0.0), (-0.75 * a, 0.0)], (0.25 * a, b)),
         Section::RoundedRect {
             u_min,
             u_max,
             half_width,
             ..
-        } => (
-            0.5 * (u_min + u_max),
-            (0.5 * (u_max - u_min)).hypot(half_width),
-        ),
+        } => {
+            let (hu, hv) = (0.25 * (u_max - u_min), 0.5 * half_width);
+            let (u0, u1) = (u_min + hu, u_max - hu);
+            (vec![(u0, -hv), (u0, hv), (u1, -hv), (u1, hv)], (hu, hv))
+        }
     };
-    // Consecutive frames are at most ~1 mm apart in the examples; the ball radius is
-    // raised by half the largest spacing so the cover has no gaps between frames.
     let fr = s.frames();
-    let gap = (0..fr.len())
-        .map(|i| (fr[(i + 1) % fr.len()].o - fr[i].o).norm())
+    let n = fr.len();
+    let gap = (0..n)
+        .map(|i| (fr[(i + 1) % n].o - fr[i].o).norm())
         .fold(0.0, f64::max);
+    let mut centers = Vec::with_capacity(n * cells.len());
+    for i in 0..n {
+        let t = (fr[(i + 1) % n].o - fr[(i + n - 1) % n].o).normalize();
+        let u = (fr[i].u - t * fr[i].u.dot(&t)).normalize();
+        let v = t.cross(&u);
+        for &(cu, cv) in &cells {
+            centers.push(fr[i].o + u * cu + v * cv);
+        }
+    }
     Balls {
         frame,
-        centers: fr.iter().map(|f| f.o + f.u * offset).collect(),
-        radius: radius + 0.5 * gap,
+        centers,
+        radius: half.0.hypot(half.1) + 0.5 * gap,
     }
 }
 
