@@ -23,6 +23,7 @@
 //! | [`connect`] | struts and posts planned through free space |
 //! | [`parts`] | the design and the three solids |
 //! | [`check`] | interference and contact gaps over the period, mesh error |
+//! | [`output`] | the output folder: STL, 3MF, GLB, pictures, build.json / build.md |
 //!
 //! It does not synthesize (`synth`), and knows meshes only through `geometry`.
 
@@ -32,6 +33,7 @@ pub mod connect;
 pub mod dims;
 pub mod kinematics;
 pub mod layout;
+pub mod output;
 pub mod parts;
 pub mod shapes;
 pub mod swept;
@@ -73,7 +75,10 @@ pub enum BuildError {
         missing: String,
     },
     /// No room for a connection.
-    #[error("cannot join {what}: {detail}")]
+    #[error(
+        "cannot join {what}: {detail}. The design leaves no room for it: synthesize with \
+         --band-gap and --axis-room (docs/build.md, \"Printable designs\")"
+    )]
     NoRoom {
         /// What could not be joined.
         what: String,
@@ -199,7 +204,7 @@ pub fn build(
     let scale = opts.scale_mm.unwrap_or(mech.scale_mm);
     in_range("--scale-mm", scale, SCALE_RANGE_MM)?;
     in_range("--clearance", opts.clearance_mm, CLEARANCE_RANGE_MM)?;
-    in_range("cell size", opts.cell_mm, CELL_RANGE_MM)?;
+    in_range("--cell-mm", opts.cell_mm, CELL_RANGE_MM)?;
     if let Some(k) = opts.without_pair {
         if k >= mech.curve_pairs.len() {
             return Err(BuildError::BadOption {
@@ -344,4 +349,56 @@ fn mesh_part(
         dropped,
         seconds: t.elapsed().as_secs_f64(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn test_mechanism() -> Mechanism {
+        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data/mechanism/half-turn-2to1/mechanism.json");
+        Mechanism::load(&file).expect("the test mechanism loads")
+    }
+
+    /// Guards the option errors, whole: each names the option as typed and its range, and
+    /// comes before any work.
+    #[test]
+    fn options_out_of_range_are_refused_whole() {
+        let mech = test_mechanism();
+        let cases = [
+            (
+                BuildOptions {
+                    clearance_mm: 5.0,
+                    ..BuildOptions::default()
+                },
+                "--clearance: 5 is outside 0–2",
+            ),
+            (
+                BuildOptions {
+                    scale_mm: Some(f64::NAN),
+                    ..BuildOptions::default()
+                },
+                "--scale-mm: NaN is outside 4–40",
+            ),
+            (
+                BuildOptions {
+                    cell_mm: 0.01,
+                    ..BuildOptions::default()
+                },
+                "--cell-mm: 0.01 is outside 0.1–1",
+            ),
+            (
+                BuildOptions {
+                    without_pair: Some(9),
+                    ..BuildOptions::default()
+                },
+                "--without-pair: pair 10 does not exist (the mechanism has 4)",
+            ),
+        ];
+        for (opts, want) in cases {
+            let err = build(&mech, &opts, &|_| {}).err().expect("refused");
+            assert_eq!(err.to_string(), want);
+        }
+    }
 }

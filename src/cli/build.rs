@@ -1,14 +1,18 @@
 //! `mpc-rig build`: printable parts from a mechanism.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context;
 use clap::Args;
 
-use crate::build::{self, Bench, BuildOptions};
+use crate::build::{self, output, Bench, BuildOptions};
+use crate::motion::MECHANISM_FILE;
 use crate::rig::config::RigConfig;
 use crate::synth::mechanism::Mechanism;
+
+/// The output folder beside the mechanism file when `-o` is not given.
+pub const DEFAULT_OUT_DIR: &str = "parts";
 
 /// Arguments of `mpc-rig build`.
 #[derive(Debug, Args)]
@@ -39,7 +43,12 @@ pub struct BuildArgs {
 
 /// Run `mpc-rig build`.
 pub fn run(args: BuildArgs) -> anyhow::Result<ExitCode> {
-    let mech = Mechanism::load(&args.mechanism)?;
+    let file = if args.mechanism.is_dir() {
+        args.mechanism.join(MECHANISM_FILE)
+    } else {
+        args.mechanism.clone()
+    };
+    let mech = Mechanism::load(&file)?;
     let bench = match &args.rig {
         Some(r) => Some(Bench::from_rig(&RigConfig::load(r)?, mech.class)?),
         None => None,
@@ -54,7 +63,13 @@ pub fn run(args: BuildArgs) -> anyhow::Result<ExitCode> {
     };
     let t = std::time::Instant::now();
     let built = build::build(&mech, &opts, &|s| eprintln!("  {s}"))
-        .with_context(|| format!("building {}", args.mechanism.display()))?;
+        .with_context(|| format!("building {}", file.display()))?;
+    let out = args.out.clone().unwrap_or_else(|| {
+        file.parent()
+            .unwrap_or_else(|| Path::new("."))
+            .join(DEFAULT_OUT_DIR)
+    });
+    let written = output::write(&built, &file, &opts, &out, &|s| eprintln!("  {s}"))?;
     for p in &built.parts {
         let c = p.mesh.check();
         let b = p.mesh.aabb().size();
@@ -82,6 +97,13 @@ pub fn run(args: BuildArgs) -> anyhow::Result<ExitCode> {
     for (what, s) in &built.timings {
         println!("{what}: {s:.1} s");
     }
+    if let Some(note) = &written.bed_note {
+        println!("note: {note}");
+    }
     println!("total {:.1} s", t.elapsed().as_secs_f64());
+    println!("wrote {} files to {}", written.files.len(), out.display());
+    for f in &written.files {
+        println!("  {}", f.display());
+    }
     Ok(ExitCode::SUCCESS)
 }

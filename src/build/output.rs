@@ -1,0 +1,450 @@
+//! The files of a build: what a printer, a viewer and a person read.
+//!
+//! Owns the output folder's layout:
+//!
+//! | file | what |
+//! |---|---|
+//! | `driver.stl`, `follower.stl`, `support.stl` | each part alone, binary STL, mm, in its own frame |
+//! | `mechanism.3mf` | the three parts laid out on a bed without overlap (model part `3D/3dmodel.model`) |
+//! | `assembly.glb` | the assembled parts moving over one period (animated glTF) |
+//! | `assembly-isometric.png`, `assembly-front.png` | the assembly at t = 0 |
+//! | `driver.png`, `follower.png`, `support.png` | each part alone, isometric |
+//! | `build.json` | format [`BUILD_FORMAT`]: options, bench, per-part and check figures |
+//! | `build.md` | the same for a person, with the pictures |
+//!
+//! It does not make or check the parts (see [`super::build`]), and writes each format
+//! through `geometry::io` / `geometry::render`.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use serde_json::json;
+
+use super::kinematics::Kinematics;
+use super::{BuildOptions, Built, Part};
+use crate::geometry::io::gltf::{write_glb, GltfError};
+use crate::geometry::io::stl::{write_stl, StlError};
+use crate::geometry::io::threemf::{self, Bed, LayoutError, ThreeMfError};
+use crate::geometry::render::{RenderError, RenderOptions, Renderer, View};
+use crate::geometry::scene::{Pose, Scene, ScenePart};
+
+/// The `format` of `build.json`.
+pub const BUILD_FORMAT: &str = "mpcmech-build/1";
+
+/// Duration of one period in `assembly.glb`, s: one driver turn in 4 s (15 rpm) is slow
+/// enough to follow a contact by eye.
+pub const ANIMATION_PERIOD_S: f64 = 4.0;
+
+/// Keys of the animation over one period (the last equals the first): 121 keys, 3° of driver
+/// per key, so linear interpolation between keys stays within a few hundredths of a mm of
+/// the law at the parts' radii.
+pub const ANIMATION_KEYS: usize = 121;
+
+/// Part colours in pictures and the GLB (linear RGBA): driver orange, follower blue,
+/// support grey, the usual colours of driving, driven and fixed links in mechanism drawings.
+const DRIVER_RGBA: [f32; 4] = [0.85, 0.36, 0.08, 1.0];
+const FOLLOWER_RGBA: [f32; 4] = [0.10, 0.33, 0.75, 1.0];
+const SUPPORT_RGBA: [f32; 4] = [0.55, 0.55, 0.55, 1.0];
+
+/// Why the files of a build could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum OutputError {
+    /// The folder or a text file could not be written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// The system's reason.
+        source: std::io::Error,
+    },
+    /// An STL file.
+    #[error(transparent)]
+    Stl(#[from] StlError),
+    /// The 3MF package.
+    #[error(transparent)]
+    ThreeMf(#[from] ThreeMfError),
+    /// The GLB file.
+    #[error(transparent)]
+    Gltf(#[from] GltfError),
+    /// A picture.
+    #[error(transparent)]
+    Render(#[from] RenderError),
+}
+
+/// What [`write`] wrote.
+#[derive(Clone, Debug)]
+pub struct Written {
+    /// Every file, in the order of the table above.
+    pub files: Vec<PathBuf>,
+    /// The bed the 3MF was laid out on, mm.
+    pub bed_mm: [f64; 2],
+    /// Why the default bed was not used, when it was not.
+    pub bed_note: Option<String>,
+}
+
+fn color(name: &str) -> [f32; 4] {
+    match name {
+        "driver" => DRIVER_RGBA,
+        "follower" => FOLLOWER_RGBA,
+        _ => SUPPORT_RGBA,
+    }
+}
+
+fn pose_of(iso: &nalgebra::Isometry3<f64>) -> Pose {
+    let q = iso.rotation.quaternion();
+    Pose {
+        rotation: [q.w, q.i, q.j, q.k],
+        translation: [iso.translation.x, iso.translation.y, iso.translation.z],
+    }
+}
+
+/// The assembled parts over one period, in the support's frame R (mm): the driver and the
+/// follower posed by `kin`, anything else static.
+pub fn scene(kin: &Kinematics, parts: &[Part]) -> Scene {
+    let times: Vec<f64> = (0..ANIMATION_KEYS)
+        .map(|i| i as f64 / (ANIMATION_KEYS - 1) as f64)
+        .collect();
+    let parts = parts
+        .iter()
+        .map(|p| {
+            let poses = match p.name {
+                // t = 1 is evaluated as t = 0 so the loop closes exactly.
+                "driver" => times
+                    .iter()
+                    .map(|&t| pose_of(&kin.driver(t % 1.0)))
+                    .collect(),
+                "follower" => times
+                    .iter()
+                    .map(|&t| pose_of(&kin.follower(t % 1.0)))
+                    .collect(),
+                _ => vec![Pose::IDENTITY],
+            };
+            ScenePart {
+                name: p.name.to_string(),
+                mesh: p.mesh.clone(),
+                color: color(p.name),
+                poses,
+            }
+        })
+        .collect();
+    Scene {
+        parts,
+        times_s: times.iter().map(|t| t * ANIMATION_PERIOD_S).collect(),
+    }
+}
+
+/// Lay the parts out on the default bed, or on the smallest square bed that holds them when
+/// they do not fit it (said in the note).
+fn write_package(path: &Path, parts: &[Part]) -> Result<([f64; 2], Option<String>), OutputError> {
+    let items: Vec<threemf::Part> = parts
+        .iter()
+        .map(|p| threemf::Part {
+            name: p.name,
+            mesh: &p.mesh,
+        })
+        .collect();
+    let bed = Bed::default();
+    match threemf::layout(&items, &bed) {
+        Ok(_) => {
+            threemf::write_3mf(path, &items, &bed)?;
+            Ok((bed.size_mm, None))
+        }
+        Err(LayoutError::BedTooSmall { needed, .. }) => {
+            let side = needed[0].max(needed[1]).ceil();
+            let big = Bed {
+                size_mm: [side, side],
+                ..bed
+            };
+            threemf::write_3mf(path, &items, &big)?;
+            let note = format!(
+                "the parts need {:.0} × {:.0} mm side by side, more than the {:.0} × {:.0} mm \
+                 bed: print them one at a time from the STL files, or use a bed of at least \
+                 {side:.0} × {side:.0} mm",
+                needed[0], needed[1], bed.size_mm[0], bed.size_mm[1]
+            );
+            Ok(([side, side], Some(note)))
+        }
+        Err(LayoutError::PartTooLarge { name, size, .. }) => {
+            let side = size[0].max(size[1]).ceil() * 3.0;
+            let big = Bed {
+                size_mm: [side, side],
+                ..bed
+            };
+            threemf::write_3mf(path, &items, &big)?;
+            let note = format!(
+                "the {name} alone is {:.0} × {:.0} mm, larger than the {:.0} × {:.0} mm bed",
+                size[0], size[1], bed.size_mm[0], bed.size_mm[1]
+            );
+            Ok(([side, side], Some(note)))
+        }
+        Err(source) => Err(ThreeMfError::Layout {
+            path: path.to_path_buf(),
+            source,
+        }
+        .into()),
+    }
+}
+
+/// Write every file of `built` into `out` (created if missing). `mechanism` is the file the
+/// parts were built from (recorded in `build.json`).
+pub fn write(
+    built: &Built,
+    mechanism: &Path,
+    opts: &BuildOptions,
+    out: &Path,
+    progress: &dyn Fn(&str),
+) -> Result<Written, OutputError> {
+    std::fs::create_dir_all(out).map_err(|source| OutputError::Io {
+        path: out.to_path_buf(),
+        source,
+    })?;
+    let mut files = Vec::new();
+    progress("writing STL, 3MF and GLB");
+    for p in &built.parts {
+        let path = out.join(format!("{}.stl", p.name));
+        write_stl(&path, &p.mesh, p.name)?;
+        files.push(path);
+    }
+    let package = out.join("mechanism.3mf");
+    let (bed_mm, bed_note) = write_package(&package, &built.parts)?;
+    files.push(package);
+    let scene = scene(&built.design.kin, &built.parts);
+    let glb = out.join("assembly.glb");
+    write_glb(&glb, &scene)?;
+    files.push(glb);
+
+    progress("rendering pictures");
+    let renderer = Renderer::new(&scene, RenderOptions::default())?;
+    for view in [View::Isometric, View::Front] {
+        let path = out.join(format!("assembly-{}.png", view.name()));
+        renderer.render(0, view)?.write_png(&path)?;
+        files.push(path);
+    }
+    for part in &scene.parts {
+        let alone = Scene {
+            parts: vec![ScenePart {
+                poses: vec![Pose::IDENTITY],
+                ..part.clone()
+            }],
+            times_s: vec![0.0],
+        };
+        let path = out.join(format!("{}.png", part.name));
+        Renderer::new(&alone, RenderOptions::default())?
+            .render(0, View::Isometric)?
+            .write_png(&path)?;
+        files.push(path);
+    }
+
+    let json_path = out.join("build.json");
+    let doc = summary_json(built, mechanism, opts, bed_mm, bed_note.as_deref());
+    let text = serde_json::to_string_pretty(&doc).expect("a JSON value always serializes");
+    write_text(&json_path, &(text + "\n"))?;
+    files.push(json_path);
+    let md_path = out.join("build.md");
+    write_text(
+        &md_path,
+        &summary_md(built, mechanism, opts, bed_mm, bed_note.as_deref()),
+    )?;
+    files.push(md_path);
+    Ok(Written {
+        files,
+        bed_mm,
+        bed_note,
+    })
+}
+
+fn write_text(path: &Path, text: &str) -> Result<(), OutputError> {
+    std::fs::write(path, text).map_err(|source| OutputError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+fn summary_json(
+    built: &Built,
+    mechanism: &Path,
+    opts: &BuildOptions,
+    bed_mm: [f64; 2],
+    bed_note: Option<&str>,
+) -> serde_json::Value {
+    let kin = &built.design.kin;
+    let f = &built.figures;
+    json!({
+        "format": BUILD_FORMAT,
+        "mechanism": mechanism.display().to_string(),
+        "class": format!("{:?}", kin.class()),
+        "scale_mm": kin.scale_mm(),
+        "dx_mm": kin.dx_mm(),
+        "clearance_mm": opts.clearance_mm,
+        "cell_mm": opts.cell_mm,
+        "without_pair": opts.without_pair.map(|k| k + 1),
+        "bench": built.design.layout.bench.to_string(),
+        "parts": built.parts.iter().map(|p| {
+            let c = p.mesh.check();
+            let b = p.mesh.aabb();
+            json!({
+                "name": p.name,
+                "file": format!("{}.stl", p.name),
+                "triangles": c.triangles,
+                "volume_mm3": c.volume_mm3,
+                "closed_manifold": c.is_closed_manifold(),
+                "bbox_min_mm": b.min,
+                "bbox_max_mm": b.max,
+                "dropped_fragments_mm3": p.dropped,
+                "seconds": p.seconds,
+            })
+        }).collect::<Vec<_>>(),
+        "bed_mm": bed_mm,
+        "bed_note": bed_note,
+        "check": {
+            "times": f.times,
+            "penetrations": f.penetrations.iter().map(|p| json!({
+                "what": p.what, "depth_mm": p.depth_mm, "t": p.t,
+            })).collect::<Vec<_>>(),
+            "gaps": f.gaps.iter().map(|g| json!({
+                "pair": g.pair, "min_mm": g.min_mm, "max_mm": g.max_mm,
+                "mean_mm": g.mean_mm, "worst_t": g.worst_t,
+            })).collect::<Vec<_>>(),
+            "failure": f.failure(),
+        },
+        "timings_s": built.timings.iter().map(|(w, s)| json!({"stage": w, "seconds": s})).collect::<Vec<_>>(),
+    })
+}
+
+fn summary_md(
+    built: &Built,
+    mechanism: &Path,
+    opts: &BuildOptions,
+    bed_mm: [f64; 2],
+    bed_note: Option<&str>,
+) -> String {
+    let kin = &built.design.kin;
+    let f = &built.figures;
+    let mut s = String::new();
+    let _ = writeln!(s, "# Parts of {}\n", mechanism.display());
+    let _ = writeln!(
+        s,
+        "{:?} mechanism, {} mm per model unit, d_x = {:.1} mm, print clearance {} mm, \
+         mesher cell {} mm; bench: {}.\n",
+        kin.class(),
+        kin.scale_mm(),
+        kin.dx_mm(),
+        opts.clearance_mm,
+        opts.cell_mm,
+        built.design.layout.bench
+    );
+    if let Some(k) = opts.without_pair {
+        let _ = writeln!(
+            s,
+            "**Curve pair {} left out** (an experiment: these parts need not close).\n",
+            k + 1
+        );
+    }
+    let _ = writeln!(s, "![assembly](assembly-isometric.png)\n");
+    let _ = writeln!(s, "| part | triangles | volume mm³ | size mm | mesh |");
+    let _ = writeln!(s, "|---|---:|---:|---|---|");
+    for p in &built.parts {
+        let c = p.mesh.check();
+        let b = p.mesh.aabb().size();
+        let _ = writeln!(
+            s,
+            "| [{n}]({n}.stl) | {} | {:.0} | {:.0} × {:.0} × {:.0} | {} |",
+            c.triangles,
+            c.volume_mm3,
+            b[0],
+            b[1],
+            b[2],
+            c.summary(),
+            n = p.name
+        );
+    }
+    let _ = writeln!(
+        s,
+        "\n`mechanism.3mf` lays the parts out on a {:.0} × {:.0} mm bed.",
+        bed_mm[0], bed_mm[1]
+    );
+    if let Some(n) = bed_note {
+        let _ = writeln!(s, "Note: {n}.");
+    }
+    let _ = writeln!(
+        s,
+        "\n## Interference and contact gaps ({} instants per period)\n",
+        f.times
+    );
+    let _ = writeln!(s, "| parts | deepest penetration mm | at t |");
+    let _ = writeln!(s, "|---|---:|---:|");
+    for p in &f.penetrations {
+        let _ = writeln!(s, "| {} | {:.3} | {:.4} |", p.what, p.depth_mm, p.t);
+    }
+    let _ = writeln!(
+        s,
+        "\n| curve pair | gap min mm | max mm | mean mm | worst at t |"
+    );
+    let _ = writeln!(s, "|---:|---:|---:|---:|---:|");
+    for g in &f.gaps {
+        let _ = writeln!(
+            s,
+            "| {} | {:.3} | {:.3} | {:.3} | {:.4} |",
+            g.pair, g.min_mm, g.max_mm, g.mean_mm, g.worst_t
+        );
+    }
+    match f.failure() {
+        None => {
+            let _ = writeln!(s, "\nThe check passes.");
+        }
+        Some(why) => {
+            let _ = writeln!(s, "\n**The check fails:** {why}.");
+        }
+    }
+    let _ = writeln!(s, "\n## Parts\n");
+    for p in &built.parts {
+        let _ = writeln!(s, "![{n}]({n}.png)", n = p.name);
+    }
+    let _ = writeln!(s, "\n## Time\n");
+    for (w, t) in &built.timings {
+        let _ = writeln!(s, "- {w}: {t:.1} s");
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::io::gltf::glb_bytes;
+    use crate::geometry::primitive_meshes;
+    use crate::synth::mechanism::Mechanism;
+
+    fn test_kinematics() -> Kinematics {
+        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data/mechanism/half-turn-2to1/mechanism.json");
+        let mech = Mechanism::load(&file).expect("the test mechanism loads");
+        Kinematics::new(&mech, 10.0).expect("its law rebuilds")
+    }
+
+    /// Guards the animation the GLB carries: driver and follower have one pose per key, the
+    /// support one; the loop closes (last key = first) and the GLB writer's own scene checks
+    /// (unit quaternions, at most 150° per key, a closed loop) accept it.
+    #[test]
+    fn assembly_scene_loops_and_is_a_valid_glb() {
+        let kin = test_kinematics();
+        let mesh = primitive_meshes::cuboid([0.0; 3], [10.0, 10.0, 10.0]);
+        let parts: Vec<Part> = ["driver", "follower", "support"]
+            .into_iter()
+            .map(|name| Part {
+                name,
+                mesh: mesh.clone(),
+                dropped: Vec::new(),
+                seconds: 0.0,
+            })
+            .collect();
+        let scene = scene(&kin, &parts);
+        assert_eq!(scene.times_s.len(), ANIMATION_KEYS);
+        assert_eq!(scene.times_s.last().copied(), Some(ANIMATION_PERIOD_S));
+        let counts: Vec<usize> = scene.parts.iter().map(|p| p.poses.len()).collect();
+        assert_eq!(counts, vec![ANIMATION_KEYS, ANIMATION_KEYS, 1]);
+        for p in &scene.parts[..2] {
+            assert_eq!(p.poses.first(), p.poses.last(), "{}", p.name);
+        }
+        glb_bytes(&scene).expect("the GLB writer accepts the scene");
+    }
+}
