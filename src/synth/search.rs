@@ -940,6 +940,39 @@ mod tests {
         );
     }
 
+    /// Digest of the reduced 1R run's design (curve pairs, closure, attempts) with the
+    /// default layout options, taken before the band gap and the axis room became options
+    /// (x86_64 Linux, release build). A changed digest means the defaults no longer
+    /// give the designs they gave; SLSQP's paths follow round-off, so a different libm can
+    /// change it too.
+    const DEFAULT_DESIGN_DIGEST: &str =
+        "769329cd705838d8e5cc8b81efcfe0c43577edc75c5f29d3545088278361e635";
+
+    /// Guards that the default options give the same design as before the layout options
+    /// existed (see [`DEFAULT_DESIGN_DIGEST`]).
+    #[test]
+    fn default_options_give_the_same_design_as_before() {
+        use sha2::{Digest, Sha256};
+        let opts = SynthOptions {
+            k: None,
+            ..small_opts(2)
+        };
+        let m = outcome(synthesize_track(
+            Class::R1,
+            half_turn_like(60),
+            "t",
+            &opts,
+            &NoProgress,
+        ));
+        let json = serde_json::to_string(&(&m.curve_pairs, &m.closure, &m.solve.attempts))
+            .expect("serializable");
+        let digest: String = Sha256::digest(json.as_bytes())
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect();
+        assert_eq!(digest, DEFAULT_DESIGN_DIGEST, "K = {}", m.curve_pairs.len());
+    }
+
     /// Guards the smallest-K acceptance: the search stops at the first K whose combination
     /// closes at every instant of the 4× check (paper and robust, E_maxDist ≤ −ε) or at the
     /// combination with fewest pairs found by leaving bands out of it; no attempt with fewer
