@@ -120,6 +120,7 @@ pub fn band_problem(
         cone,
         focus: None,
         stage: Stage::Full,
+        axis_room: None,
     }
 }
 
