@@ -219,7 +219,7 @@ fn solve_band(
     let mut usable = 0;
     for i in 0..m {
         let t0 = std::time::Instant::now();
-        let layout = bands::BandLayout::for_motion(class, &tr);
+        let layout = bands::BandLayout::for_motion(class, &tr, bands::BAND_GAP);
         let mut pb = bands::band_problem(class, &tr, dx, layout, b, cone);
         if class != Class::R1 {
             pb.vary = Some((i * n / m) % n);

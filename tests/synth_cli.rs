@@ -52,7 +52,8 @@ fn synth_end_to_end_then_check_and_reject_tampering() {
         .stdout(predicate::str::contains(
             "best reached per K tried (closure margin asked: E_maxDist ≤ −0.02):\n  K = 3, d_x = 6:",
         ))
-        .stdout(predicate::str::contains("(accepted)"));
+        .stdout(predicate::str::contains("(accepted)"))
+        .stdout(predicate::str::contains("layout: band gap 0.5, axis room none"));
     let file = out.join("mechanism.json");
     assert!(file.exists());
     for plot in [
@@ -82,12 +83,33 @@ fn synth_end_to_end_then_check_and_reject_tampering() {
     assert_eq!(json["closure"]["vali_time"], 1.0);
     assert_eq!(json["closure"]["max_dist"], -1.0);
     assert_eq!(json["closure"]["robust_vali_time"], 1.0);
+    assert_eq!(json["solve"]["band_gap"], 0.5);
+    assert!(json["solve"]["axis_room"].is_null());
     Command::cargo_bin("mpc-rig")
         .unwrap()
         .args(["synth", "--check", out.to_str().unwrap()])
         .assert()
         .success()
-        .stdout(predicate::str::contains("passes every check"));
+        .stdout(predicate::str::contains("passes every check"))
+        .stdout(predicate::str::contains("axis room").not());
+
+    // Claimed layout options the curves do not keep: a wider band gap than the slabs
+    // leave, and an axis room the curves reach into.
+    for (field, value, fails) in [
+        ("band_gap", 1.0, "FAIL band separation"),
+        ("axis_room", 4.0, "FAIL axis room"),
+    ] {
+        let mut claimed = json.clone();
+        claimed["solve"][field] = serde_json::json!(value);
+        let f = dir.path().join(format!("claimed-{field}.json"));
+        std::fs::write(&f, serde_json::to_string(&claimed).unwrap()).unwrap();
+        Command::cargo_bin("mpc-rig")
+            .unwrap()
+            .args(["synth", "--check", f.to_str().unwrap()])
+            .assert()
+            .code(2)
+            .stdout(predicate::str::contains(fails));
+    }
 
     // Tamper: move one contact point of pair 0.
     let mut bad = json.clone();
@@ -147,6 +169,37 @@ fn synth_refuses_a_margin_below_epsilon() {
         .stderr(predicate::str::contains(
             "--min-margin 0.01 must lie between ε = 0.02",
         ));
+}
+
+/// Guards request validation of the layout options at the command line: a band gap outside
+/// 0–5 and an axis room that is not positive or leaves the curves no room between it and the
+/// shafts' minimum radius (d_x − 0.8) are refused with a message saying why.
+#[test]
+fn synth_refuses_bad_layout_options() {
+    let dir = tempfile::tempdir().unwrap();
+    for (args, says) in [
+        (
+            &["--band-gap", "-1"][..],
+            "--band-gap -1 must lie between 0",
+        ),
+        (&["--band-gap", "6"], "--band-gap 6 must lie between 0"),
+        (
+            &["--axis-room", "-1"],
+            "--axis-room -1 must be positive and below",
+        ),
+        (
+            &["--axis-room", "5.5", "--dx", "6"],
+            "--axis-room 5.5 must be positive and below 5.2",
+        ),
+    ] {
+        Command::cargo_bin("mpc-rig")
+            .unwrap()
+            .args(["synth", MOTION, "-o", dir.path().to_str().unwrap()])
+            .args(args)
+            .assert()
+            .failure()
+            .stderr(predicate::str::contains(says));
+    }
 }
 
 /// Guards request validation at the command line: K below dof + 1 is refused with a clear

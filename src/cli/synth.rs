@@ -64,6 +64,17 @@ pub struct SynthArgs {
     /// docs/synthesis.md).
     #[arg(long, value_enum, default_value_t = ConeArg::Tangent)]
     pub normal_cone: ConeArg,
+    /// Free height between neighbouring bands, model units (0 to 5). The default 0.5 leaves
+    /// no room for a printed follower's plate and rim between two driver bands; 1.5 does,
+    /// at the cost of curve pairs (see docs/synthesis.md, "Printable layouts").
+    #[arg(long, default_value_t = synth::bands::BAND_GAP, allow_negative_numbers = true)]
+    pub band_gap: f64,
+    /// Room A kept free around each part's axis, model units (default: none). Every
+    /// follower contact stays within d_x − A of the follower axis (3R: of its joint centre)
+    /// and every driver curve within d_x − A of the driver axis, so that neither part's
+    /// swept curves cross the other's hub column. Costs curve pairs (see docs/synthesis.md).
+    #[arg(long, allow_negative_numbers = true)]
+    pub axis_room: Option<f64>,
 }
 
 /// Command-line names of [`synth::closure::NormalCone`].
@@ -175,6 +186,7 @@ fn summary(m: &Mechanism) -> String {
     format!(
         "class  K  d_x    E_valiTime  E_maxDist  robust_vali  robust_max  vali@4x  residual°  time s\n\
          {:<6} {:<2} {:<6} {:<11.4} {:<10.4} {:<12.4} {:<11.4} {:<8.4} {:<10.3} {:.1}{note}\n\
+         layout: band gap {}, axis room {}\n\
          best reached per K tried (closure margin asked: E_maxDist ≤ −{}):{}",
         m.class.label(),
         m.curve_pairs.len(),
@@ -186,6 +198,9 @@ fn summary(m: &Mechanism) -> String {
         over.map_or(f64::NAN, |o| o.vali_time),
         m.closure.worst_residual_deg,
         m.solve.seconds,
+        m.solve.band_gap,
+        m.solve.axis_room
+            .map_or("none".to_string(), |a| format!("{a} (curves within d_x − {a} of the axes)")),
         m.solve.min_margin,
         tried.concat()
     )
@@ -239,6 +254,8 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
         scale_mm: args.scale_mm,
         cone: args.normal_cone.into(),
         min_margin: args.min_margin,
+        band_gap: args.band_gap,
+        axis_room: args.axis_room,
         ..SynthOptions::default()
     };
     let bar = ProgressBar::new(0);

@@ -17,8 +17,10 @@ use super::pose::PoseTrack;
 /// Height of each band, model units. Default 1.0 (10 mm at the default scale): room for a
 /// contact curve with some vertical waviness and for the swept cross-section.
 pub const BAND_HEIGHT: f64 = 1.0;
-/// Gap between bands, model units. Default 0.5 (5 mm): keeps neighbouring swept contact
-/// surfaces apart when printed.
+/// Gap between bands, model units, unless `--band-gap` asks for another (see
+/// [`SynthOptions::band_gap`](super::SynthOptions::band_gap)). Default 0.5 (5 mm): keeps
+/// neighbouring swept contact surfaces apart, but leaves no room for a follower plate and
+/// rim between two driver bands (see `docs/synthesis.md`, "Printable layouts").
 pub const BAND_GAP: f64 = 0.5;
 /// How many bands beyond K may be laid out when some are left empty (no candidate passed
 /// the checks), so that K still counts curve pairs. Default 2: spherical-four-bar's band 5
@@ -73,17 +75,15 @@ pub fn dwell_1r(class: Class, poses: &PoseTrack) -> bool {
 }
 
 impl BandLayout {
-    /// The layout for a motion: taller bands ([`DWELL_BAND_HEIGHT`]) for a 1R motion with
-    /// dwells ([`dwell_1r`]), else the default.
-    pub fn for_motion(class: Class, poses: &PoseTrack) -> Self {
-        if dwell_1r(class, poses) {
-            Self {
-                height: DWELL_BAND_HEIGHT,
-                gap: BAND_GAP,
-            }
+    /// The layout for a motion with bands `gap` apart: taller bands ([`DWELL_BAND_HEIGHT`])
+    /// for a 1R motion with dwells ([`dwell_1r`]), else [`BAND_HEIGHT`].
+    pub fn for_motion(class: Class, poses: &PoseTrack, gap: f64) -> Self {
+        let height = if dwell_1r(class, poses) {
+            DWELL_BAND_HEIGHT
         } else {
-            Self::default()
-        }
+            BAND_HEIGHT
+        };
+        Self { height, gap }
     }
 
     /// Band k's [z_min, z_max].
@@ -120,6 +120,7 @@ pub fn band_problem(
         cone,
         focus: None,
         stage: Stage::Full,
+        axis_room: None,
     }
 }
 
@@ -381,6 +382,45 @@ mod tests {
         }
     }
 
+    /// Guards that the layout uses the gap it is given, for plain and dwell layouts: band k
+    /// is centred at s(k)·(height + gap), neighbouring bands are exactly `gap` apart, and the
+    /// default layout is the one with [`BAND_GAP`].
+    #[test]
+    fn band_layout_uses_the_gap() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/motions");
+        for (name, height) in [
+            ("half-turn-2to1", BAND_HEIGHT),
+            ("quarter-turn-dwell", DWELL_BAND_HEIGHT),
+        ] {
+            let motion =
+                crate::motion::Motion::from_file(&dir.join(format!("{name}.toml"))).unwrap();
+            let poses = PoseTrack::from_motion(&motion, 360);
+            let class: Class = motion.class().into();
+            assert_eq!(
+                BandLayout::for_motion(class, &poses, BAND_GAP),
+                BandLayout {
+                    height,
+                    gap: BAND_GAP
+                }
+            );
+            for gap in [0.0, 1.5, 5.0] {
+                let l = BandLayout::for_motion(class, &poses, gap);
+                assert_eq!((l.height, l.gap), (height, gap), "{name}");
+                // Bands 0, 1, 3 are stacked upwards, 0, 2, 4 downwards.
+                for (lo, hi) in [(0, 1), (1, 3), (2, 0), (4, 2)] {
+                    let (a, b) = (l.band(lo), l.band(hi));
+                    assert!(
+                        (b.0 - a.1 - gap).abs() < 1e-12,
+                        "{name} gap {gap}: {a:?} {b:?}"
+                    );
+                }
+                let s3 = 2.0;
+                assert!((l.band(3).0 + l.band(3).1 - 2.0 * s3 * (height + gap)).abs() < 1e-12);
+            }
+        }
+        assert_eq!(BandLayout::default().gap, BAND_GAP);
+    }
+
     /// Guards the dwell detection: of the example motions only quarter-turn-dwell (four
     /// dwells, 40 % of the period) stands still and gets the dwell layout; no sample of the
     /// others is still (pick-and-place's pauses are spline keys, not a standstill).
@@ -393,7 +433,7 @@ mod tests {
             let motion = crate::motion::Motion::from_file(&path).unwrap();
             let poses = PoseTrack::from_motion(&motion, 360);
             let class: Class = motion.class().into();
-            let layout = BandLayout::for_motion(class, &poses);
+            let layout = BandLayout::for_motion(class, &poses, BAND_GAP);
             if motion.name() == "quarter-turn-dwell" {
                 let share = poses.still_share();
                 assert!((share - 0.4).abs() < 0.02, "{share}");

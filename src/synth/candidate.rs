@@ -590,7 +590,7 @@ pub fn solve_from(
                 .iter()
                 .enumerate()
                 .max_by(|a, b| a.1.total_cmp(b.1))
-                .map(|(i, v)| format!("{} violated by {v:.3e}", super::energy::CONSTRAINT_NAMES[i]))
+                .map(|(i, v)| format!("{} violated by {v:.3e}", pb.constraint_name(i)))
                 .unwrap_or_default();
             reason = Some(format!("infeasible ({:?}): {worst}", res.status));
         }
@@ -651,6 +651,7 @@ pub(crate) mod tests {
             cone: closure::NormalCone::Tangent,
             focus: None,
             stage: Stage::Full,
+            axis_room: None,
         }
     }
 

@@ -131,6 +131,14 @@ pub struct PairProblem {
     pub focus: Option<Arc<Vec<f64>>>,
     /// Which objective: the candidate's, or the 3R curve-alignment pre-solve.
     pub stage: Stage,
+    /// Room A kept free around the other part's axis, model units (`None`: no bound). With
+    /// A, every contact stays within d_x − A of the follower joint axis (1R/1R1T; of the
+    /// joint centre for 3R, which bounds the horizontal distance under any rotation) and
+    /// |c¹_xy| ≤ d_x − A: the driver curve sweeps a circle of radius |c¹_xy| about its axis
+    /// and the follower's material stays within that radius of the follower axis, so each
+    /// stays at least A from the other's axis column (hub, shaft). Two more constraints,
+    /// "follower reach" and "driver reach", after the others.
+    pub axis_room: Option<f64>,
 }
 
 /// The objective a [`PairProblem`] evaluates.
@@ -154,14 +162,17 @@ pub const W_ALIGN: f64 = 100.0;
 /// Regularization δ of the alignment term (where T² ∥ w any normal is conjugate). Default 0.05.
 pub const ALIGN_REG: f64 = 0.05;
 
-/// Names of the constraints, in evaluation order.
-pub const CONSTRAINT_NAMES: [&str; 6] = [
+/// Names of the constraints, in evaluation order: the 3R cone only for 3R, the two reach
+/// constraints only with [`PairProblem::axis_room`] (see [`PairProblem::constraint_name`]).
+pub const CONSTRAINT_NAMES: [&str; 8] = [
     "length ≥ L1",
     "length ≤ L2",
     "follower axis clearance",
     "driver axis clearance",
     "tangent steepness",
     "3R normal cone",
+    "follower reach",
+    "driver reach",
 ];
 
 /// Objective, constraints and their gradients at one design vector.
@@ -204,8 +215,9 @@ struct Scratch {
     curve: Vec<[V3<f64>; 3]>,
     /// Unit tangents t̂², ĉ̇¹ per sample on the tangent jet (E_smth).
     units: Vec<[V3<Dual<DT>>; 2]>,
-    /// Follower clearance, driver clearance, tangent steepness, cone.
-    ks: [Ks; 4],
+    /// Follower clearance, driver clearance, tangent steepness, cone, follower reach, driver
+    /// reach.
+    ks: [Ks; 6],
 }
 
 impl Scratch {
@@ -325,12 +337,19 @@ fn misalignment<S: Scalar>(p: V3<S>, t1: V3<S>, t2: V3<S>) -> S {
 }
 
 impl PairProblem {
-    /// Number of constraints for this class.
+    /// Number of constraints for this class (and axis room).
     pub fn n_constraints(&self) -> usize {
-        if self.class == Class::R3 {
-            6
+        let base = if self.class == Class::R3 { 6 } else { 5 };
+        base + if self.axis_room.is_some() { 2 } else { 0 }
+    }
+
+    /// Name of constraint `i` (an index into [`Evaluation::cons`]).
+    pub fn constraint_name(&self, i: usize) -> &'static str {
+        let base = if self.class == Class::R3 { 6 } else { 5 };
+        if i < base {
+            CONSTRAINT_NAMES[i]
         } else {
-            5
+            CONSTRAINT_NAMES.get(6 + i - base).copied().unwrap_or("?")
         }
     }
 
@@ -374,7 +393,7 @@ impl PairProblem {
             bases,
             curve,
             units,
-            ks: [ks_rf, ks_rd, ks_sl, ks_cone],
+            ks: [ks_rf, ks_rd, ks_sl, ks_cone, ks_fr, ks_dr],
             ..
         } = scratch;
         let bases = &bases[..];
@@ -419,9 +438,17 @@ impl PairProblem {
         }
         let mut len = 0.0;
         let mut len_grad = vec![0.0; NV];
-        for ks in [&mut *ks_rf, &mut *ks_rd, &mut *ks_sl, &mut *ks_cone] {
+        for ks in [
+            &mut *ks_rf,
+            &mut *ks_rd,
+            &mut *ks_sl,
+            &mut *ks_cone,
+            &mut *ks_fr,
+            &mut *ks_dr,
+        ] {
             ks.clear();
         }
+        let reach = self.axis_room.map(|a| self.dx - a);
         let max_dot = self.cone.max_abs_dot();
         for (i, ((pose, b), c)) in self
             .poses
@@ -471,6 +498,10 @@ impl PairProblem {
             ks_rf.push(-radius + MIN_FOLLOWER_RADIUS);
             let c1xy = (c1.x * c1.x + c1.y * c1.y).sqrt();
             ks_rd.push(-c1xy + MIN_DRIVER_RADIUS);
+            if let Some(r) = reach {
+                ks_fr.push(radius - r);
+                ks_dr.push(c1xy - r);
+            }
             let slope = c2d.z / speed;
             ks_sl.push(slope * slope - MAX_TANGENT_SLOPE * MAX_TANGENT_SLOPE);
         }
@@ -487,9 +518,9 @@ impl PairProblem {
         for g in grad.iter_mut() {
             *g /= n as f64;
         }
-        let mut cons = Vec::with_capacity(6);
-        let mut cons_grad = Vec::with_capacity(6);
-        let mut cons_exact = Vec::with_capacity(6);
+        let mut cons = Vec::with_capacity(self.n_constraints());
+        let mut cons_grad = Vec::with_capacity(self.n_constraints());
+        let mut cons_exact = Vec::with_capacity(self.n_constraints());
         let [l1, l2] = LENGTH_BOUNDS;
         cons.push((l1 - len) / l1);
         cons_grad.push(len_grad.iter().map(|g| -g / l1).collect());
@@ -515,6 +546,16 @@ impl PairProblem {
                 cons_exact.push(-1.0);
             }
             _ => {}
+        }
+        if reach.is_some() {
+            let mut agg = |ks: &Ks, rho: f64| {
+                let (v, g, m) = ks.finish(rho, bases);
+                cons.push(v);
+                cons_grad.push(g);
+                cons_exact.push(m);
+            };
+            agg(ks_fr, KS_RHO_LENGTH);
+            agg(ks_dr, KS_RHO_LENGTH);
         }
         Evaluation {
             f,
@@ -642,9 +683,64 @@ mod tests {
                 cone: NormalCone::Tangent,
                 focus: None,
                 stage: Stage::Full,
+                axis_room: None,
             },
             x,
         )
+    }
+
+    /// [`problem`] with an axis room that makes both reach constraints matter (d_x − A = 3
+    /// against follower radii about 2.5 and driver radii about 3.5).
+    fn reaching(class: Class) -> (PairProblem, Vec<f64>) {
+        let (mut pb, x) = problem(class);
+        pb.axis_room = Some(3.0);
+        (pb, x)
+    }
+
+    /// Guards the reach constraints' values and names: with an axis room A they are the
+    /// largest |c²| radial distance (1R: from the axis, 3R: from the centre) and |c¹_xy|
+    /// over the samples minus d_x − A, come after the others, and are absent without A (the
+    /// other constraints unchanged).
+    #[test]
+    fn reach_constraints_bound_both_curves_by_dx_minus_the_axis_room() {
+        for class in [Class::R1, Class::R3] {
+            let (plain, x) = problem(class);
+            let (pb, _) = reaching(class);
+            let (e0, e) = (plain.evaluate(&x), pb.evaluate(&x));
+            assert_eq!(e.cons.len(), plain.n_constraints() + 2);
+            assert_eq!(pb.n_constraints(), e.cons.len());
+            assert_eq!(e.cons[..e0.cons.len()], e0.cons[..]);
+            let (mut rf, mut rd) = (f64::MIN, f64::MIN);
+            for pose in &pb.poses.samples {
+                let c = model::contact_f64(&x, pose, pb.dx);
+                let p = c.p.vals();
+                let r = if class == Class::R3 {
+                    (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt()
+                } else {
+                    p[0].hypot(p[1])
+                };
+                rf = rf.max(r);
+                let c1 = c.c1.vals();
+                rd = rd.max(c1[0].hypot(c1[1]));
+            }
+            let n = e.cons.len();
+            let bound = pb.dx - 3.0;
+            assert!(
+                (e.cons_exact[n - 2] - (rf - bound)).abs() < 1e-9,
+                "{class:?}"
+            );
+            assert!(
+                (e.cons_exact[n - 1] - (rd - bound)).abs() < 1e-9,
+                "{class:?}"
+            );
+            assert!(
+                e.cons_exact[n - 1] > 0.0,
+                "the test design must reach too far"
+            );
+            assert_eq!(pb.constraint_name(n - 2), "follower reach");
+            assert_eq!(pb.constraint_name(n - 1), "driver reach");
+            assert_eq!(plain.constraint_name(4), "tangent steepness");
+        }
     }
 
     /// Guards the per-thread buffers of `evaluate`: problems of other classes, sample counts
@@ -663,9 +759,11 @@ mod tests {
             samples: (0..36).map(|i| at((i as f64 + 0.5) / 36.0)).collect(),
             at,
         });
+        let (reach3, _) = reaching(Class::R3);
         let cases = [
             (&r3, &x3),
             (&r1, &x1),
+            (&reach3, &x3),
             (&shifted, &x3),
             (&r3, &x3),
             (&r1, &x1),
@@ -713,7 +811,8 @@ mod tests {
         let problems = [Class::R1, Class::R1T1, Class::R3]
             .map(problem)
             .into_iter()
-            .chain([focused(), aligning()]);
+            .chain([focused(), aligning()])
+            .chain([Class::R1, Class::R3].map(reaching));
         for (pb, x) in problems {
             let class = (pb.class, pb.stage);
             let ev = pb.evaluate(&x);
@@ -781,8 +880,11 @@ mod tests {
     /// Guards the KS aggregation: it never under-estimates the exact per-sample maximum.
     #[test]
     fn aggregated_constraints_bound_the_exact_maximum() {
-        for class in [Class::R1, Class::R3] {
-            let (pb, x) = problem(class);
+        for (pb, x) in [Class::R1, Class::R3]
+            .map(problem)
+            .into_iter()
+            .chain([Class::R1, Class::R3].map(reaching))
+        {
             let ev = pb.evaluate(&x);
             for (a, e) in ev.cons.iter().zip(&ev.cons_exact) {
                 assert!(a >= e, "{a} < {e}");

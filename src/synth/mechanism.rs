@@ -21,6 +21,10 @@ pub use crate::motion::DEFAULT_SCALE_MM;
 /// Tolerance of the coincidence and normal checks, model units / unit-vector components.
 /// Default 1e-6: the file stores full double precision, so anything above is a real error.
 pub const CHECK_TOL: f64 = 1e-6;
+/// Tolerance of the axis-room check (`solve.axis_room`), model units. Default 1e-6, the
+/// candidates' feasibility tolerance ([`FEAS_TOL`](super::candidate::FEAS_TOL)): the file's
+/// samples are the instants at which every constraint was checked to that tolerance.
+pub const AXIS_ROOM_TOL: f64 = 1e-6;
 /// Tolerance when comparing the stored dist(t) with the recomputed one. Default 1e-9.
 pub const DIST_TOL: f64 = 1e-9;
 
@@ -187,6 +191,10 @@ fn epsilon() -> f64 {
     EPSILON
 }
 
+fn band_gap() -> f64 {
+    super::bands::BAND_GAP
+}
+
 /// How the mechanism was found.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SolveInfo {
@@ -226,6 +234,15 @@ pub struct SolveInfo {
     /// older files: ε).
     #[serde(default = "epsilon")]
     pub min_margin: f64,
+    /// Gap between neighbouring bands asked of the layout, model units (absent in older
+    /// files: [`BAND_GAP`](super::bands::BAND_GAP)).
+    #[serde(default = "band_gap")]
+    pub band_gap: f64,
+    /// Room kept free around the other part's axis, model units: every contact within
+    /// d_x − A of the follower axis (3R: centre) and |c¹_xy| ≤ d_x − A; `null` (or absent,
+    /// in older files) when not asked for. `synth --check` verifies it when present.
+    #[serde(default)]
+    pub axis_room: Option<f64>,
 }
 
 /// A mechanism: the content of `mechanism.json`.
@@ -441,6 +458,25 @@ impl Mechanism {
         Ok(())
     }
 
+    /// The largest distance of a follower curve sample from the follower axis (3R: from the
+    /// joint centre, which bounds it under any rotation) and of a driver curve sample from
+    /// the driver axis, over every pair: what `solve.axis_room` bounds by d_x − A.
+    pub fn reaches(&self) -> (f64, f64) {
+        let (mut rf, mut rd) = (0.0f64, 0.0f64);
+        for cp in &self.curve_pairs {
+            for (c2, c1) in cp.samples.c2.iter().zip(&cp.samples.c1) {
+                let r = if self.class == Class::R3 {
+                    V3::from(*c2).norm()
+                } else {
+                    c2[0].hypot(c2[1])
+                };
+                rf = rf.max(r);
+                rd = rd.max(c1[0].hypot(c1[1]));
+            }
+        }
+        (rf, rd)
+    }
+
     /// Re-verify from the sampled arrays alone (the `synth --check` verification).
     pub fn check(&self) -> CheckReport {
         let mut r = CheckReport::default();
@@ -506,7 +542,12 @@ impl Mechanism {
         );
         // Bands.
         let mut band_ok = true;
-        let mut band_detail = String::from("every c2.z inside its slab; slabs disjoint");
+        // Slabs at least the recorded gap apart (a band left out leaves a wider one).
+        let gap = self.solve.band_gap - 1e-9;
+        let mut band_detail = format!(
+            "every c2.z inside its slab; slabs at least band_gap = {} apart",
+            self.solve.band_gap
+        );
         for (k, cp) in self.curve_pairs.iter().enumerate() {
             if let Some(i) = cp
                 .samples
@@ -521,9 +562,12 @@ impl Mechanism {
                 );
             }
             for (j, other) in self.curve_pairs.iter().enumerate().skip(k + 1) {
-                if cp.slab[0] < other.slab[1] && other.slab[0] < cp.slab[1] {
+                if cp.slab[0] < other.slab[1] + gap && other.slab[0] < cp.slab[1] + gap {
                     band_ok = false;
-                    band_detail = format!("slabs of pairs {k} and {j} overlap");
+                    band_detail = format!(
+                        "slabs of pairs {k} and {j} overlap or are closer than band_gap = {}",
+                        self.solve.band_gap
+                    );
                 }
             }
         }
@@ -590,6 +634,23 @@ impl Mechanism {
                 }
             ),
         );
+        if let Some(a) = self.solve.axis_room {
+            let (rf, rd) = self.reaches();
+            let bound = self.driver_offset - a;
+            r.add(
+                "axis room",
+                rf <= bound + AXIS_ROOM_TOL && rd <= bound + AXIS_ROOM_TOL,
+                format!(
+                    "max |c2| {} = {rf:.4}, max |c1_xy| = {rd:.4} ≤ d_x − A = {bound:.4} \
+                     (A = {a})",
+                    if class == Class::R3 {
+                        "from the centre"
+                    } else {
+                        "from the follower axis"
+                    }
+                ),
+            );
+        }
         if class == Class::R3 {
             let sg = cone.max_abs_dot();
             let mut w = 0.0f64;

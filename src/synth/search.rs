@@ -44,11 +44,12 @@ use rayon::prelude::*;
 use super::assemble::assemble;
 use super::bands::{
     band_problem, dwell_1r, focus_of, refine_focus, usable_bands, used_bands, BandLayout, Focus,
-    FOCUS_MIN_ROBUST, MAX_EMPTY_BANDS,
+    BAND_GAP, FOCUS_MIN_ROBUST, MAX_EMPTY_BANDS,
 };
 use super::candidate::{self, Candidate, NAN_REASON, OVERSAMPLE};
 use super::closure::{self, Class, NormalCone, EPSILON};
 use super::combine::{self, Combination, Fitness, Pool};
+use super::energy::{PairProblem, MIN_DRIVER_RADIUS, MIN_FOLLOWER_RADIUS};
 use super::error::SynthError;
 use super::ga::{self, GaSettings};
 use super::mechanism::{
@@ -116,6 +117,11 @@ pub fn max_extra_k(class: Class) -> usize {
         MAX_EXTRA_K
     }
 }
+/// Largest band gap `--band-gap` accepts, model units. Default 5 (50 mm at 10 mm per unit):
+/// five times the band height; a wider gap only makes the stack taller and pushes the outer
+/// bands of a 3R design away from the joint centre.
+pub const MAX_BAND_GAP: f64 = 5.0;
+
 /// Candidates per band (the paper's M). Default 30 (supplementary notes).
 pub const CANDIDATES: usize = 30;
 /// Rounds of refinement of a 1R combination that misses closure (see `Search::refine`);
@@ -160,6 +166,16 @@ pub struct SynthOptions {
     /// every instant of the 4× check. Default ε ([`EPSILON`], the conventions' validity
     /// bar), so the smallest K that closes is accepted; a wider margin costs curve pairs.
     pub min_margin: f64,
+    /// Gap between neighbouring bands, model units, for every band layout (the dwell layout
+    /// too). Default [`BAND_GAP`]; a printable follower needs room for its plate and rim
+    /// between two driver bands (see `docs/synthesis.md`, "Printable layouts").
+    pub band_gap: f64,
+    /// Room A kept free around the other part's axis, model units: every candidate keeps
+    /// its contacts within d_x − A of the follower axis (3R: of the joint centre) and its
+    /// driver curve within d_x − A of the driver axis (see
+    /// [`PairProblem::axis_room`]), so each part can have a hub or shaft column on its axis
+    /// through the whole stack. Default `None`: no such bound.
+    pub axis_room: Option<f64>,
 }
 
 impl Default for SynthOptions {
@@ -179,6 +195,8 @@ impl Default for SynthOptions {
             source: None,
             cone: NormalCone::default(),
             min_margin: EPSILON,
+            band_gap: BAND_GAP,
+            axis_room: None,
         }
     }
 }
@@ -243,6 +261,34 @@ pub fn synthesize_track(
             opts.min_margin
         ));
     }
+    if !(opts.band_gap >= 0.0 && opts.band_gap <= MAX_BAND_GAP) {
+        return bad(format!(
+            "--band-gap {} must lie between 0 (bands touching) and {MAX_BAND_GAP} model units \
+             (wider only makes the stack taller); it is the free height between neighbouring \
+             bands of height {} (default {BAND_GAP})",
+            opts.band_gap,
+            BandLayout::for_motion(class, &poses, BAND_GAP).height
+        ));
+    }
+    if let Some(a) = opts.axis_room {
+        let dx_min = match opts.dx {
+            Some(d) => d,
+            None => dx_grid(class, dwell_1r(class, &poses))
+                .iter()
+                .copied()
+                .fold(f64::INFINITY, f64::min),
+        };
+        let min_radius = MIN_FOLLOWER_RADIUS.max(MIN_DRIVER_RADIUS);
+        let limit = dx_min - min_radius;
+        if !(a > 0.0 && a < limit) {
+            return bad(format!(
+                "--axis-room {a} must be positive and below {limit} model units: the curves \
+                 must stay within d_x − A of their axes (d_x = {dx_min} is the smallest tried) \
+                 but at least {min_radius} away from them (the minimum radius kept for the \
+                 shafts), which leaves no room when A ≥ d_x − {min_radius}"
+            ));
+        }
+    }
     if opts.candidates == 0 || opts.population < 2 || opts.generations == 0 {
         return bad("candidates, population (≥ 2) and generations must be positive".into());
     }
@@ -257,7 +303,7 @@ pub fn synthesize_track(
             source: opts.source.clone().unwrap_or_else(|| source.to_string()),
             name: source.to_string(),
         },
-        layout: BandLayout::for_motion(class, &poses),
+        layout: BandLayout::for_motion(class, &poses, opts.band_gap),
         poses,
         opts,
         progress,
@@ -376,6 +422,13 @@ impl Search<'_> {
         Ok(())
     }
 
+    /// The candidate problem of band `b` at `dx`, with the requested axis room.
+    fn problem(&self, dx: f64, b: usize) -> PairProblem {
+        let mut pb = band_problem(self.class, &self.poses, dx, self.layout, b, self.opts.cone);
+        pb.axis_room = self.opts.axis_room;
+        pb
+    }
+
     /// Solve the candidates of band `b` (in parallel), with a gap-filling focus if given.
     fn solve_band(&self, dx: f64, b: usize, focus: Option<&Focus>) -> Vec<Candidate> {
         let (class, opts) = (self.class, self.opts);
@@ -384,7 +437,7 @@ impl Search<'_> {
         (0..m)
             .into_par_iter()
             .map(|i| {
-                let mut pb = band_problem(class, &self.poses, dx, self.layout, b, opts.cone);
+                let mut pb = self.problem(dx, b);
                 if class != Class::R1 {
                     pb.vary = Some((i * n / m) % n);
                 }
@@ -650,8 +703,7 @@ impl Search<'_> {
             .collect();
         jobs.into_par_iter()
             .map(|(j, c, ask)| {
-                let mut pb =
-                    band_problem(self.class, &self.poses, dx, self.layout, c.band, opts.cone);
+                let mut pb = self.problem(dx, c.band);
                 pb.focus = Some(ask);
                 // New indices after the band's own candidates.
                 let index = opts.candidates * (1 + round) + j;
@@ -694,6 +746,8 @@ impl Search<'_> {
             partial,
             normal_cone: opts.cone,
             min_margin: opts.min_margin,
+            band_gap: opts.band_gap,
+            axis_room: opts.axis_room,
         }
     }
 
@@ -940,6 +994,95 @@ mod tests {
         );
     }
 
+    /// Axis room of the reduced run in `an_axis_room_keeps_both_curves_within_dx_minus_a`.
+    const AXIS_ROOM_TEST: f64 = 2.0;
+
+    /// Digest of the reduced 1R run's design (curve pairs, closure, attempts) with the
+    /// default layout options, taken before the band gap and the axis room became options
+    /// (x86_64 Linux, release build). A changed digest means the defaults no longer
+    /// give the designs they gave; SLSQP's paths follow round-off, so a different libm can
+    /// change it too.
+    const DEFAULT_DESIGN_DIGEST: &str =
+        "769329cd705838d8e5cc8b81efcfe0c43577edc75c5f29d3545088278361e635";
+
+    /// Guards that the default options give the same design as before the layout options
+    /// existed (see [`DEFAULT_DESIGN_DIGEST`]).
+    #[test]
+    fn default_options_give_the_same_design_as_before() {
+        use sha2::{Digest, Sha256};
+        let opts = SynthOptions {
+            k: None,
+            ..small_opts(2)
+        };
+        let m = outcome(synthesize_track(
+            Class::R1,
+            half_turn_like(60),
+            "t",
+            &opts,
+            &NoProgress,
+        ));
+        let json = serde_json::to_string(&(&m.curve_pairs, &m.closure, &m.solve.attempts))
+            .expect("serializable");
+        let digest: String = Sha256::digest(json.as_bytes())
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect();
+        assert_eq!(digest, DEFAULT_DESIGN_DIGEST, "K = {}", m.curve_pairs.len());
+    }
+
+    /// Guards the axis room: with `axis_room` A every sample of every chosen pair's c² lies
+    /// within d_x − A of the follower axis and every sample of c¹ within d_x − A of the
+    /// driver axis (to [`AXIS_ROOM_TOL`](crate::synth::mechanism::AXIS_ROOM_TOL)), the
+    /// file records A and the gap and `check` verifies the bound; the same run without A
+    /// reaches beyond it (|c¹_xy| up to 7.3 > d_x), so the bound did work. Reduced 1R run
+    /// (N = 60, M = 6, d_x = 6, gap 1.5); it does not close at these settings, so its best
+    /// design is checked: every candidate in it passed the same feasibility checks as an
+    /// accepted design's.
+    #[test]
+    fn an_axis_room_keeps_both_curves_within_dx_minus_a() {
+        use crate::synth::mechanism::AXIS_ROOM_TOL;
+        let track = half_turn_like(60);
+        let (a, gap) = (AXIS_ROOM_TEST, 1.5);
+        let run = |axis_room| {
+            let opts = SynthOptions {
+                k: None,
+                band_gap: gap,
+                axis_room,
+                ..small_opts(2)
+            };
+            outcome(synthesize_track(
+                Class::R1,
+                track.clone(),
+                "t",
+                &opts,
+                &NoProgress,
+            ))
+        };
+        let (free, m) = (run(None), run(Some(a)));
+        let bound = m.driver_offset - a;
+        let (rf0, rd0) = free.reaches();
+        let (rf, rd) = m.reaches();
+        eprintln!(
+            "reaches without A: {rf0:.3}, {rd0:.3}; with A = {a}: {rf:.3}, {rd:.3} (≤ {bound})"
+        );
+        assert!(
+            rf0.max(rd0) > bound + 0.1,
+            "the bound must bind: {rf0} {rd0}"
+        );
+        for cp in &m.curve_pairs {
+            for (c2, c1) in cp.samples.c2.iter().zip(&cp.samples.c1) {
+                assert!(c2[0].hypot(c2[1]) <= bound + AXIS_ROOM_TOL, "c2 {c2:?}");
+                assert!(c1[0].hypot(c1[1]) <= bound + AXIS_ROOM_TOL, "c1 {c1:?}");
+            }
+        }
+        assert_eq!((m.solve.axis_room, m.solve.band_gap), (Some(a), gap));
+        assert_eq!(free.solve.axis_room, None);
+        let report = m.check();
+        let item = report.items.iter().find(|i| i.name == "axis room");
+        assert!(item.is_some_and(|i| i.passed), "{report}");
+        assert!(free.check().items.iter().all(|i| i.name != "axis room"));
+    }
+
     /// Guards the smallest-K acceptance: the search stops at the first K whose combination
     /// closes at every instant of the 4× check (paper and robust, E_maxDist ≤ −ε) or at the
     /// combination with fewest pairs found by leaving bands out of it; no attempt with fewer
@@ -1071,5 +1214,33 @@ mod tests {
             let e = synthesize_track(Class::R1, track.clone(), "t", &o, &NoProgress).unwrap_err();
             assert!(e.to_string().contains("--min-margin"), "{e}");
         }
+        for gap in [-0.1, MAX_BAND_GAP + 0.1, f64::NAN] {
+            let o = SynthOptions {
+                band_gap: gap,
+                ..small_opts(1)
+            };
+            let e = synthesize_track(Class::R1, track.clone(), "t", &o, &NoProgress).unwrap_err();
+            assert!(e.to_string().contains("--band-gap"), "{e}");
+        }
+        // d_x = 6 and a minimum radius of 0.8 leave room for A < 5.2 only.
+        for room in [0.0, -1.0, 5.2, f64::NAN] {
+            let o = SynthOptions {
+                axis_room: Some(room),
+                ..small_opts(1)
+            };
+            let e = synthesize_track(Class::R1, track.clone(), "t", &o, &NoProgress).unwrap_err();
+            assert!(e.to_string().contains("--axis-room"), "{e}");
+        }
+        // Without a fixed d_x the smallest of the grid counts (1R: 6).
+        let o = SynthOptions {
+            axis_room: Some(5.5),
+            dx: None,
+            ..small_opts(1)
+        };
+        let e = synthesize_track(Class::R1, track.clone(), "t", &o, &NoProgress).unwrap_err();
+        assert!(
+            e.to_string().contains("d_x = 6 is the smallest tried"),
+            "{e}"
+        );
     }
 }
