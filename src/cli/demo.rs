@@ -22,7 +22,7 @@ use sha2::{Digest, Sha256};
 use crate::analysis::{analyze_and_report, ReportOptions};
 use crate::motion::{Motion, MotionClass};
 use crate::rig::config::RigConfig;
-use crate::rig::recording::utc_dir_stamp;
+use crate::rig::recording::{utc_dir_stamp, Phase};
 use crate::rig::session::{self, MeasureOptions, Progress, TargetSpec};
 use crate::rig::sim::plant::PlantConfig;
 use crate::synth::{Mechanism, Outcome, SynthOptions, SynthProgress};
@@ -304,17 +304,10 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         replace: false,
         cancel,
         progress: Some(Box::new(move |p: &Progress| {
-            if last.elapsed().as_secs_f64() >= 1.0 {
-                eprintln!(
-                    "      [{:>7}] cycle {:.2}/{}  {} samples  {:.0} Hz{}",
-                    p.phase.as_str(),
-                    p.cycle,
-                    p.cycles,
-                    p.samples,
-                    p.sample_rate_hz,
-                    p.error_deg
-                        .map_or(String::new(), |e| format!("  error {e:+.2}°"))
-                );
+            // Every second, and the end of each measured direction.
+            let end_of_direction = p.phase != Phase::Settle && p.cycle >= f64::from(p.cycles);
+            if last.elapsed().as_secs_f64() >= 1.0 || end_of_direction {
+                eprintln!("      {}", super::measure::progress_line(p));
                 last = Instant::now();
             }
         })),
