@@ -112,6 +112,9 @@ pub fn print_summary(s: &Summary, report_dir: &Path) {
             lv[0], lv[1], lv[1], lv[2]
         );
     }
+    if let Some(why) = &h.not_enough_data {
+        println!("error:    {why}");
+    }
     if let Some(r) = h.rms_error_deg {
         println!(
             "error:    RMS {r:.3}°, max {:.3}° (after removing the offsets below)",
