@@ -258,3 +258,28 @@ fn cli_sample_and_show() {
     assert!(dir.path().join("screw-bob-height.png").exists());
     assert!(dir.path().join("screw-bob-angle.svg").exists());
 }
+
+/// Guards `motion sample -o` into a folder that does not exist yet (issue 20: `motion
+/// show -o` created it, `motion sample -o` failed): both create it.
+#[test]
+fn cli_sample_creates_the_output_folder() {
+    let file = motions_dir().join("screw-bob.toml");
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("new/deeper/screw-bob.csv");
+    let out = assert_cmd::Command::cargo_bin("mpc-rig")
+        .unwrap()
+        .args(["motion", "sample", "-n", "36", "--output"])
+        .arg(&csv)
+        .arg(&file)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(
+        std::fs::read_to_string(&csv).unwrap().lines().count(),
+        3 + 36
+    );
+}

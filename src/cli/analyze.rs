@@ -27,7 +27,7 @@ pub struct AnalyzeArgs {
     #[arg(long)]
     pub motion: Option<PathBuf>,
     /// Report directory (default: RECORDING/report).
-    #[arg(short, long)]
+    #[arg(short = 'o', long = "output", alias = "out", value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// Follower crossing angles for timing ratios, degrees relative to each cycle's start
     /// (default 0,180,360 for a turning follower).

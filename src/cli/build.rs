@@ -20,7 +20,7 @@ pub struct BuildArgs {
     /// The mechanism file (or its directory).
     pub mechanism: PathBuf,
     /// Output folder (default: `parts/` beside the mechanism file).
-    #[arg(short = 'o', long = "out")]
+    #[arg(short = 'o', long = "output", alias = "out", value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// Millimetres per model unit (default: the file's `scale_mm`).
     #[arg(long = "scale-mm")]

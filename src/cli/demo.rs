@@ -66,7 +66,13 @@ pub struct DemoArgs {
     #[arg(long)]
     pub no_reverse: bool,
     /// Output directory (mechanism cache, recordings, reports).
-    #[arg(short, long, default_value = "out/demo")]
+    #[arg(
+        short = 'o',
+        long = "output",
+        alias = "out",
+        value_name = "DIR",
+        default_value = "out/demo"
+    )]
     pub out: PathBuf,
     /// Synthesis seed.
     #[arg(long, default_value_t = 1)]

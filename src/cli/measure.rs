@@ -82,7 +82,7 @@ pub struct MeasureArgs {
     pub reverse: bool,
     /// Recording directory (default: a new `out/measure/<UTC timestamp>`). A directory that
     /// already holds a recording is refused unless --replace is given.
-    #[arg(short, long, value_name = "DIR")]
+    #[arg(short, long, alias = "out", value_name = "DIR")]
     pub output: Option<PathBuf>,
     /// Replace the recording already in the -o directory (its CSV, sidecar and report).
     #[arg(long, requires = "output")]

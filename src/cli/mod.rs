@@ -184,3 +184,42 @@ mod fault_help_tests {
         }
     }
 }
+
+#[cfg(test)]
+mod output_option_tests {
+    use clap::{CommandFactory, Parser};
+
+    use super::{Cli, Command};
+
+    fn walk(cmd: &clap::Command, path: String, out: &mut Vec<(String, clap::Arg)>) {
+        for a in cmd.get_arguments() {
+            if a.get_short() == Some('o') {
+                out.push((path.clone(), a.clone()));
+            }
+        }
+        for sub in cmd.get_subcommands() {
+            walk(sub, format!("{path} {}", sub.get_name()), out);
+        }
+    }
+
+    /// Guards one meaning of `-o` (issue 20: `--out` in demo, analyze and build, `--output`
+    /// elsewhere): every `-o` is `--output`, and `--out` still works as an alias so old
+    /// command lines keep running.
+    #[test]
+    fn every_o_is_output_with_out_as_alias() {
+        let mut all = Vec::new();
+        walk(&Cli::command(), "mpc-rig".into(), &mut all);
+        assert!(all.len() >= 7, "{}", all.len());
+        for (path, a) in &all {
+            assert_eq!(a.get_long(), Some("output"), "{path}");
+            assert_eq!(a.get_all_aliases(), Some(vec!["out"]), "{path}");
+        }
+        for flag in ["-o", "--output", "--out"] {
+            let cli = Cli::try_parse_from(["mpc-rig", "demo", flag, "x"]).unwrap();
+            match cli.command {
+                Command::Demo(d) => assert_eq!(d.out, std::path::PathBuf::from("x")),
+                _ => panic!(),
+            }
+        }
+    }
+}

@@ -23,7 +23,13 @@ pub struct SynthArgs {
     #[arg(required_unless_present = "check")]
     pub motion: Option<PathBuf>,
     /// Output directory (gets mechanism.json and report/).
-    #[arg(short, long, required_unless_present = "check")]
+    #[arg(
+        short,
+        long,
+        alias = "out",
+        value_name = "DIR",
+        required_unless_present = "check"
+    )]
     pub output: Option<PathBuf>,
     /// Re-verify a mechanism.json (file or directory) from its samples alone.
     #[arg(long, conflicts_with_all = ["motion", "output"])]
