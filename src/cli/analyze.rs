@@ -92,9 +92,11 @@ pub fn exit_code(summary: &Summary) -> ExitCode {
 /// Print where the report is and its headline figures (stdout).
 pub fn print_summary(s: &Summary, report_dir: &Path) {
     let h = &s.headline;
-    println!("report:   {}", report_dir.join("report.html").display());
-    println!("          {}", report_dir.join("report.md").display());
-    println!("summary:  {}", report_dir.join("summary.json").display());
+    if !super::quiet() {
+        println!("report:   {}", report_dir.join("report.html").display());
+        println!("          {}", report_dir.join("report.md").display());
+        println!("summary:  {}", report_dir.join("summary.json").display());
+    }
     println!("motion:   {} ({})", h.motion, h.class);
     if let (Some(m), Some(u), Some(t)) = (
         h.timing_ratio_measured,

@@ -102,8 +102,10 @@ pub fn run(args: BuildArgs) -> anyhow::Result<ExitCode> {
     }
     println!("total {:.1} s", t.elapsed().as_secs_f64());
     println!("wrote {} files to {}", written.files.len(), out.display());
-    for f in &written.files {
-        println!("  {}", f.display());
+    if !super::quiet() {
+        for f in &written.files {
+            println!("  {}", f.display());
+        }
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -92,8 +92,19 @@ pub enum Command {
     WireDump(wire_dump::WireDumpArgs),
 }
 
-/// Set up `tracing` output on stderr from the -v/-q flags (`RUST_LOG` overrides).
+/// Set by `-q`: commands leave out the lists of files they wrote (issue 20: `-q` still
+/// printed them); results and errors are still printed.
+static QUIET: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Whether `-q` was given (see [`QUIET`]).
+pub(crate) fn quiet() -> bool {
+    QUIET.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+/// Set up `tracing` output on stderr from the -v/-q flags (`RUST_LOG` overrides), and
+/// remember `-q` for the commands' file lists.
 pub fn init_logging(verbose: u8, quiet: bool) {
+    QUIET.store(quiet, std::sync::atomic::Ordering::Relaxed);
     let level = if quiet {
         "error"
     } else {

@@ -89,8 +89,10 @@ pub fn run(args: MotionArgs) -> anyhow::Result<ExitCode> {
             let m = load(&file)?;
             report_warnings(&m);
             let written = motion::figures::write_all(&m, &output, samples)?;
-            for p in written {
-                println!("{}", p.display());
+            if !super::quiet() {
+                for p in written {
+                    println!("{}", p.display());
+                }
             }
             Ok(ExitCode::SUCCESS)
         }
