@@ -318,8 +318,16 @@ impl Plan {
             }
             Some(_) => {
                 if p > hi + PHASE_MARGIN_DEG {
-                    let q = self.max_seen - self.start - p;
-                    Step::Continue(Phase::Settle, (q / 360.0).max(0.0))
+                    // Back over the run-out (and the overshoot of the turn), shown as the
+                    // fraction of it done in settle revolutions.
+                    let top = self.max_seen - self.start;
+                    let span = top - hi - PHASE_MARGIN_DEG;
+                    let c = if span > 0.0 {
+                        ((top - p) / span).clamp(0.0, 1.0) * self.settle_deg / 360.0
+                    } else {
+                        0.0
+                    };
+                    Step::Continue(Phase::Settle, c)
                 } else if p >= lo - margin {
                     let c = ((hi - p) / 360.0).clamp(0.0, self.measure_deg / 360.0);
                     Step::Continue(Phase::Reverse, c)
@@ -803,10 +811,11 @@ mod tests {
         // Overshoot while decelerating, then back over the run-out.
         let top = 1440.0 + 90.0;
         assert!(matches!(plan.step(top), Step::Continue(Phase::Settle, _)));
-        assert!(matches!(
-            plan.step(1200.0),
-            Step::Continue(Phase::Settle, _)
-        ));
+        // Halfway back to the cycles is half the settle, the overshoot included.
+        match plan.step((top + 1080.0 + m) / 2.0) {
+            Step::Continue(Phase::Settle, c) => assert!((c - 0.5).abs() < 1e-12, "{c}"),
+            _ => panic!(),
+        }
         // The reverse phase covers the forward cycles exactly (and the same margins).
         match plan.step(1080.0 + m) {
             Step::Continue(Phase::Reverse, c) => assert!(c.abs() < 1e-12),
