@@ -95,3 +95,50 @@ fn writes_all_files_and_judges_tolerances() {
         "{md}"
     );
 }
+
+/// Guards the headline of a run without a whole cycle (issue 20: a run that disconnected
+/// got "error RMS 0.025°" after a −41° driver offset was fitted on 0 cycles): no error or
+/// timing figure is given, the summary says why in these words, and a tolerance counts as
+/// missed.
+#[test]
+fn a_run_without_a_complete_cycle_gets_no_error_figures() {
+    let law = piecewise_half_turn(2.0 / 3.0);
+    let bench = SyntheticBench {
+        driver_offset_deg: -41.0,
+        noise: 0.05,
+        quantum: 360.0 / 4096.0,
+        forward_cycles: 0.7,
+        reverse_cycles: 0.0,
+        rate_hz: 200.0,
+        ..Default::default()
+    };
+    let run = bench.generate(&law);
+    let a = analyze(&run, &law, &AnalysisOptions::default()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let opts = ReportOptions {
+        tol_deg: Some(5.0),
+        ..Default::default()
+    };
+    let s = write_report(dir.path(), &a, &run, &law, source(), &opts).unwrap();
+    let h = &s.headline;
+    assert_eq!(h.cycles, 0);
+    assert_eq!(
+        h.not_enough_data.as_deref(),
+        Some(
+            "not enough data: no complete driver revolution was recorded (a cycle counts \
+             when 90 % of it is covered), so no error or timing figures are given; the \
+             offsets were fitted on part of a revolution"
+        )
+    );
+    assert_eq!(h.rms_error_deg, None);
+    assert_eq!(h.max_error_deg, None);
+    assert_eq!(h.timing_ratio_measured, None);
+    assert_eq!(s.pass, Some(false));
+    assert_eq!(s.checks[0].measured, None);
+    let md = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
+    assert!(
+        md.contains("**Not enough data: no complete driver revolution"),
+        "{md}"
+    );
+    assert!(!md.contains("Rotation error after alignment"), "{md}");
+}

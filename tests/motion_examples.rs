@@ -258,3 +258,54 @@ fn cli_sample_and_show() {
     assert!(dir.path().join("screw-bob-height.png").exists());
     assert!(dir.path().join("screw-bob-angle.svg").exists());
 }
+
+/// Guards `motion sample -o` into a folder that does not exist yet (issue 20: `motion
+/// show -o` created it, `motion sample -o` failed): both create it.
+#[test]
+fn cli_sample_creates_the_output_folder() {
+    let file = motions_dir().join("screw-bob.toml");
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("new/deeper/screw-bob.csv");
+    let out = assert_cmd::Command::cargo_bin("mpc-rig")
+        .unwrap()
+        .args(["motion", "sample", "-n", "36", "--output"])
+        .arg(&csv)
+        .arg(&file)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(
+        std::fs::read_to_string(&csv).unwrap().lines().count(),
+        3 + 36
+    );
+}
+
+/// Guards `-q` (issue 20: it still printed the list of files written): `motion show -q`
+/// writes its figures and prints nothing; without `-q` it lists them.
+#[test]
+fn cli_show_quiet_prints_no_file_list() {
+    let file = motions_dir().join("screw-bob.toml");
+    let dir = tempfile::tempdir().unwrap();
+    let run = |quiet: bool| {
+        let mut cmd = assert_cmd::Command::cargo_bin("mpc-rig").unwrap();
+        if quiet {
+            cmd.arg("-q");
+        }
+        cmd.args(["motion", "show", "-o"])
+            .arg(dir.path())
+            .arg(&file)
+            .output()
+            .unwrap()
+    };
+    let out = run(true);
+    assert!(out.status.success());
+    assert_eq!(String::from_utf8_lossy(&out.stdout), "");
+    assert_eq!(String::from_utf8_lossy(&out.stderr), "");
+    assert!(dir.path().join("screw-bob-height.png").exists());
+    let out = run(false);
+    assert!(String::from_utf8_lossy(&out.stdout).contains("screw-bob-height.png"));
+}

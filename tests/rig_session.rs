@@ -249,6 +249,25 @@ fn full_session_records_all_phases_and_ends_stopped() {
         "{}",
         span(Phase::Reverse)
     );
+    // Both directions measure the same driver revolutions (issue 20: reverse cycles
+    // started wherever the reversal ramp ended, so they straddled the analysis's cycles).
+    let bounds = |p: Phase| {
+        let a = rec
+            .phase
+            .iter()
+            .zip(&rec.driver_angle_deg)
+            .filter(|(&x, _)| x == p)
+            .map(|(_, &a)| a);
+        (
+            a.clone().fold(f64::MAX, f64::min),
+            a.fold(f64::MIN, f64::max),
+        )
+    };
+    let (f, r) = (bounds(Phase::Forward), bounds(Phase::Reverse));
+    assert!(
+        (f.0 - r.0).abs() < 2.0 && (f.1 - r.1).abs() < 2.0,
+        "forward {f:?}, reverse {r:?}"
+    );
     let l = log.lock().unwrap();
     assert_eq!(l.shutdowns, 1);
     assert_eq!(l.speed_rpm, 0.0);
@@ -259,6 +278,31 @@ fn full_session_records_all_phases_and_ends_stopped() {
     // The driver came to rest before the stream was stopped: the last rows are still.
     let n = rec.len();
     assert!((rec.driver_angle_deg[n - 1] - rec.driver_angle_deg[n - 20]).abs() < 0.05);
+}
+
+/// Guards the live progress at the end of each measured direction (issue 20: forward
+/// stopped at 2.56/3 on the live line): both directions are reported at N/N cycles.
+#[test]
+fn progress_reports_each_direction_complete() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = Arc::new(Mutex::new(Log::default()));
+    let mut bench = FakeBench::new(log);
+    let mut opts = options(dir.path(), true);
+    let seen = Arc::new(Mutex::new(Vec::new()));
+    let sink = seen.clone();
+    opts.progress = Some(Box::new(move |p: &mpc_rig::rig::session::Progress| {
+        sink.lock().unwrap().push((p.phase, p.cycle));
+    }));
+    let target = opts.target.load().unwrap();
+    let out = run_session(&mut bench, &rig(), &target, &mut opts).unwrap();
+    assert!(out.complete);
+    let seen = seen.lock().unwrap();
+    for ph in [Phase::Forward, Phase::Reverse] {
+        assert!(
+            seen.iter().any(|&(p, c)| p == ph && c == 2.0),
+            "{ph:?} never reported at 2/2: {seen:?}"
+        );
+    }
 }
 
 /// Guards: an unplug mid-run keeps an analyzable recording marked incomplete, with the

@@ -27,7 +27,7 @@ pub struct AnalyzeArgs {
     #[arg(long)]
     pub motion: Option<PathBuf>,
     /// Report directory (default: RECORDING/report).
-    #[arg(short, long)]
+    #[arg(short = 'o', long = "output", alias = "out", value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// Follower crossing angles for timing ratios, degrees relative to each cycle's start
     /// (default 0,180,360 for a turning follower).
@@ -92,9 +92,11 @@ pub fn exit_code(summary: &Summary) -> ExitCode {
 /// Print where the report is and its headline figures (stdout).
 pub fn print_summary(s: &Summary, report_dir: &Path) {
     let h = &s.headline;
-    println!("report:   {}", report_dir.join("report.html").display());
-    println!("          {}", report_dir.join("report.md").display());
-    println!("summary:  {}", report_dir.join("summary.json").display());
+    if !super::quiet() {
+        println!("report:   {}", report_dir.join("report.html").display());
+        println!("          {}", report_dir.join("report.md").display());
+        println!("summary:  {}", report_dir.join("summary.json").display());
+    }
     println!("motion:   {} ({})", h.motion, h.class);
     if let (Some(m), Some(u), Some(t)) = (
         h.timing_ratio_measured,
@@ -111,6 +113,9 @@ pub fn print_summary(s: &Summary, report_dir: &Path) {
             "timing:   ({}°→{}°)/({}°→{}°) measured {m:.3} ± {u:.3} vs target {t:.3}",
             lv[0], lv[1], lv[1], lv[2]
         );
+    }
+    if let Some(why) = &h.not_enough_data {
+        println!("error:    {why}");
     }
     if let Some(r) = h.rms_error_deg {
         println!(

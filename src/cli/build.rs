@@ -20,7 +20,7 @@ pub struct BuildArgs {
     /// The mechanism file (or its directory).
     pub mechanism: PathBuf,
     /// Output folder (default: `parts/` beside the mechanism file).
-    #[arg(short = 'o', long = "out")]
+    #[arg(short = 'o', long = "output", alias = "out", value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// Millimetres per model unit (default: the file's `scale_mm`).
     #[arg(long = "scale-mm")]
@@ -102,8 +102,10 @@ pub fn run(args: BuildArgs) -> anyhow::Result<ExitCode> {
     }
     println!("total {:.1} s", t.elapsed().as_secs_f64());
     println!("wrote {} files to {}", written.files.len(), out.display());
-    for f in &written.files {
-        println!("  {}", f.display());
+    if !super::quiet() {
+        for f in &written.files {
+            println!("  {}", f.display());
+        }
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -22,7 +22,7 @@ use sha2::{Digest, Sha256};
 use crate::analysis::{analyze_and_report, ReportOptions};
 use crate::motion::{Motion, MotionClass};
 use crate::rig::config::RigConfig;
-use crate::rig::recording::utc_dir_stamp;
+use crate::rig::recording::{utc_dir_stamp, Phase};
 use crate::rig::session::{self, MeasureOptions, Progress, TargetSpec};
 use crate::rig::sim::plant::PlantConfig;
 use crate::synth::{Mechanism, Outcome, SynthOptions, SynthProgress};
@@ -50,9 +50,11 @@ pub struct DemoArgs {
     /// Simulated bench.
     #[arg(long, value_enum, default_value_t = DemoBench::Stepper)]
     pub bench: DemoBench,
-    /// Injected imperfection of the simulated mechanism or link, repeatable:
-    /// backlash=2, phase_lag=1, encoder_noise=2, ... (see `mpc-rig sim-device --help`).
-    #[arg(long = "fault", value_name = "KEY=VALUE")]
+    /// Injected imperfection of the simulated mechanism or link, `key=value`, repeatable
+    /// (e.g. backlash=2; the keys are listed by --help).
+    #[arg(long = "fault", value_name = "KEY=VALUE", long_help = fault_keys_help!(
+        "Injected imperfection of the simulated mechanism or link, repeatable (e.g. backlash=2)."
+    ))]
     pub faults: Vec<String>,
     /// Measured cycles per direction.
     #[arg(long, default_value_t = 3)]
@@ -64,7 +66,13 @@ pub struct DemoArgs {
     #[arg(long)]
     pub no_reverse: bool,
     /// Output directory (mechanism cache, recordings, reports).
-    #[arg(short, long, default_value = "out/demo")]
+    #[arg(
+        short = 'o',
+        long = "output",
+        alias = "out",
+        value_name = "DIR",
+        default_value = "out/demo"
+    )]
     pub out: PathBuf,
     /// Synthesis seed.
     #[arg(long, default_value_t = 1)]
@@ -86,26 +94,6 @@ pub struct DemoArgs {
     /// Tolerance on the timing ratio for a pass/fail verdict.
     #[arg(long, value_parser = crate::cli::analyze::positive)]
     pub tol_ratio: Option<f64>,
-}
-
-/// Short fault names the demo accepts besides the plant's own keys: `backlash=2` is
-/// `backlash_deg=2`, and likewise `phase_lag`, `imu_noise`, `imu_bias` (degrees) and
-/// `encoder_noise` (counts).
-fn fault_alias(fault: &str) -> String {
-    const ALIASES: [(&str, &str); 5] = [
-        ("backlash", "backlash_deg"),
-        ("phase_lag", "phase_lag_deg"),
-        ("imu_noise", "imu_noise_deg"),
-        ("imu_bias", "imu_bias_deg"),
-        ("encoder_noise", "encoder_noise_counts"),
-    ];
-    match fault.split_once('=') {
-        Some((k, v)) => ALIASES
-            .iter()
-            .find(|(short, _)| *short == k.trim())
-            .map_or_else(|| fault.to_string(), |(_, long)| format!("{long}={v}")),
-        None => fault.to_string(),
-    }
 }
 
 /// Find a file shipped with the repository: relative to the working directory first, then
@@ -247,8 +235,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
     };
     let motion = Motion::from_file(&motion_path)
         .with_context(|| format!("loading {}", motion_path.display()))?;
-    let faults: Vec<String> = args.faults.iter().map(|f| fault_alias(f)).collect();
-    let plant = PlantConfig::from_faults(&faults)?;
+    let plant = super::sim_device::plant_from(&args.faults)?;
     let rig_path = shipped(rig_for(args.bench, motion.class()));
     let rig = RigConfig::load(&rig_path)?;
 
@@ -304,17 +291,10 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         replace: false,
         cancel,
         progress: Some(Box::new(move |p: &Progress| {
-            if last.elapsed().as_secs_f64() >= 1.0 {
-                eprintln!(
-                    "      [{:>7}] cycle {:.2}/{}  {} samples  {:.0} Hz{}",
-                    p.phase.as_str(),
-                    p.cycle,
-                    p.cycles,
-                    p.samples,
-                    p.sample_rate_hz,
-                    p.error_deg
-                        .map_or(String::new(), |e| format!("  error {e:+.2}°"))
-                );
+            // Every second, and the end of each measured direction.
+            let end_of_direction = p.phase != Phase::Settle && p.cycle >= f64::from(p.cycles);
+            if last.elapsed().as_secs_f64() >= 1.0 || end_of_direction {
+                eprintln!("      {}", super::measure::progress_line(p));
                 last = Instant::now();
             }
         })),

@@ -10,6 +10,7 @@ use anyhow::Context;
 use clap::Args;
 
 use crate::cli::ExitStatusError;
+use crate::rig::recording::Phase;
 use crate::rig::session::{self, EndReason, MeasureOptions, Progress, TargetSpec};
 
 /// Exit code when the device disconnected during the run (recording kept, incomplete).
@@ -81,7 +82,7 @@ pub struct MeasureArgs {
     pub reverse: bool,
     /// Recording directory (default: a new `out/measure/<UTC timestamp>`). A directory that
     /// already holds a recording is refused unless --replace is given.
-    #[arg(short, long, value_name = "DIR")]
+    #[arg(short, long, alias = "out", value_name = "DIR")]
     pub output: Option<PathBuf>,
     /// Replace the recording already in the -o directory (its CSV, sidecar and report).
     #[arg(long, requires = "output")]
@@ -200,19 +201,59 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
     Err(ExitStatusError { code, message }.into())
 }
 
-fn progress_line(p: &Progress) -> String {
+/// The live status line: in the settle phase how far the settle has come (of the settle
+/// revolutions), in a measured phase how far the cycles have (of the cycles).
+pub(crate) fn progress_line(p: &Progress) -> String {
     let err = p
         .error_deg
         .map_or(String::new(), |e| format!("  error {e:+.2}°"));
+    let (what, of) = if p.phase == Phase::Settle {
+        ("settle", p.settle_cycles)
+    } else {
+        ("cycle", p.cycles)
+    };
     format!(
-        "[{:>7}] cycle {:.2}/{}  {} samples  {:.0} Hz  gaps {}{}  {:.1} s",
+        "[{:>7}] {what} {:.2}/{of}  {} samples  {:.0} Hz  gaps {}{}  {:.1} s",
         p.phase.as_str(),
         p.cycle,
-        p.cycles,
         p.samples,
         p.sample_rate_hz,
         p.gaps,
         err,
         p.elapsed_s
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn progress(phase: Phase, cycle: f64) -> Progress {
+        Progress {
+            phase,
+            cycle,
+            cycles: 3,
+            settle_cycles: 1,
+            samples: 1500,
+            sample_rate_hz: 1000.0,
+            gaps: 0,
+            error_deg: Some(0.012),
+            elapsed_s: 1.5,
+        }
+    }
+
+    /// Guards the live line (issue 20: `[ settle] cycle 0.00/3` shown all through the
+    /// settle): the settle says how far it has come of its own revolutions, a measured
+    /// phase how many of its cycles are done.
+    #[test]
+    fn progress_line_counts_settle_and_cycles() {
+        assert_eq!(
+            progress_line(&progress(Phase::Settle, 0.45)),
+            "[ settle] settle 0.45/1  1500 samples  1000 Hz  gaps 0  error +0.01°  1.5 s"
+        );
+        assert_eq!(
+            progress_line(&progress(Phase::Forward, 3.0)),
+            "[forward] cycle 3.00/3  1500 samples  1000 Hz  gaps 0  error +0.01°  1.5 s"
+        );
+    }
 }

@@ -8,6 +8,40 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+/// The `--fault` keys for the long help of every command that takes them (one list, the
+/// plant's [`crate::rig::sim::plant::FAULT_KEYS`] and short names; a test keeps them equal).
+macro_rules! fault_keys_help {
+    ($what:literal) => {
+        concat!(
+            $what,
+            "\n\nKeys:\n",
+            "  backlash_deg (or backlash): dead band between driver and follower, deg\n",
+            "  phase_lag_deg (or phase_lag): follower lags the driver by this angle, deg\n",
+            "  gain_error: relative encoder scale error, e.g. 0.01\n",
+            "  encoder_noise_counts (or encoder_noise): encoder noise standard deviation, counts\n",
+            "  encoder_resolution: encoder quantization, counts per turn\n",
+            "  imu_noise_deg (or imu_noise): IMU noise standard deviation, deg\n",
+            "  imu_bias_deg (or imu_bias): IMU constant rotation bias, deg\n",
+            "  missed_step_prob: probability a step pulse is lost\n",
+            "  scale_mm: mm per model unit for heights\n",
+            "  drop_prob: probability a byte to the host is dropped\n",
+            "  corrupt_prob: probability a byte to the host is corrupted\n",
+            "  disconnect_at_s: unplug for good at this time, s\n",
+            "  dropout_at_s: brief unplug starting at this time, s\n",
+            "  dropout_s: length of the brief unplug, s (default 0.5)\n",
+            "  stall_at_s: Dynamixel bus: replies held back from this time, s\n",
+            "  stall_s: length of the stall, s (default 0.06)\n",
+            "  reboot_at_s: Dynamixel bus: the driver reboots at this time, s (a brown-out)\n",
+            "  driver_fault_at_s: the driver reports a hardware fault (overload, firmware e-stop) at this time, s\n",
+            "  driver_stall_at_s: the driver's shaft is blocked from this time, s (no fault reported)\n",
+            "  jam_at_s: the follower binds and stops from this time, s\n",
+            "  echo: Dynamixel bus: 1 echoes every byte the host sends (adapter without echo suppression)\n",
+            "  protocol_version: protocol version the simulated device claims\n",
+            "  seed: seed of the simulated randomness"
+        )
+    };
+}
+
 pub mod analyze;
 pub mod build;
 pub mod demo;
@@ -58,8 +92,19 @@ pub enum Command {
     WireDump(wire_dump::WireDumpArgs),
 }
 
-/// Set up `tracing` output on stderr from the -v/-q flags (`RUST_LOG` overrides).
+/// Set by `-q`: commands leave out the lists of files they wrote (issue 20: `-q` still
+/// printed them); results and errors are still printed.
+static QUIET: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Whether `-q` was given (see [`QUIET`]).
+pub(crate) fn quiet() -> bool {
+    QUIET.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+/// Set up `tracing` output on stderr from the -v/-q flags (`RUST_LOG` overrides), and
+/// remember `-q` for the commands' file lists.
 pub fn init_logging(verbose: u8, quiet: bool) {
+    QUIET.store(quiet, std::sync::atomic::Ordering::Relaxed);
     let level = if quiet {
         "error"
     } else {
@@ -110,4 +155,82 @@ pub struct ExitStatusError {
     pub code: u8,
     /// What went wrong, for the user.
     pub message: String,
+}
+
+#[cfg(test)]
+mod fault_help_tests {
+    use clap::CommandFactory;
+
+    use super::Cli;
+    use crate::rig::sim::plant::{FAULT_ALIASES, FAULT_KEYS};
+
+    /// Guards one list of fault keys (issue 20: `demo` named a few short keys and pointed
+    /// elsewhere, `sim-device dynamixel` gave examples only): the `--help` of every command
+    /// that takes `--fault` lists every key of the plant with its description and short name.
+    #[test]
+    fn every_fault_help_lists_every_key() {
+        let mut cli = Cli::command();
+        cli.build();
+        let paths: [&[&str]; 5] = [
+            &["demo"],
+            &["sim-device", "stepper"],
+            &["sim-device", "dynamixel"],
+            &["sim-device", "mixed"],
+            &["sim-device", "pico"],
+        ];
+        for path in paths {
+            let mut cmd = &mut cli;
+            for name in path {
+                cmd = cmd.find_subcommand_mut(name).expect(name);
+            }
+            let help = cmd.render_long_help().to_string();
+            for (key, what) in FAULT_KEYS {
+                let short = FAULT_ALIASES.iter().find(|(_, long)| long == key);
+                let entry = match short {
+                    Some((s, _)) => format!("  {key} (or {s}): {what}"),
+                    None => format!("  {key}: {what}"),
+                };
+                assert!(help.contains(&entry), "{path:?}: no `{entry}` in\n{help}");
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod output_option_tests {
+    use clap::{CommandFactory, Parser};
+
+    use super::{Cli, Command};
+
+    fn walk(cmd: &clap::Command, path: String, out: &mut Vec<(String, clap::Arg)>) {
+        for a in cmd.get_arguments() {
+            if a.get_short() == Some('o') {
+                out.push((path.clone(), a.clone()));
+            }
+        }
+        for sub in cmd.get_subcommands() {
+            walk(sub, format!("{path} {}", sub.get_name()), out);
+        }
+    }
+
+    /// Guards one meaning of `-o` (issue 20: `--out` in demo, analyze and build, `--output`
+    /// elsewhere): every `-o` is `--output`, and `--out` still works as an alias so old
+    /// command lines keep running.
+    #[test]
+    fn every_o_is_output_with_out_as_alias() {
+        let mut all = Vec::new();
+        walk(&Cli::command(), "mpc-rig".into(), &mut all);
+        assert!(all.len() >= 7, "{}", all.len());
+        for (path, a) in &all {
+            assert_eq!(a.get_long(), Some("output"), "{path}");
+            assert_eq!(a.get_all_aliases(), Some(vec!["out"]), "{path}");
+        }
+        for flag in ["-o", "--output", "--out"] {
+            let cli = Cli::try_parse_from(["mpc-rig", "demo", flag, "x"]).unwrap();
+            match cli.command {
+                Command::Demo(d) => assert_eq!(d.out, std::path::PathBuf::from("x")),
+                _ => panic!(),
+            }
+        }
+    }
 }

@@ -34,7 +34,13 @@ pub enum MotionCommand {
         /// Motion file (.toml or .csv) or mechanism.json.
         file: PathBuf,
         /// Output directory (created if missing).
-        #[arg(short, long, default_value = "out/motion")]
+        #[arg(
+            short,
+            long,
+            alias = "out",
+            value_name = "DIR",
+            default_value = "out/motion"
+        )]
         output: PathBuf,
         /// Samples per period for the curves.
         #[arg(short = 'n', long, default_value_t = 4 * DEFAULT_SAMPLES)]
@@ -47,8 +53,8 @@ pub enum MotionCommand {
         /// Number of samples per period.
         #[arg(short = 'n', long, default_value_t = DEFAULT_SAMPLES)]
         samples: usize,
-        /// Output file; standard output when absent.
-        #[arg(short, long)]
+        /// Output file (its folder is created if missing); standard output when absent.
+        #[arg(short, long, alias = "out", value_name = "FILE")]
         output: Option<PathBuf>,
         /// Add angular velocity/acceleration and velocity/acceleration columns.
         #[arg(long)]
@@ -83,8 +89,10 @@ pub fn run(args: MotionArgs) -> anyhow::Result<ExitCode> {
             let m = load(&file)?;
             report_warnings(&m);
             let written = motion::figures::write_all(&m, &output, samples)?;
-            for p in written {
-                println!("{}", p.display());
+            if !super::quiet() {
+                for p in written {
+                    println!("{}", p.display());
+                }
             }
             Ok(ExitCode::SUCCESS)
         }
@@ -102,6 +110,11 @@ pub fn run(args: MotionArgs) -> anyhow::Result<ExitCode> {
             let s = m.samples(samples);
             match output {
                 Some(path) => {
+                    // As `motion show -o` does for its folder.
+                    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+                        std::fs::create_dir_all(dir)
+                            .with_context(|| format!("cannot create {}", dir.display()))?;
+                    }
                     let f = std::fs::File::create(&path)
                         .with_context(|| format!("cannot create {}", path.display()))?;
                     motion::dense::write_csv(f, &m, &s, derivatives)

@@ -63,8 +63,10 @@ pub struct SimMixedArgs {
     #[arg(long, value_name = "FILE")]
     pub rig: PathBuf,
     /// Plant imperfection or link fault, `key=value`, repeatable; link faults apply to
-    /// both pseudo-terminals (see `sim-device stepper --help` for the keys).
-    #[arg(long = "fault", value_name = "KEY=VALUE")]
+    /// both pseudo-terminals (the keys are listed by --help).
+    #[arg(long = "fault", value_name = "KEY=VALUE", long_help = fault_keys_help!(
+        "Plant imperfection or link fault, repeatable; link faults apply to both pseudo-terminals."
+    ))]
     pub faults: Vec<String>,
 }
 
@@ -86,11 +88,11 @@ pub struct SimDynamixelArgs {
     /// The motion to serve.
     #[command(flatten)]
     pub target: TargetArgs,
-    /// Plant imperfection or link fault, `key=value`, repeatable (e.g. backlash_deg=0.5,
-    /// gain_error=0.01, encoder_noise_counts=1, drop_prob=0.001, corrupt_prob=0.001,
-    /// disconnect_at_s=5, dropout_at_s=2, driver_fault_at_s=2, driver_stall_at_s=2,
-    /// jam_at_s=2, echo=1, seed=7).
-    #[arg(long = "fault", value_name = "KEY=VALUE")]
+    /// Plant imperfection or link fault, `key=value`, repeatable (e.g. backlash=0.5,
+    /// drop_prob=0.001, echo=1; the keys are listed by --help).
+    #[arg(long = "fault", value_name = "KEY=VALUE", long_help = fault_keys_help!(
+        "Plant imperfection or link fault, repeatable (e.g. backlash=0.5, drop_prob=0.001, echo=1)."
+    ))]
     pub faults: Vec<String>,
     /// ID of the driver servo.
     #[arg(long, default_value_t = 1)]
@@ -119,12 +121,11 @@ pub struct SimStepperArgs {
     /// The motion to serve.
     #[command(flatten)]
     pub target: TargetArgs,
-    /// Plant imperfection or link fault, `key=value`, repeatable: backlash_deg,
-    /// phase_lag_deg, gain_error, encoder_noise_counts, encoder_resolution, imu_noise_deg,
-    /// imu_bias_deg, missed_step_prob, scale_mm, drop_prob, corrupt_prob, disconnect_at_s,
-    /// dropout_at_s, dropout_s, driver_fault_at_s, driver_stall_at_s, jam_at_s,
-    /// protocol_version, seed.
-    #[arg(long = "fault", value_name = "KEY=VALUE")]
+    /// Plant imperfection or link fault, `key=value`, repeatable (e.g. backlash=0.5,
+    /// missed_step_prob=0.001; the keys are listed by --help).
+    #[arg(long = "fault", value_name = "KEY=VALUE", long_help = fault_keys_help!(
+        "Plant imperfection or link fault, repeatable (e.g. backlash=0.5, missed_step_prob=0.001)."
+    ))]
     pub faults: Vec<String>,
     /// Take the bench's mechanics (steps/rev, microsteps, gear, direction, fitted sensors)
     /// from this rig file; default: those of rigs/sim-stepper.toml.

@@ -23,9 +23,11 @@ pub struct SimPicoArgs {
     /// The motion to serve.
     #[command(flatten)]
     pub target: TargetArgs,
-    /// Plant imperfection or byte fault, `key=value`, repeatable (as for `sim-device
-    /// stepper`; unplug, drop-out, stall, reboot and protocol faults are refused).
-    #[arg(long = "fault", value_name = "KEY=VALUE")]
+    /// Plant imperfection or byte fault, `key=value`, repeatable (unplug, drop-out, stall,
+    /// reboot and protocol faults are refused; the keys are listed by --help).
+    #[arg(long = "fault", value_name = "KEY=VALUE", long_help = fault_keys_help!(
+        "Plant imperfection or byte fault, repeatable. Unplug, drop-out, stall, reboot and protocol faults are refused here."
+    ))]
     pub faults: Vec<String>,
     /// Take the bench's mechanics (steps/rev, microsteps, gear, direction, fitted sensors)
     /// from this rig file; default: those of rigs/sim-stepper.toml.

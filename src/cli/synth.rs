@@ -10,7 +10,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::motion::Motion;
-use crate::synth::closure::NormalCone;
+use crate::synth::closure::{dist_text as dist, NormalCone};
 use crate::synth::mechanism::Attempt;
 use crate::synth::{self, Mechanism, Outcome, SynthOptions, SynthProgress};
 
@@ -23,7 +23,13 @@ pub struct SynthArgs {
     #[arg(required_unless_present = "check")]
     pub motion: Option<PathBuf>,
     /// Output directory (gets mechanism.json and report/).
-    #[arg(short, long, required_unless_present = "check")]
+    #[arg(
+        short,
+        long,
+        alias = "out",
+        value_name = "DIR",
+        required_unless_present = "check"
+    )]
     pub output: Option<PathBuf>,
     /// Re-verify a mechanism.json (file or directory) from its samples alone.
     #[arg(long, conflicts_with_all = ["motion", "output"])]
@@ -133,16 +139,24 @@ impl SynthProgress for Bar {
     }
 }
 
+/// What the closure figures mean, printed under the table.
+const LEGEND: &str =
+    "E_valiTime: fraction of the instants at which the contacts hold the follower \
+(form closure, 1 = all); E_maxDist: the worst instant's signed distance from the origin to \
+the hull of the contact normals (below −ε = closed, \"no interior\" = the normals span no \
+volume, so nothing is held); robust: the same counting only contacts whose normal has a \
+useful torque arm";
+
 /// K, d_x and what the attempt's best combination reached, at the samples and at 4×.
 fn attempt_figures(a: &Attempt) -> String {
     let at4 = match &a.oversampled {
         Some(o) => format!(
-            "; at {}×: {:.3}, robust {:.3}, E_maxDist {:.3}, robust {:.3}",
+            "; at {}×: {:.3}, robust {:.3}, E_maxDist {}, robust {}",
             o.factor,
             o.vali_time,
             o.robust_vali_time,
-            o.max_dist.min(99.0),
-            o.robust_max_dist.min(99.0)
+            dist(o.max_dist),
+            dist(o.robust_max_dist)
         ),
         None => "; too few bands with usable candidates".into(),
     };
@@ -152,13 +166,13 @@ fn attempt_figures(a: &Attempt) -> String {
         format!(" (bands {:?} left out)", a.left_out)
     };
     format!(
-        "K = {}{left_out}, d_x = {}: E_valiTime {:.3}, robust {:.3}, E_maxDist {:.3}, robust {:.3}{at4}",
+        "K = {}{left_out}, d_x = {}: E_valiTime {:.3}, robust {:.3}, E_maxDist {}, robust {}{at4}",
         a.k,
         a.dx,
         a.vali_time,
         a.robust_vali_time,
-        a.max_dist.min(99.0),
-        a.robust_max_dist.min(99.0),
+        dist(a.max_dist),
+        dist(a.robust_max_dist),
     )
 }
 
@@ -185,16 +199,17 @@ fn summary(m: &Mechanism) -> String {
         .collect();
     format!(
         "class  K  d_x    E_valiTime  E_maxDist  robust_vali  robust_max  vali@4x  residual°  time s\n\
-         {:<6} {:<2} {:<6} {:<11.4} {:<10.4} {:<12.4} {:<11.4} {:<8.4} {:<10.3} {:.1}{note}\n\
-         layout: band gap {}, axis room {}\n\
+         {:<6} {:<2} {:<6} {:<11.4} {:<10} {:<12.4} {:<11} {:<8.4} {:<10.3} {:.1}{note}
+         layout: band gap {}, axis room {}
+         {LEGEND}
          best reached per K tried (closure margin asked: E_maxDist ≤ −{}):{}",
         m.class.label(),
         m.curve_pairs.len(),
         m.driver_offset,
         m.closure.vali_time,
-        m.closure.max_dist.min(99.0),
+        dist(m.closure.max_dist),
         m.closure.robust_vali_time,
-        m.closure.robust_max_dist.min(99.0),
+        dist(m.closure.robust_max_dist),
         over.map_or(f64::NAN, |o| o.vali_time),
         m.closure.worst_residual_deg,
         m.solve.seconds,
@@ -318,5 +333,43 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
             }
             .into())
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synth::closure::NO_INTERIOR_DIST;
+    use crate::synth::mechanism::OversampledClosure;
+
+    /// Guards the attempt line (issue 20: `E_maxDist 99.000` where the file holds 1000 for
+    /// a hull without interior): that case reads `no interior`, other distances stay numbers.
+    #[test]
+    fn a_hull_without_interior_is_named() {
+        let a = Attempt {
+            k: 2,
+            dx: 6.0,
+            valid_candidates: vec![3, 4],
+            vali_time: 0.5,
+            robust_vali_time: 0.25,
+            max_dist: NO_INTERIOR_DIST,
+            robust_max_dist: NO_INTERIOR_DIST,
+            oversampled: Some(OversampledClosure {
+                factor: 4,
+                vali_time: 0.5,
+                max_dist: NO_INTERIOR_DIST,
+                robust_vali_time: 0.25,
+                robust_max_dist: -0.0312,
+            }),
+            exhaustive: false,
+            left_out: vec![],
+            closes: false,
+            accepted: false,
+        };
+        assert_eq!(
+            attempt_figures(&a),
+            "K = 2, d_x = 6: E_valiTime 0.500, robust 0.250, E_maxDist no interior, robust \
+             no interior; at 4×: 0.500, robust 0.250, E_maxDist no interior, robust -0.031"
+        );
     }
 }

@@ -20,6 +20,17 @@ use super::math::V3;
 /// distance of unit vectors is within [−1, 1], so 1000 cannot be mistaken for one.
 pub const NO_INTERIOR_DIST: f64 = 1000.0;
 
+/// A signed distance for people: `no interior` for [`NO_INTERIOR_DIST`] (the file's
+/// stand-in for +∞), the number to 3 decimals otherwise. It used to be printed clipped to
+/// `99.000`, a value no file holds (issue 20).
+pub fn dist_text(d: f64) -> String {
+    if d >= NO_INTERIOR_DIST {
+        "no interior".into()
+    } else {
+        format!("{d:.3}")
+    }
+}
+
 /// Closure tolerance ε: a sample is valid when dist < −ε. Default 0.02 (paper §5.2).
 pub const EPSILON: f64 = 0.02;
 

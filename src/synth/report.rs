@@ -29,12 +29,12 @@ pub fn write_report(m: &Mechanism, dir: &Path) -> Result<Vec<PathBuf>, ReportErr
     let clip = |d: f64| d.min(DIST_PLOT_CLIP);
     let mut dist = Chart::new(
         format!(
-            "dist(t), {} K = {}, d_x = {}: E_valiTime {:.3}, E_maxDist {:.3}",
+            "dist(t), {} K = {}, d_x = {}: E_valiTime {:.3}, E_maxDist {}",
             m.class.label(),
             m.curve_pairs.len(),
             m.driver_offset,
             m.closure.vali_time,
-            m.closure.max_dist.min(99.0)
+            super::closure::dist_text(m.closure.max_dist)
         ),
         "t (fraction of the period)",
         "signed distance (clipped at 1.2 = no interior)",

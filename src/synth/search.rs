@@ -816,16 +816,16 @@ impl Search<'_> {
             .take(5)
             .map(|(i, d)| {
                 format!(
-                    "t = {:.3} (dist {:.3})",
+                    "t = {:.3} (dist {})",
                     *i as f64 / m.samples as f64,
-                    d.min(99.0)
+                    super::closure::dist_text(*d)
                 )
             })
             .collect();
         let over = m.closure.oversampled.as_ref();
         format!(
             "no tried K {:?} and d_x {:?} closed at every instant with E_maxDist ≤ −{}: the \
-             best reached E_valiTime {:.3} (robust {:.3}, E_maxDist {:.3}; at {OVERSAMPLE}× \
+             best reached E_valiTime {:.3} (robust {:.3}, E_maxDist {}; at {OVERSAMPLE}× \
              the samples {:.3} and robust {:.3}) at K = {}, d_x = {}; worst samples: {}. Try \
              a larger --k, another --dx, or a different --seed{}.",
             self.k_tried,
@@ -833,7 +833,7 @@ impl Search<'_> {
             self.opts.min_margin,
             m.closure.vali_time,
             m.closure.robust_vali_time,
-            m.closure.max_dist.min(99.0),
+            super::closure::dist_text(m.closure.max_dist),
             over.map_or(f64::NAN, |o| o.vali_time),
             over.map_or(f64::NAN, |o| o.robust_vali_time),
             m.curve_pairs.len(),

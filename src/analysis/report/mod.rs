@@ -116,6 +116,24 @@ pub struct Headline {
     pub cycles: usize,
     /// Mean sample rate.
     pub sample_rate_hz: f64,
+    /// Why the error and timing figures above are absent although samples were analysed
+    /// ([`not_enough_data`]); `None` when they rest on whole cycles.
+    pub not_enough_data: Option<String>,
+}
+
+/// Why a run with no complete cycle gets no error or timing figures: over part of a
+/// revolution the alignment fits offsets that absorb most of any error (issue 20: a run
+/// that disconnected got "error RMS 0.025°" after a −41° driver offset was fitted on
+/// 0 cycles), so such an RMS says nothing about the mechanism. `None` with a whole cycle.
+pub fn not_enough_data(cycles: usize) -> Option<String> {
+    (cycles == 0).then(|| {
+        format!(
+            "not enough data: no complete driver revolution was recorded (a cycle counts \
+             when {:.0} % of it is covered), so no error or timing figures are given; the \
+             offsets were fitted on part of a revolution",
+            super::metrics::FULL_CYCLE_COVERAGE * 100.0
+        )
+    })
 }
 
 /// The offsets, with units in the field names.
@@ -195,12 +213,15 @@ pub struct Summary {
     pub files: Vec<String>,
 }
 
-fn checks(a: &Analysis, opts: &ReportOptions) -> Vec<Check> {
+/// The tolerance checks; with `enough` false (no complete cycle) every figure counts as
+/// not measured, so a tolerance given is missed.
+fn checks(a: &Analysis, opts: &ReportOptions, enough: bool) -> Vec<Check> {
     let mut out = Vec::new();
     let rot = a
         .channels
         .iter()
-        .find(|c| c.name == "rz" || c.name == "rotation");
+        .find(|c| c.name == "rz" || c.name == "rotation")
+        .filter(|_| enough);
     if let Some(tol) = opts.tol_deg {
         let m = rot.map(|c| c.overall.rms);
         out.push(Check {
@@ -219,6 +240,7 @@ fn checks(a: &Analysis, opts: &ReportOptions) -> Vec<Check> {
             .channels
             .iter()
             .find(|c| c.name == "tz")
+            .filter(|_| enough)
             .map(|c| c.overall.rms);
         out.push(Check {
             name: "rms_error_tz_mm".into(),
@@ -229,7 +251,7 @@ fn checks(a: &Analysis, opts: &ReportOptions) -> Vec<Check> {
         });
     }
     if let Some(tol) = opts.tol_ratio {
-        match &a.timing {
+        match a.timing.as_ref().filter(|_| enough) {
             Some(t) if !t.ratios.is_empty() => {
                 for r in &t.ratios {
                     out.push(Check {
@@ -263,20 +285,32 @@ pub fn summarize(
     source: SourceInfo,
     opts: &ReportOptions,
 ) -> Summary {
-    let checks = checks(a, opts);
-    let pass = (!checks.is_empty()).then(|| checks.iter().all(|c| c.pass));
     let rot = a
         .channels
         .iter()
         .find(|c| c.name == "rz" || c.name == "rotation");
-    let tz = a.channels.iter().find(|c| c.name == "tz");
-    let ratio = a.timing.as_ref().and_then(|t| t.ratios.first());
     let cycles = rot.map_or(0, |c| {
         c.per_cycle
             .iter()
             .filter(|k| k.coverage >= super::metrics::FULL_CYCLE_COVERAGE)
             .count()
     });
+    let not_enough_data = not_enough_data(cycles);
+    let enough = not_enough_data.is_none();
+    let checks = checks(a, opts, enough);
+    let pass = (!checks.is_empty()).then(|| checks.iter().all(|c| c.pass));
+    // Without a whole cycle the figures are withheld (see [`not_enough_data`]).
+    let rot = rot.filter(|_| enough);
+    let tz = a
+        .channels
+        .iter()
+        .find(|c| c.name == "tz")
+        .filter(|_| enough);
+    let ratio = a
+        .timing
+        .as_ref()
+        .and_then(|t| t.ratios.first())
+        .filter(|_| enough);
     let off = |d: Dof| a.alignment.dofs.iter().find(|o| o.dof == d);
     let rot_off = a.alignment.rotation;
     let axis = |q: nalgebra::UnitQuaternion<f64>| {
@@ -308,6 +342,7 @@ pub fn summarize(
             backlash_driver_deg: bl.map(|b| b.driver_deg.value),
             cycles,
             sample_rate_hz: a.sampling.mean_rate_hz,
+            not_enough_data,
         },
         alignment: AlignmentSummary {
             driver_offset_deg: a.alignment.driver_offset_deg.value,
@@ -393,6 +428,9 @@ fn blocks(s: &Summary, a: &Analysis, pictures: &[plots::Picture]) -> Vec<Block> 
             "Timing: the follower's {}°→{}° took **{m:.3} ± {u:.3}** times as long as {}°→{}° (target **{t:.3}**).",
             lv[0], lv[1], lv[1], lv[2]
         ));
+    }
+    if let Some(why) = &h.not_enough_data {
+        lines.push(format!("**{}{}.**", why[..1].to_uppercase(), &why[1..]));
     }
     if let Some(r) = h.rms_error_deg {
         lines.push(format!(

@@ -1,7 +1,7 @@
 //! The measurement session: what `mpc-rig measure` (and `demo`) run at the bench.
 //!
-//! Owns the run plan (zero/home, settle cycle(s), N forward cycles, optionally the same in
-//! reverse), the sample loop (recording every sample, counting cycles from the driver
+//! Owns the run plan (zero/home, settle cycle(s), N forward cycles, optionally a run-out of
+//! the settle length and the same N driver revolutions in reverse), the sample loop (recording every sample, counting cycles from the driver
 //! angle, live progress with the current error against the target law), the recording
 //! folder's claim, the safety limits (speed, run time, sample stall, and the [`watch`]es on
 //! every sample: a driver fault or stall, a jammed mechanism) and the exit paths: on the
@@ -85,10 +85,13 @@ pub const RUN_TIME_MARGIN: f64 = 1.2;
 pub struct Progress {
     /// Current phase.
     pub phase: Phase,
-    /// Cycles completed in the current measured direction (fractional).
+    /// Cycles completed in the current measured direction (fractional); in the settle
+    /// phase, the revolutions of settle (or run-out before a reversal) done so far.
     pub cycle: f64,
     /// Cycles planned per direction.
     pub cycles: u32,
+    /// Settle revolutions planned before each measured direction.
+    pub settle_cycles: u32,
     /// Samples recorded.
     pub samples: u64,
     /// Sample rate over the last progress interval, Hz.
@@ -250,7 +253,13 @@ pub fn check_plan(rig: &RigConfig, opts: &MeasureOptions) -> Result<(), RigError
             "at least one measured cycle is needed".into(),
         ));
     }
-    let revs = f64::from(opts.cycles + opts.settle_cycles) * if opts.reverse { 2.0 } else { 1.0 };
+    // Forward: settle, cycles, and (with reverse) a run-out of the settle length; back over
+    // the run-out and the cycles.
+    let revs = if opts.reverse {
+        f64::from(2 * opts.cycles + 3 * opts.settle_cycles)
+    } else {
+        f64::from(opts.cycles + opts.settle_cycles)
+    };
     let planned_s = revs / (opts.speed_rpm / 60.0) * RUN_TIME_MARGIN;
     if planned_s > rig.safety.max_run_s {
         return Err(RigError::Safety(format!(
@@ -280,30 +289,47 @@ enum Step {
 }
 
 impl Plan {
+    /// The measured cycles of both directions are the same driver revolutions,
+    /// `[start + settle, start + settle + measure]`: the analysis numbers cycles by
+    /// ⌊φ/360°⌋, so reverse cycles measured from wherever the reversal ramp happened to end
+    /// straddled two of its cycles (issue 20: forward 1–3 but reverse 0–3, 6 complete cycles
+    /// at one speed and 5 at another). To keep a settle of `settle_deg` after the reversal,
+    /// the forward run runs out that far past the measured cycles before it turns.
     fn step(&mut self, angle: f64) -> Step {
         self.max_seen = self.max_seen.max(angle);
+        let p = angle - self.start;
+        let lo = self.settle_deg;
+        let hi = self.settle_deg + self.measure_deg;
+        let margin = PHASE_MARGIN_DEG.min(self.settle_deg);
         match self.turn {
             None => {
-                let p = angle - self.start;
-                let margin = PHASE_MARGIN_DEG.min(self.settle_deg);
-                if p < self.settle_deg - margin {
-                    Step::Continue(Phase::Settle, 0.0)
-                } else if p < self.settle_deg + self.measure_deg + PHASE_MARGIN_DEG {
-                    let c = ((p - self.settle_deg) / 360.0).clamp(0.0, self.measure_deg / 360.0);
+                if p < lo - margin {
+                    Step::Continue(Phase::Settle, (p / 360.0).max(0.0))
+                } else if p < hi + PHASE_MARGIN_DEG {
+                    let c = ((p - lo) / 360.0).clamp(0.0, self.measure_deg / 360.0);
                     Step::Continue(Phase::Forward, c)
-                } else if self.reverse {
-                    Step::Reverse
-                } else {
+                } else if !self.reverse {
                     Step::Done
+                } else if p < hi + self.settle_deg.max(PHASE_MARGIN_DEG) {
+                    Step::Continue(Phase::Settle, ((p - hi) / 360.0).max(0.0))
+                } else {
+                    Step::Reverse
                 }
             }
-            Some(turn) => {
-                let q = self.max_seen.max(turn) - angle;
-                let margin = PHASE_MARGIN_DEG.min(self.settle_deg);
-                if q < self.settle_deg - margin {
-                    Step::Continue(Phase::Settle, 0.0)
-                } else if q < self.settle_deg + self.measure_deg + PHASE_MARGIN_DEG {
-                    let c = ((q - self.settle_deg) / 360.0).clamp(0.0, self.measure_deg / 360.0);
+            Some(_) => {
+                if p > hi + PHASE_MARGIN_DEG {
+                    // Back over the run-out (and the overshoot of the turn), shown as the
+                    // fraction of it done in settle revolutions.
+                    let top = self.max_seen - self.start;
+                    let span = top - hi - PHASE_MARGIN_DEG;
+                    let c = if span > 0.0 {
+                        ((top - p) / span).clamp(0.0, 1.0) * self.settle_deg / 360.0
+                    } else {
+                        0.0
+                    };
+                    Step::Continue(Phase::Settle, c)
+                } else if p >= lo - margin {
+                    let c = ((hi - p) / 360.0).clamp(0.0, self.measure_deg / 360.0);
                     Step::Continue(Phase::Reverse, c)
                 } else {
                     Step::Done
@@ -531,6 +557,11 @@ fn drive(
             if !done {
                 match plan.step(s.driver_angle_deg) {
                     Step::Continue(p, c) => {
+                        if p != phase && matches!(phase, Phase::Forward | Phase::Reverse) {
+                            // A measured direction is over: say so, whatever the interval.
+                            let done_cycles = f64::from(opts.cycles);
+                            report_progress(opts, writer, start, phase, done_cycles, error_deg);
+                        }
                         phase = p;
                         cycle = c;
                     }
@@ -541,6 +572,10 @@ fn drive(
                         stall.commanded(-opts.speed_rpm);
                     }
                     Step::Done => {
+                        if phase == Phase::Reverse {
+                            let done_cycles = f64::from(opts.cycles);
+                            report_progress(opts, writer, start, phase, done_cycles, error_deg);
+                        }
                         done = true;
                         // The rest of this batch is the start of the stop ramp.
                         phase = Phase::Settle;
@@ -582,6 +617,7 @@ fn drive(
                     phase,
                     cycle,
                     cycles: opts.cycles,
+                    settle_cycles: opts.settle_cycles,
                     samples: rows,
                     sample_rate_hz: (rows - rows_at_last_progress) as f64 / dt,
                     gaps: writer.meta().counts.gaps,
@@ -649,6 +685,38 @@ fn watch_sample(
 
 /// After a stop command: keep recording until the driver is at rest (or [`STOP_WAIT`]),
 /// so the deceleration is in the recording, then stop the stream.
+/// A progress report outside the regular interval (the end of a measured direction, so
+/// the live line shows it reach N/N); its rate is the mean since the start.
+fn report_progress(
+    opts: &mut MeasureOptions,
+    writer: &RecordingWriter,
+    start: Instant,
+    phase: Phase,
+    cycle: f64,
+    error_deg: Option<f64>,
+) {
+    let (cycles, settle_cycles) = (opts.cycles, opts.settle_cycles);
+    if let Some(cb) = opts.progress.as_mut() {
+        let rows = writer.rows_pushed();
+        let elapsed_s = start.elapsed().as_secs_f64();
+        cb(&Progress {
+            phase,
+            cycle,
+            cycles,
+            settle_cycles,
+            samples: rows,
+            sample_rate_hz: if elapsed_s > 0.0 {
+                rows as f64 / elapsed_s
+            } else {
+                0.0
+            },
+            gaps: writer.meta().counts.gaps,
+            error_deg,
+            elapsed_s,
+        });
+    }
+}
+
 fn finish_tail(
     bench: &mut (dyn Bench + Send),
     writer: &mut RecordingWriter,
@@ -723,25 +791,44 @@ mod tests {
             Step::Continue(Phase::Forward, c) => assert!((c - 0.5).abs() < 1e-12),
             _ => panic!(),
         }
-        // The forward phase runs PHASE_MARGIN_DEG past the last cycle.
+        // The forward phase runs PHASE_MARGIN_DEG past the last cycle, then runs out one
+        // settle length before it turns.
         let m = PHASE_MARGIN_DEG;
         assert!(matches!(
             plan.step(1080.0 + m / 2.0),
             Step::Continue(Phase::Forward, _)
         ));
-        assert!(matches!(plan.step(1080.0 + m), Step::Reverse));
-        plan.turn = Some(1080.0 + m);
-        // Overshoot while decelerating moves the turning point.
-        let top = 1080.0 + m + 5.0;
+        match plan.step(1080.0 + m) {
+            Step::Continue(Phase::Settle, c) => assert!((c - m / 360.0).abs() < 1e-12),
+            _ => panic!(),
+        }
+        assert!(matches!(
+            plan.step(1440.0 - 1.0),
+            Step::Continue(Phase::Settle, _)
+        ));
+        assert!(matches!(plan.step(1440.0), Step::Reverse));
+        plan.turn = Some(1440.0);
+        // Overshoot while decelerating, then back over the run-out.
+        let top = 1440.0 + 90.0;
         assert!(matches!(plan.step(top), Step::Continue(Phase::Settle, _)));
+        // Halfway back to the cycles is half the settle, the overshoot included.
+        match plan.step((top + 1080.0 + m) / 2.0) {
+            Step::Continue(Phase::Settle, c) => assert!((c - 0.5).abs() < 1e-12, "{c}"),
+            _ => panic!(),
+        }
+        // The reverse phase covers the forward cycles exactly (and the same margins).
+        match plan.step(1080.0 + m) {
+            Step::Continue(Phase::Reverse, c) => assert!(c.abs() < 1e-12),
+            _ => panic!(),
+        }
+        match plan.step(540.0) {
+            Step::Continue(Phase::Reverse, c) => assert!((c - 1.5).abs() < 1e-12),
+            _ => panic!(),
+        }
         assert!(matches!(
-            plan.step(top - 360.0 + m / 2.0),
+            plan.step(360.0 - m),
             Step::Continue(Phase::Reverse, _)
         ));
-        assert!(matches!(
-            plan.step(top - 400.0),
-            Step::Continue(Phase::Reverse, _)
-        ));
-        assert!(matches!(plan.step(top - 1080.0 - m), Step::Done));
+        assert!(matches!(plan.step(360.0 - m - 0.1), Step::Done));
     }
 }

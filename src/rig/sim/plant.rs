@@ -227,6 +227,16 @@ pub const FAULT_KEYS: &[(&str, &str)] = &[
     ("seed", "seed of the simulated randomness"),
 ];
 
+/// Short names accepted for some `--fault` keys by every command that takes them:
+/// `backlash=2` is `backlash_deg=2`. Errors repeat the option as typed.
+pub const FAULT_ALIASES: &[(&str, &str)] = &[
+    ("backlash", "backlash_deg"),
+    ("phase_lag", "phase_lag_deg"),
+    ("imu_noise", "imu_noise_deg"),
+    ("imu_bias", "imu_bias_deg"),
+    ("encoder_noise", "encoder_noise_counts"),
+];
+
 /// Default length of a brief drop-out when only `dropout_at_s` is given: half a second,
 /// like a USB cable wiggled loose and back.
 pub const DEFAULT_DROPOUT_S: f64 = 0.5;
@@ -258,6 +268,10 @@ impl PlantConfig {
             .split_once('=')
             .ok_or_else(|| fail("expected key=value".into()))?;
         let (key, value) = (key.trim(), value.trim());
+        let key = FAULT_ALIASES
+            .iter()
+            .find(|(short, _)| *short == key)
+            .map_or(key, |(_, long)| long);
         let num = || -> Result<f64, PlantError> {
             let v: f64 = value
                 .parse()
@@ -634,6 +648,25 @@ mod tests {
         assert!((r.angle_to(&q).to_degrees() - 2.0).abs() < 1e-9);
     }
 
+    /// Guards one set of fault keys for every command (issue 20: `backlash=2` worked for
+    /// `demo` only, and a bad value there was echoed as `backlash_deg=abc`): the short
+    /// names are the plant's own, and an error repeats the option as the user typed it.
+    #[test]
+    fn short_fault_names_everywhere_and_errors_as_typed() {
+        for (short, long) in FAULT_ALIASES {
+            assert!(FAULT_KEYS.iter().any(|(k, _)| k == long), "{long}");
+            let a = PlantConfig::from_faults(&[format!("{short}=0.5")]).unwrap();
+            let b = PlantConfig::from_faults(&[format!("{long}=0.5")]).unwrap();
+            assert_eq!(format!("{a:?}"), format!("{b:?}"), "{short}");
+        }
+        assert_eq!(
+            PlantConfig::from_faults(&["backlash=abc"])
+                .unwrap_err()
+                .to_string(),
+            "--fault `backlash=abc`: `abc` is not a number"
+        );
+    }
+
     /// Guards: bad `--fault` options are rejected with the key named.
     #[test]
     fn bad_faults_are_rejected() {
@@ -643,6 +676,7 @@ mod tests {
             "drop_prob=2",
             "wobble=1",
             "seed=x",
+            "backlash=abc",
         ] {
             let err = PlantConfig::from_faults(&[bad]).unwrap_err().to_string();
             assert!(err.contains(bad), "{err}");
