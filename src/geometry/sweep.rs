@@ -136,10 +136,7 @@ impl Section {
                 ..
             } => (u_min, u_max, half_width),
         };
-        norm2(
-            (u_lo - u).max(u - u_hi).max(0.0),
-            (v.abs() - hv).max(0.0),
-        )
+        norm2((u_lo - u).max(u - u_hi).max(0.0), (v.abs() - hv).max(0.0))
     }
 
     /// Largest distance of the section from the origin (for bounding boxes). The half
