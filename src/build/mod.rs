@@ -103,7 +103,9 @@ pub enum BuildError {
         summary: String,
     },
     /// A part came out in several pieces.
-    #[error("the {part} is in {pieces} separate pieces: {detail}")]
+    #[error(
+        "the {part} is in {pieces} separate pieces that each carry contact surfaces ({detail})"
+    )]
     Disconnected {
         /// Part.
         part: &'static str,
@@ -168,6 +170,9 @@ pub struct Part {
     /// Loose fragments dropped (pieces of web cut off by the driver's sweep), with their
     /// volume in mm³.
     pub dropped: Vec<f64>,
+    /// When the part is in several pieces that carry contact surfaces (not printable as
+    /// one part), each piece's volume in mm³, largest first; empty when it is one piece.
+    pub pieces: Vec<f64>,
     /// Seconds spent meshing it.
     pub seconds: f64,
 }
@@ -182,6 +187,17 @@ pub struct Built {
     pub figures: CheckFigures,
     /// Seconds per stage.
     pub timings: Vec<(String, f64)>,
+    /// Why the parts are not printable as they are (a part in several pieces, a failed
+    /// check), worded for the user; empty when they are. The parts are still returned so
+    /// they can be written and looked at.
+    pub problems: Vec<String>,
+}
+
+impl Built {
+    /// Printable: every part in one piece and the check passed (or not enforced).
+    pub fn printable(&self) -> bool {
+        self.problems.is_empty()
+    }
 }
 
 fn in_range(option: &str, v: f64, r: (f64, f64)) -> Result<(), BuildError> {
@@ -272,9 +288,28 @@ pub fn build(
     let t1 = Instant::now();
     let figures = check::run(&design, mech, &out[0].mesh, &out[1].mesh, &out[2].mesh);
     timings.push(("check".to_string(), t1.elapsed().as_secs_f64()));
+    let mut problems: Vec<String> = out
+        .iter()
+        .filter(|p| p.pieces.len() > 1)
+        .map(|p| {
+            BuildError::Disconnected {
+                part: p.name,
+                pieces: p.pieces.len(),
+                detail: format!(
+                    "volumes {} mm³",
+                    p.pieces
+                        .iter()
+                        .map(|v| format!("{v:.0}"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            }
+            .to_string()
+        })
+        .collect();
     if !opts.allow_interference {
         if let Some(msg) = figures.failure() {
-            return Err(BuildError::Interference(msg));
+            problems.push(BuildError::Interference(msg).to_string());
         }
     }
     Ok(Built {
@@ -282,6 +317,7 @@ pub fn build(
         parts: out,
         figures,
         timings,
+        problems,
     })
 }
 
@@ -322,24 +358,22 @@ fn mesh_part(
                 dropped.push(s.volume());
             }
         }
-        if kept.len() > 1 {
-            return Err(BuildError::Disconnected {
-                part: name,
-                pieces: kept.len(),
-                detail: format!(
-                    "volumes {} mm³",
-                    kept.iter()
-                        .map(|m| format!("{:.0}", m.volume()))
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            });
+        // Several pieces carry contact surfaces: keep them all (the caller reports the
+        // part as not printable, and its files show where it comes apart).
+        let pieces = if kept.len() > 1 {
+            kept.iter().map(Mesh::volume).collect()
+        } else {
+            Vec::new()
+        };
+        let mut mesh = Mesh::default();
+        for s in &kept {
+            mesh.append(s);
         }
-        let mesh = kept.pop().expect("the largest shell is kept");
         return Ok(Part {
             name,
             mesh,
             dropped,
+            pieces,
             seconds: t.elapsed().as_secs_f64(),
         });
     }
@@ -347,6 +381,7 @@ fn mesh_part(
         name,
         mesh,
         dropped,
+        pieces: Vec::new(),
         seconds: t.elapsed().as_secs_f64(),
     })
 }

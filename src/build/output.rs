@@ -291,9 +291,12 @@ fn summary_json(
                 "bbox_min_mm": b.min,
                 "bbox_max_mm": b.max,
                 "dropped_fragments_mm3": p.dropped,
+                "pieces_mm3": p.pieces,
                 "seconds": p.seconds,
             })
         }).collect::<Vec<_>>(),
+        "printable": built.printable(),
+        "problems": built.problems,
         "bed_mm": bed_mm,
         "bed_note": bed_note,
         "check": {
@@ -339,6 +342,13 @@ fn summary_md(
             "**Curve pair {} left out** (an experiment: these parts need not close).\n",
             k + 1
         );
+    }
+    if !built.printable() {
+        let _ = writeln!(s, "**Not printable as it is:**\n");
+        for p in &built.problems {
+            let _ = writeln!(s, "- {p}");
+        }
+        let _ = writeln!(s);
     }
     let _ = writeln!(s, "![assembly](assembly-isometric.png)\n");
     let _ = writeln!(s, "| part | triangles | volume mm³ | size mm | mesh |");
@@ -434,6 +444,7 @@ mod tests {
                 name,
                 mesh: mesh.clone(),
                 dropped: Vec::new(),
+                pieces: Vec::new(),
                 seconds: 0.0,
             })
             .collect();

@@ -107,5 +107,12 @@ pub fn run(args: BuildArgs) -> anyhow::Result<ExitCode> {
             println!("  {}", f.display());
         }
     }
-    Ok(ExitCode::SUCCESS)
+    if built.printable() {
+        return Ok(ExitCode::SUCCESS);
+    }
+    anyhow::bail!(
+        "the parts are not printable as they are (written to {} for inspection):\n  - {}",
+        out.display(),
+        built.problems.join("\n  - ")
+    )
 }
