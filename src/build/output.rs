@@ -71,7 +71,7 @@ pub enum OutputError {
     Render(#[from] RenderError),
 }
 
-/// What [`write`] wrote.
+/// What [`write()`] wrote.
 #[derive(Clone, Debug)]
 pub struct Written {
     /// Every file, in the order of the table above.

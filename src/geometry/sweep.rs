@@ -44,7 +44,7 @@ pub enum Section {
 /// distance is replaced by the distance to that circle, a lower bound: callers need exact
 /// values near surfaces and bounds elsewhere, and the closest-point iteration dominated the
 /// cost of far queries.
-const ELLIPSE_FAR: f64 = 2.0;
+pub const ELLIPSE_FAR: f64 = 2.0;
 
 /// √(a² + b²) for the mm-sized values here (`f64::hypot` guards against overflow at a cost
 /// that dominated the sweeps' profile).
