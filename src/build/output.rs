@@ -165,7 +165,16 @@ fn write_package(path: &Path, parts: &[Part]) -> Result<([f64; 2], Option<String
             Ok(([side, side], Some(note)))
         }
         Err(LayoutError::PartTooLarge { name, size, .. }) => {
-            let side = size[0].max(size[1]).ceil() * 3.0;
+            // Three parts side by side fit a square of three times the largest footprint
+            // side, gaps included (the gap is far below a part's side).
+            let largest = parts
+                .iter()
+                .map(|p| {
+                    let s = p.mesh.aabb().size();
+                    s[0].max(s[1])
+                })
+                .fold(0.0, f64::max);
+            let side = (largest + bed.gap_mm).ceil() * parts.len().max(1) as f64;
             let big = Bed {
                 size_mm: [side, side],
                 ..bed
@@ -429,6 +438,34 @@ mod tests {
             .join("tests/data/mechanism/half-turn-2to1/mechanism.json");
         let mech = Mechanism::load(&file).expect("the test mechanism loads");
         Kinematics::new(&mech, 10.0).expect("its law rebuilds")
+    }
+
+    /// Guards the package when parts outgrow the default bed: it is still written, on a bed
+    /// that holds them without overlap, and the note says why (whole text).
+    #[test]
+    fn parts_larger_than_the_bed_get_a_larger_bed_and_a_note() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("mechanism.3mf");
+        let part = |name, w| Part {
+            name,
+            mesh: primitive_meshes::cuboid([0.0; 3], [w, 40.0, 10.0]),
+            dropped: Vec::new(),
+            pieces: Vec::new(),
+            seconds: 0.0,
+        };
+        let parts = [
+            part("driver", 250.0),
+            part("follower", 60.0),
+            part("support", 90.0),
+        ];
+        let (bed, note) = write_package(&path, &parts).expect("written");
+        assert_eq!(bed, [765.0, 765.0]);
+        assert_eq!(
+            note.as_deref(),
+            Some("the driver alone is 250 × 40 mm, larger than the 200 × 200 mm bed")
+        );
+        let model = threemf::read_3mf(&path).expect("our reader reads it back");
+        assert_eq!(model.objects.len(), 3);
     }
 
     /// Guards the animation the GLB carries: driver and follower have one pose per key, the
