@@ -352,27 +352,15 @@ fn plan_follower_struts(
     let band_clearance = |p: Vec3| web_clear.below(p, STRUT_RADIUS_MM + ROOT_MARGIN_MM);
     for &k in &order {
         // Struts leave a rim from behind it, along −n², where the driver's band is not.
-        let rays: Vec<(Vec3, Vec3)> = rims[k]
-            .frames()
-            .iter()
-            .step_by(2)
-            .map(|f| (f.o - f.u * (RIM_DEPTH_MM + ROOT_DEPTH_MM), -f.u))
-            .collect();
-        let starts = connect::ray_starts(
-            &rays,
+        let st = strut_from_behind(
+            &rims[k],
+            RIM_DEPTH_MM + ROOT_DEPTH_MM,
             field,
             &band_clearance,
-            STRUT_RADIUS_MM + ROOT_MARGIN_MM,
-            RAY_REACH_MM,
-        );
-        let st = connect::strut(
-            field,
-            &joined,
-            &starts,
+            &mut joined,
             hub_center,
             &format!("plate {} (curve pair {})", k + 1, pairs[k].0 + 1),
         )?;
-        joined.mark_balls(&connect::polyline_points(&st, 0.5), st.radius);
         joined.mark_balls(&core_of(k), 1.5);
         struts.push(st);
     }
@@ -455,27 +443,15 @@ fn plan_driver_struts(
     let mut struts = Vec::new();
     for &k in &order {
         // Struts leave a band from behind it, along −n¹, away from the groove.
-        let rays: Vec<(Vec3, Vec3)> = bands[k]
-            .frames()
-            .iter()
-            .step_by(2)
-            .map(|f| (f.o - f.u * (BAND_DEPTH_MM - ROOT_DEPTH_MM), -f.u))
-            .collect();
-        let starts = connect::ray_starts(
-            &rays,
+        let st = strut_from_behind(
+            &bands[k],
+            BAND_DEPTH_MM - ROOT_DEPTH_MM,
             field,
             &rim_clearance,
-            STRUT_RADIUS_MM + ROOT_MARGIN_MM,
-            RAY_REACH_MM,
-        );
-        let st = connect::strut(
-            field,
-            &joined,
-            &starts,
+            &mut joined,
             hub,
             &format!("band {} (curve pair {})", k + 1, pairs[k].0 + 1),
         )?;
-        joined.mark_balls(&connect::polyline_points(&st, 0.5), st.radius);
         let centre: Vec<Vec3> = bands[k]
             .frames()
             .iter()
@@ -696,6 +672,37 @@ fn place_imu_pad(field: &DistanceField, p: &mut Pieces) -> Result<(), BuildError
         what: "the IMU pad".into(),
         detail: "no direction from the ball has 30 mm of space the driver never enters".into(),
     })
+}
+
+/// A strut from behind a rim or band to what its part has joined so far, aimed at `toward`:
+/// roots `depth` mm behind the curve along −u at every second frame, rays along −u (away
+/// from the contact), starts kept [`ROOT_MARGIN_MM`] clear by `exact`; the strut is marked
+/// joined.
+fn strut_from_behind(
+    sweep: &Sweep,
+    depth: f64,
+    field: &DistanceField,
+    exact: &(dyn Fn(Vec3) -> f64 + Sync),
+    joined: &mut connect::Joined,
+    toward: Vec3,
+    what: &str,
+) -> Result<ThickPolyline, BuildError> {
+    let rays: Vec<(Vec3, Vec3)> = sweep
+        .frames()
+        .iter()
+        .step_by(2)
+        .map(|f| (f.o - f.u * depth, -f.u))
+        .collect();
+    let starts = connect::ray_starts(
+        &rays,
+        field,
+        exact,
+        STRUT_RADIUS_MM + ROOT_MARGIN_MM,
+        RAY_REACH_MM,
+    );
+    let st = connect::strut(field, joined, &starts, toward, what)?;
+    joined.mark_balls(&connect::polyline_points(&st, 0.5), st.radius);
+    Ok(st)
 }
 
 impl Design {
