@@ -65,7 +65,7 @@ pub enum BuildError {
     #[error("the mechanism's follower_motion: {0}")]
     Motion(String),
     /// The rig cannot measure this class of mechanism.
-    #[error("rig {rig:?} cannot measure a {class:?} mechanism: it has no {missing}")]
+    #[error("rig {rig:?} cannot measure a {} mechanism: it has no {missing}", class.label())]
     RigCannotMeasure {
         /// Rig name.
         rig: String,

@@ -281,7 +281,7 @@ fn summary_json(
     json!({
         "format": BUILD_FORMAT,
         "mechanism": mechanism.display().to_string(),
-        "class": format!("{:?}", kin.class()),
+        "class": kin.class().label(),
         "scale_mm": kin.scale_mm(),
         "dx_mm": kin.dx_mm(),
         "clearance_mm": opts.clearance_mm,
@@ -336,9 +336,9 @@ fn summary_md(
     let _ = writeln!(s, "# Parts of {}\n", mechanism.display());
     let _ = writeln!(
         s,
-        "{:?} mechanism, {} mm per model unit, d_x = {:.1} mm, print clearance {} mm, \
+        "{} mechanism, {} mm per model unit, d_x = {:.1} mm, print clearance {} mm, \
          mesher cell {} mm; bench: {}.\n",
-        kin.class(),
+        kin.class().label(),
         kin.scale_mm(),
         kin.dx_mm(),
         opts.clearance_mm,
