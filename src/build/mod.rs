@@ -21,6 +21,7 @@
 //! | [`shapes`] | rims, webs, bands from the curve pairs |
 //! | [`layout`] | hubs, joint, couplings, sensor features, support, by rule |
 //! | [`connect`] | struts and posts planned through free space |
+//! | [`segments`] | where the carve leaves a driver band in pieces |
 //! | [`parts`] | the design and the three solids |
 //! | [`check`] | interference and contact gaps over the period, mesh error |
 //! | [`output`] | the output folder: STL, 3MF, GLB, pictures, build.json / build.md |
@@ -35,6 +36,7 @@ pub mod kinematics;
 pub mod layout;
 pub mod output;
 pub mod parts;
+pub mod segments;
 pub mod shapes;
 pub mod swept;
 

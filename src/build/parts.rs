@@ -8,7 +8,8 @@
 //! 4. the webs kept [`WEB_MARGIN_MM`] clear of the driver's swept bands (exactly, near
 //!    their edge) and the follower's struts, cap and pad joined through the space the
 //!    driver and support never enter;
-//! 5. the driver's struts joined through the space the whole follower never enters.
+//! 5. the driver's struts joined through the space the whole follower never enters, one
+//!    per piece the carve leaves of each band (`segments`).
 //!
 //! Then the solids: the follower shrunk by half the clearance; the driver as bands, struts
 //! and hub minus the exact swept volume of the rims grown by half the clearance (the
@@ -30,6 +31,7 @@ use super::connect::{self, Joined};
 use super::dims::*;
 use super::kinematics::Kinematics;
 use super::layout::{cover_cylinder, Layout, Pieces};
+use super::segments::{self, Segment};
 use super::shapes;
 use super::swept::{Balls, ExactSweep, Frame};
 use super::{BuildError, BuildOptions};
@@ -246,11 +248,12 @@ pub fn design(
         &kin,
         &layout,
         &bands,
-        &band_covers,
         &rim_union,
         &driver_field,
         &driver_pieces,
         &pairs,
+        opts.clearance_mm,
+        progress,
     )?;
     let driver_field = Arc::new(driver_field);
 
@@ -405,30 +408,23 @@ fn plan_follower_struts(
     Ok(struts)
 }
 
-/// Join each band (nearest the hub first) to the driver's hub.
+/// Join every piece of every band (nearest the hub first) to the driver's hub: a band the
+/// rims' sweep cuts crosswise ([`segments::band_segments`]) needs a strut per piece.
 #[allow(clippy::too_many_arguments)]
 fn plan_driver_struts(
     kin: &Kinematics,
     layout: &Layout,
     bands: &[Sweep],
-    band_covers: &[Balls],
     rims: &Union,
     field: &DistanceField,
     pieces: &Pieces,
     pairs: &[(usize, &crate::synth::mechanism::CurvePair)],
+    clearance: f64,
+    progress: &dyn Fn(&str),
 ) -> Result<Vec<ThickPolyline>, BuildError> {
     let mut joined = Joined::new(field.grid);
     joined_mark_first(&mut joined, pieces);
     let hub = Vec3::new(0.0, 0.0, 0.5 * (layout.driver_hub.0 + layout.driver_hub.1));
-    let mut order: Vec<usize> = (0..bands.len()).collect();
-    let nearest = |k: usize| {
-        band_covers[k]
-            .centers
-            .iter()
-            .map(|p| (p - hub).norm())
-            .fold(f64::INFINITY, f64::min)
-    };
-    order.sort_by(|&a, &b| nearest(a).total_cmp(&nearest(b)));
     let rim_clearance = |p: Vec3| {
         ExactSweep {
             kin,
@@ -440,28 +436,100 @@ fn plan_driver_struts(
         }
         .value(p)
     };
-    let mut struts = Vec::new();
-    for &k in &order {
-        // Struts leave a band from behind it, along −n¹, away from the groove.
-        let st = strut_from_behind(
-            &bands[k],
-            BAND_DEPTH_MM - ROOT_DEPTH_MM,
-            field,
-            &rim_clearance,
-            &mut joined,
-            hub,
-            &format!("band {} (curve pair {})", k + 1, pairs[k].0 + 1),
-        )?;
-        let centre: Vec<Vec3> = bands[k]
-            .frames()
+    // What the carve leaves of each band: its swept distance less half the clearance.
+    let carve = |p: Vec3| {
+        ExactSweep {
+            kin,
+            solid: rims,
+            frame: Frame::Follower,
+            target: Frame::Driver,
+            cap: 0.5 * clearance + segments::BRIDGE_MM + 0.1,
+            coarse: Some(field),
+        }
+        .value(p)
+            - 0.5 * clearance
+    };
+    // (band, piece number, piece), nearest the hub first.
+    let mut items: Vec<(usize, usize, Segment)> = Vec::new();
+    for (k, band) in bands.iter().enumerate() {
+        let segs = segments::band_segments(band, &carve);
+        if segs.len() > 1 {
+            progress(&format!(
+                "band {} (curve pair {}) comes out of the carve in {} pieces: one strut each",
+                k + 1,
+                pairs[k].0 + 1,
+                segs.len()
+            ));
+        }
+        for (j, seg) in segs.into_iter().enumerate() {
+            if seg.samples.len() >= MIN_PIECE_SAMPLES {
+                items.push((k, j, seg));
+            }
+        }
+    }
+    let nearest = |s: &Segment| {
+        s.roots
             .iter()
-            .map(|f| f.o - f.u * (0.5 * BAND_DEPTH_MM))
+            .map(|p| (p - hub).norm())
+            .fold(f64::INFINITY, f64::min)
+    };
+    items.sort_by(|a, b| nearest(&a.2).total_cmp(&nearest(&b.2)));
+    let mut struts = Vec::new();
+    for (k, j, seg) in &items {
+        let what = if *j == 0 {
+            format!("band {} (curve pair {})", k + 1, pairs[*k].0 + 1)
+        } else {
+            format!(
+                "piece {} of band {} (curve pair {})",
+                j + 1,
+                k + 1,
+                pairs[*k].0 + 1
+            )
+        };
+        // Struts leave a piece from behind it (along −n¹, away from the groove) or across
+        // the band, towards the gap between the slabs.
+        let frames = bands[*k].frames();
+        let rays: Vec<(Vec3, Vec3)> = seg
+            .frames
+            .iter()
+            .zip(&seg.roots)
+            .step_by(2)
+            .flat_map(|(&i, &root)| {
+                let (u, v) = segments::section_axes(frames, i);
+                [-u, v, -v, (v - u).normalize(), (-v - u).normalize()].map(|d| (root, d))
+            })
             .collect();
-        joined.mark_balls(&centre, 1.5);
-        struts.push(st);
+        // First with the strut's whole section clear of the rims' sweep where it leaves;
+        // failing that, with its core clear (the carve then trims the strut's flank there).
+        let whole = STRUT_RADIUS_MM + ROOT_MARGIN_MM;
+        let core = STRUT_CORE_MM + 0.5 * clearance;
+        let planned = strut_from_rays(&rays, whole, field, &rim_clearance, &mut joined, hub, &what)
+            .or_else(|_| {
+                strut_from_rays(&rays, core, field, &rim_clearance, &mut joined, hub, &what)
+            });
+        match planned {
+            Ok(st) => {
+                joined.mark_balls(&seg.samples, 0.5);
+                struts.push(st);
+            }
+            // A band's largest piece must be joined; a smaller one that cannot be is left
+            // for the mesh check, which reports the driver in pieces.
+            Err(e) if *j > 0 => progress(&format!("{what} stays loose: {e}")),
+            Err(e) => return Err(e),
+        }
     }
     Ok(struts)
 }
+
+/// Radius of a driver strut's core that must survive the carve where the strut leaves a
+/// piece of band hemmed in by the rims' sweep, mm: a 2 mm round core, five perimeters of a
+/// 0.4 mm nozzle.
+const STRUT_CORE_MM: f64 = 1.0;
+
+/// Pieces of a band with fewer samples than this are crumbs, not given a strut: under
+/// a millimetre of band (the mesh keeps them only if they hold a functional point, and then
+/// reports the driver in pieces).
+const MIN_PIECE_SAMPLES: usize = 8;
 
 fn joined_mark_first(j: &mut Joined, p: &Pieces) {
     if let Some(a) = p.add.first() {
@@ -674,10 +742,9 @@ fn place_imu_pad(field: &DistanceField, p: &mut Pieces) -> Result<(), BuildError
     })
 }
 
-/// A strut from behind a rim or band to what its part has joined so far, aimed at `toward`:
-/// roots `depth` mm behind the curve along −u at every second frame, rays along −u (away
-/// from the contact), starts kept [`ROOT_MARGIN_MM`] clear by `exact`; the strut is marked
-/// joined.
+/// A strut from behind a rim to what its part has joined so far, aimed at `toward`: roots
+/// `depth` mm behind the curve along −u at every second frame, the strut's first segment
+/// kept [`ROOT_MARGIN_MM`] clear of `exact` (see [`strut_from_rays`]).
 fn strut_from_behind(
     sweep: &Sweep,
     depth: f64,
@@ -693,13 +760,23 @@ fn strut_from_behind(
         .step_by(2)
         .map(|f| (f.o - f.u * depth, -f.u))
         .collect();
-    let starts = connect::ray_starts(
-        &rays,
-        field,
-        exact,
-        STRUT_RADIUS_MM + ROOT_MARGIN_MM,
-        RAY_REACH_MM,
-    );
+    let root_clearance = STRUT_RADIUS_MM + ROOT_MARGIN_MM;
+    strut_from_rays(&rays, root_clearance, field, exact, joined, toward, what)
+}
+
+/// A strut from one of `rays` (root, direction away from the contact) to what its part has
+/// joined so far, aimed at `toward`; `exact` stays at least `root_clearance` along the ray
+/// up to the start; the strut is marked joined.
+fn strut_from_rays(
+    rays: &[(Vec3, Vec3)],
+    root_clearance: f64,
+    field: &DistanceField,
+    exact: &(dyn Fn(Vec3) -> f64 + Sync),
+    joined: &mut connect::Joined,
+    toward: Vec3,
+    what: &str,
+) -> Result<ThickPolyline, BuildError> {
+    let starts = connect::ray_starts(rays, field, exact, root_clearance, RAY_REACH_MM);
     let st = connect::strut(field, joined, &starts, toward, what)?;
     joined.mark_balls(&connect::polyline_points(&st, 0.5), st.radius);
     Ok(st)
