@@ -411,14 +411,14 @@ fn cli_check_reports_errors() {
     assert!(out.status.success());
     assert!(String::from_utf8_lossy(&out.stdout).contains("1R \"half-turn-2to1\""));
 
-    // --strict turns warnings into exit code 2.
+    // --strict turns warnings into exit code 3 (2 is clap's usage error).
     let out = assert_cmd::Command::cargo_bin("mpc-rig")
         .unwrap()
         .args(["motion", "check", "--strict"])
         .arg(data("large-tilt.toml"))
         .output()
         .unwrap();
-    assert_eq!(out.status.code(), Some(2));
+    assert_eq!(out.status.code(), Some(3));
 }
 
 /// Guards the acceleration warning: a fast swing loads, with one warning naming the

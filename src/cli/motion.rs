@@ -24,7 +24,8 @@ pub enum MotionCommand {
         /// Motion files (.toml or .csv) or mechanism.json files/directories.
         #[arg(required = true)]
         files: Vec<PathBuf>,
-        /// Treat warnings as errors (exit code 2).
+        /// Treat warnings as errors (exit code 3, as a missed criterion elsewhere; 2 is a
+        /// usage error).
         #[arg(long)]
         strict: bool,
     },
@@ -134,6 +135,11 @@ fn report_warnings(m: &Motion) {
     }
 }
 
+/// Exit code of `motion check --strict` when a file has warnings: 3, the code every command
+/// uses for "ran, but a criterion was missed"; it was 2, which clap uses for usage errors,
+/// so a script could not tell a typo from a warning (issue 20).
+pub const STRICT_WARNINGS_EXIT: u8 = 3;
+
 fn check(files: &[PathBuf], strict: bool) -> anyhow::Result<ExitCode> {
     let mut failed = 0;
     let mut warned = 0;
@@ -164,7 +170,7 @@ fn check(files: &[PathBuf], strict: bool) -> anyhow::Result<ExitCode> {
     }
     if strict && warned > 0 {
         return Err(crate::cli::ExitStatusError {
-            code: 2,
+            code: STRICT_WARNINGS_EXIT,
             message: format!("{warned} motion file(s) have warnings (--strict)"),
         }
         .into());
