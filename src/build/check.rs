@@ -7,7 +7,13 @@
 //! - **contact gaps**: at every sample time of every curve pair, the design contact point's
 //!   signed distance to the driver mesh (c¹, driver frame) plus its distance to the follower
 //!   mesh (c², follower frame): the play the printed pair has at that contact, which should
-//!   be the clearance.
+//!   be the clearance. A gap below it binds (a failure); a gap above it means the contact is
+//!   lost at that instant (the carve took the driver's material there, or a piece the carve
+//!   isolated was left out);
+//! - **closure of the printed parts**: at every sample time, the paper's dist(t) (and the
+//!   robust one, when the design holds it) from the contacts the parts keep: lost contacts
+//!   are harmless while the others still close the follower, which is the paper's dynamic
+//!   form closure applied to the parts as built.
 //!
 //! Distances come from `parry3d-f64`'s triangle-mesh queries (BVH, inside/outside by
 //! pseudo-normals), independent of the implicit solids the meshes were made from. A coarse
@@ -25,7 +31,7 @@ use crate::geometry::voxel::{distance_transform, VoxelGrid};
 use crate::synth::mechanism::Mechanism;
 
 use super::parts::Design;
-use super::swept::{transform, Frame};
+use super::swept::{transform, ExactSweep, Frame};
 
 /// Times per period of the interference check. 720: twice the 360, so a part moves
 /// by less than 1.3 mm between checks at the examples' fastest points.
@@ -42,19 +48,71 @@ const OCCUPANCY_VOXEL_MM: f64 = 1.0;
 /// exactly, mm.
 const NEAR_MM: f64 = 2.0;
 
-/// The worst contact gaps of one curve pair over its samples.
+/// The contact gaps of one curve pair over its samples.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PairGap {
     /// Curve pair (1-based, as in reports).
     pub pair: usize,
     /// Smallest gap, mm.
     pub min_mm: f64,
+    /// Its time.
+    pub min_t: f64,
     /// Largest gap, mm.
     pub max_mm: f64,
-    /// Mean gap, mm.
+    /// Mean gap over the instants the contact is kept, mm.
     pub mean_mm: f64,
-    /// Time of the gap farthest from the clearance.
+    /// Time windows `[from, to]` (inclusive sample times) where the gap exceeds the
+    /// clearance by more than [`GAP_TOL_MM`]: the contact is lost there. A window that
+    /// runs past the end of the period into the next has `from > to`.
+    pub lost: Vec<[f64; 2]>,
+    /// Fraction of the samples where the contact is lost.
+    pub lost_fraction: f64,
+    /// Which rims cut the driver at this pair's contact curve: (curve pair of the rim,
+    /// 1-based; fraction of the samples where its sweep reaches [`GAP_TOL_MM`] or more
+    /// past c¹), most first. Lost samples no rim explains are where a piece of band was
+    /// left out.
+    pub cut_by: Vec<(usize, f64)>,
+}
+
+/// The paper's closure of the printed parts, from the contacts they keep.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BuiltClosure {
+    /// Largest dist(t) over the samples (E_maxDist of the parts as built).
+    pub max_dist: f64,
+    /// Its time.
     pub worst_t: f64,
+    /// Largest robust dist(t).
+    pub robust_max_dist: f64,
+    /// Its time.
+    pub robust_worst_t: f64,
+    /// Whether robust closure is required (the design holds it).
+    pub robust_required: bool,
+    /// Samples where some contact is lost.
+    pub instants_with_lost_contacts: usize,
+    /// Samples per period.
+    pub samples: usize,
+}
+
+impl BuiltClosure {
+    /// Why closure fails, if it does.
+    pub fn failure(&self) -> Option<String> {
+        let eps = crate::synth::closure::EPSILON;
+        if self.max_dist > -eps {
+            return Some(format!(
+                "with the contacts the parts keep, dynamic form closure fails at t = {:.4} (dist {} > −{eps})",
+                self.worst_t,
+                crate::synth::closure::dist_text(self.max_dist)
+            ));
+        }
+        if self.robust_required && self.robust_max_dist > -eps {
+            return Some(format!(
+                "with the contacts the parts keep, robust closure fails at t = {:.4} (dist {} > −{eps})",
+                self.robust_worst_t,
+                crate::synth::closure::dist_text(self.robust_max_dist)
+            ));
+        }
+        None
+    }
 }
 
 /// One part entering another.
@@ -79,6 +137,8 @@ pub struct CheckFigures {
     pub penetrations: Vec<Penetration>,
     /// Per curve pair.
     pub gaps: Vec<PairGap>,
+    /// Closure from the contacts the parts keep.
+    pub closure: BuiltClosure,
 }
 
 impl CheckFigures {
@@ -89,20 +149,16 @@ impl CheckFigures {
             .max_by(|a, b| a.depth_mm.total_cmp(&b.depth_mm))
     }
 
-    /// The pair whose gap strays farthest from the clearance, and by how much (mm).
-    pub fn worst_gap(&self) -> Option<(&PairGap, f64)> {
+    /// The pair whose gap closes most below the clearance, if any does beyond the tolerance.
+    pub fn binding(&self) -> Option<&PairGap> {
         self.gaps
             .iter()
-            .map(|g| {
-                let d = (g.min_mm - self.clearance_mm)
-                    .abs()
-                    .max((g.max_mm - self.clearance_mm).abs());
-                (g, d)
-            })
-            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .filter(|g| g.min_mm < self.clearance_mm - GAP_TOL_MM)
+            .min_by(|a, b| a.min_mm.total_cmp(&b.min_mm))
     }
 
-    /// Why the check fails, if it does.
+    /// Why the check fails, if it does: a penetration, a binding contact, or closure lost
+    /// with the contacts the parts keep. Lost contacts alone do not fail it.
     pub fn failure(&self) -> Option<String> {
         let mut why = Vec::new();
         if let Some(p) = self.worst_penetration() {
@@ -113,16 +169,45 @@ impl CheckFigures {
                 ));
             }
         }
-        if let Some((g, d)) = self.worst_gap() {
-            if d > GAP_TOL_MM {
-                why.push(format!(
-                    "the gap at curve pair {}'s contact ranges {:.3}–{:.3} mm (worst at t = {:.4}), not {:.2} ± {GAP_TOL_MM} mm",
-                    g.pair, g.min_mm, g.max_mm, g.worst_t, self.clearance_mm
-                ));
-            }
+        if let Some(g) = self.binding() {
+            why.push(format!(
+                "the gap at curve pair {}'s contact closes to {:.3} mm at t = {:.4}, below the clearance {:.2} − {GAP_TOL_MM} mm",
+                g.pair, g.min_mm, g.min_t, self.clearance_mm
+            ));
         }
+        why.extend(self.closure.failure());
         (!why.is_empty()).then(|| why.join("; "))
     }
+}
+
+/// The windows (first and last sample time) of the runs of `true` in a periodic sequence.
+pub fn windows(flags: &[bool]) -> Vec<[f64; 2]> {
+    let n = flags.len();
+    if n == 0 {
+        return Vec::new();
+    }
+    if flags.iter().all(|&f| f) {
+        return vec![[0.0, (n - 1) as f64 / n as f64]];
+    }
+    // Start right after a false, so no run wraps unseen.
+    let start = (0..n).find(|&i| !flags[i]).map_or(0, |i| i + 1);
+    let mut out = Vec::new();
+    let mut run: Option<usize> = None;
+    for j in 0..=n {
+        let i = (start + j) % n;
+        let on = j < n && flags[i];
+        match (on, run) {
+            (true, None) => run = Some(i),
+            (false, Some(first)) => {
+                let last = (i + n - 1) % n;
+                out.push([first as f64 / n as f64, last as f64 / n as f64]);
+                run = None;
+            }
+            _ => {}
+        }
+    }
+    out.sort_by(|a, b| a[0].total_cmp(&b[0]));
+    out
 }
 
 /// A mesh ready for queries: parry's BVH with pseudo-normals and a coarse occupancy grid
@@ -315,14 +400,16 @@ pub fn run(
         ),
     ];
     let s = design.kin.scale_mm();
-    let gaps = mech
+    let pairs: Vec<(usize, &crate::synth::mechanism::CurvePair)> = mech
         .curve_pairs
         .iter()
         .enumerate()
         .filter(|(k, _)| Some(*k) != design.without_pair)
-        .map(|(k, cp)| {
-            let n = cp.samples.c1.len();
-            let g: Vec<f64> = (0..n)
+        .collect();
+    let per_pair: Vec<Vec<f64>> = pairs
+        .iter()
+        .map(|(_, cp)| {
+            (0..cp.samples.c1.len())
                 .into_par_iter()
                 .map(|i| {
                     let c1 = cp.samples.c1[i];
@@ -330,27 +417,247 @@ pub fn run(
                     qd.signed(Vec3::new(c1[0], c1[1], c1[2]) * s)
                         + qf.signed(Vec3::new(c2[0], c2[1], c2[2]) * s)
                 })
-                .collect();
-            let worst = (0..n)
-                .max_by(|&a, &b| {
-                    (g[a] - design.clearance)
-                        .abs()
-                        .total_cmp(&(g[b] - design.clearance).abs())
-                })
-                .unwrap_or(0);
-            PairGap {
-                pair: k + 1,
-                min_mm: g.iter().copied().fold(f64::INFINITY, f64::min),
-                max_mm: g.iter().copied().fold(f64::NEG_INFINITY, f64::max),
-                mean_mm: g.iter().sum::<f64>() / n as f64,
-                worst_t: worst as f64 / n as f64,
-            }
+                .collect()
         })
         .collect();
+    let kept_limit = design.clearance + GAP_TOL_MM;
+    let cut_by = culprits(design, &pairs, &per_pair, kept_limit);
+    let gaps = pairs
+        .iter()
+        .zip(&per_pair)
+        .zip(cut_by)
+        .map(|(((k, _), g), cut_by)| PairGap {
+            cut_by,
+            ..pair_gap(k + 1, g, kept_limit)
+        })
+        .collect();
+    let closure = built_closure(mech, &pairs, &per_pair, kept_limit);
     CheckFigures {
         times: CHECK_TIMES,
         clearance_mm: design.clearance,
         penetrations,
         gaps,
+        closure,
+    }
+}
+
+/// The figures of one pair's gaps `g` (one per sample); above `kept_limit` it is lost.
+fn pair_gap(pair: usize, g: &[f64], kept_limit: f64) -> PairGap {
+    let n = g.len().max(1);
+    let lost: Vec<bool> = g.iter().map(|&x| x > kept_limit).collect();
+    let kept: Vec<f64> = g.iter().copied().filter(|&x| x <= kept_limit).collect();
+    let min_i = (0..g.len())
+        .min_by(|&a, &b| g[a].total_cmp(&g[b]))
+        .unwrap_or(0);
+    PairGap {
+        pair,
+        min_mm: g.iter().copied().fold(f64::INFINITY, f64::min),
+        min_t: min_i as f64 / n as f64,
+        max_mm: g.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+        mean_mm: if kept.is_empty() {
+            f64::NAN
+        } else {
+            kept.iter().sum::<f64>() / kept.len() as f64
+        },
+        lost_fraction: lost.iter().filter(|&&l| l).count() as f64 / n as f64,
+        lost: windows(&lost),
+        cut_by: Vec::new(),
+    }
+}
+
+/// For each pair, which rims' swept volume reaches past its contact curve c¹ at the samples
+/// where the contact is lost (see [`PairGap::cut_by`]).
+fn culprits(
+    design: &Design,
+    pairs: &[(usize, &crate::synth::mechanism::CurvePair)],
+    gaps: &[Vec<f64>],
+    kept_limit: f64,
+) -> Vec<Vec<(usize, f64)>> {
+    let s = design.kin.scale_mm();
+    pairs
+        .iter()
+        .zip(gaps)
+        .map(|((_, cp), g)| {
+            let n = g.len().max(1);
+            let mut counts = vec![0usize; design.rims.len()];
+            let hits: Vec<Vec<usize>> = (0..g.len())
+                .into_par_iter()
+                .filter(|&i| g[i] > kept_limit)
+                .map(|i| {
+                    let c1 = cp.samples.c1[i];
+                    let p = Vec3::new(c1[0], c1[1], c1[2]) * s;
+                    (0..design.rims.len())
+                        .filter(|&j| {
+                            ExactSweep {
+                                kin: &design.kin,
+                                solid: &design.rims[j],
+                                frame: Frame::Follower,
+                                target: Frame::Driver,
+                                cap: 0.0,
+                                coarse: None,
+                            }
+                            .value(p)
+                                <= -GAP_TOL_MM
+                        })
+                        .collect()
+                })
+                .collect();
+            for h in hits {
+                for j in h {
+                    counts[j] += 1;
+                }
+            }
+            let mut by: Vec<(usize, f64)> = counts
+                .iter()
+                .enumerate()
+                .filter(|(_, &c)| c > 0)
+                .map(|(j, &c)| (pairs[j].0 + 1, c as f64 / n as f64))
+                .collect();
+            by.sort_by(|a, b| b.1.total_cmp(&a.1));
+            by
+        })
+        .collect()
+}
+
+/// dist(t) at every sample from the contacts kept there (gap ≤ `kept_limit`).
+fn built_closure(
+    mech: &Mechanism,
+    pairs: &[(usize, &crate::synth::mechanism::CurvePair)],
+    gaps: &[Vec<f64>],
+    kept_limit: f64,
+) -> BuiltClosure {
+    use crate::synth::closure::{self, EPSILON};
+    let n = pairs.first().map_or(0, |(_, cp)| cp.samples.p.len());
+    let mut worst = (f64::NEG_INFINITY, 0.0);
+    let mut robust_worst = (f64::NEG_INFINITY, 0.0);
+    let mut with_lost = 0;
+    for i in 0..n {
+        let mut contacts = Vec::with_capacity(pairs.len());
+        for ((_, cp), g) in pairs.iter().zip(gaps) {
+            if g[i] <= kept_limit {
+                contacts.push((cp.samples.p[i], cp.samples.n[i]));
+            }
+        }
+        if contacts.len() < pairs.len() {
+            with_lost += 1;
+        }
+        let (d, r) = closure::dist_at(mech.class, &contacts);
+        let t = i as f64 / n as f64;
+        if d > worst.0 {
+            worst = (d, t);
+        }
+        if r > robust_worst.0 {
+            robust_worst = (r, t);
+        }
+    }
+    BuiltClosure {
+        max_dist: worst.0,
+        worst_t: worst.1,
+        robust_max_dist: robust_worst.0,
+        robust_worst_t: robust_worst.1,
+        robust_required: mech.closure.robust_max_dist <= -EPSILON,
+        instants_with_lost_contacts: with_lost,
+        samples: n,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synth::closure::{self, EPSILON};
+
+    /// Guards the lost-contact windows: runs of lost samples as first and last sample time,
+    /// one run across the period's end kept whole (from > to), nothing lost gives none.
+    #[test]
+    fn windows_are_the_runs_of_lost_samples() {
+        let f = |v: &[u8]| windows(&v.iter().map(|&x| x == 1).collect::<Vec<_>>());
+        assert_eq!(
+            f(&[0, 1, 1, 0, 0, 1, 0, 0]),
+            vec![[0.125, 0.25], [0.625, 0.625]]
+        );
+        assert_eq!(f(&[1, 0, 0, 1, 1]), vec![[0.6, 0.0]]);
+        assert_eq!(f(&[0, 0, 0]), Vec::<[f64; 2]>::new());
+        assert_eq!(f(&[1, 1]), vec![[0.0, 0.5]]);
+    }
+
+    fn test_mechanism() -> Mechanism {
+        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data/mechanism/half-turn-2to1/mechanism.json");
+        Mechanism::load(&file).expect("the test mechanism loads")
+    }
+
+    /// Guards the closure of the parts as built: with every contact kept it is the file's
+    /// closure; with one pair's contact lost over a window, it is the closure of the other
+    /// pairs there (computed here independently), and a pair lost everywhere is counted at
+    /// every instant.
+    #[test]
+    fn closure_is_computed_from_the_contacts_kept() {
+        let mech = test_mechanism();
+        let pairs: Vec<(usize, &crate::synth::mechanism::CurvePair)> =
+            mech.curve_pairs.iter().enumerate().collect();
+        let n = pairs[0].1.samples.p.len();
+        let clearance = 0.2;
+        let limit = clearance + GAP_TOL_MM;
+        let all_kept = vec![vec![clearance; n]; pairs.len()];
+        let c = built_closure(&mech, &pairs, &all_kept, limit);
+        assert!((c.max_dist - mech.closure.max_dist).abs() < 1e-9, "{c:?}");
+        assert_eq!(c.instants_with_lost_contacts, 0);
+        assert!(c.failure().is_none());
+
+        // Pair 1 lost at every instant: the other pairs' closure, instant by instant.
+        let mut lost = all_kept.clone();
+        lost[0] = vec![5.0; n];
+        let c = built_closure(&mech, &pairs, &lost, limit);
+        let expected = (0..n)
+            .map(|i| {
+                let contacts: Vec<_> = pairs[1..]
+                    .iter()
+                    .map(|(_, cp)| (cp.samples.p[i], cp.samples.n[i]))
+                    .collect();
+                closure::dist_at(mech.class, &contacts).0
+            })
+            .fold(f64::NEG_INFINITY, f64::max);
+        assert!((c.max_dist - expected).abs() < 1e-12);
+        assert_eq!(c.instants_with_lost_contacts, n);
+        assert!(
+            c.max_dist >= mech.closure.max_dist - 1e-12,
+            "fewer contacts closed better"
+        );
+        assert_eq!(
+            c.failure().is_some(),
+            c.max_dist > -EPSILON || c.robust_max_dist > -EPSILON
+        );
+    }
+
+    /// Guards what fails the check: a gap below the clearance binds and is named with its
+    /// pair and time; a lost contact alone does not fail it.
+    #[test]
+    fn binding_fails_and_lost_contacts_alone_do_not() {
+        let closure = BuiltClosure {
+            max_dist: -0.05,
+            worst_t: 0.0,
+            robust_max_dist: -0.04,
+            robust_worst_t: 0.0,
+            robust_required: true,
+            instants_with_lost_contacts: 3,
+            samples: 8,
+        };
+        let lost = pair_gap(1, &[0.2, 0.2, 3.0, 3.0, 0.25, 0.2, 0.2, 0.2], 0.3);
+        assert_eq!(lost.lost, vec![[0.25, 0.375]]);
+        assert_eq!(lost.lost_fraction, 0.25);
+        assert!((lost.mean_mm - 1.25 / 6.0).abs() < 1e-12);
+        let mut f = CheckFigures {
+            times: CHECK_TIMES,
+            clearance_mm: 0.2,
+            penetrations: Vec::new(),
+            gaps: vec![lost],
+            closure,
+        };
+        assert_eq!(f.failure(), None);
+        f.gaps.push(pair_gap(2, &[0.2, 0.05, 0.2, 0.2], 0.3));
+        assert_eq!(
+            f.failure().as_deref(),
+            Some("the gap at curve pair 2's contact closes to 0.050 mm at t = 0.2500, below the clearance 0.20 − 0.1 mm")
+        );
     }
 }

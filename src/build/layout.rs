@@ -47,7 +47,7 @@ const PLUNGER_BODY_MM: f64 = 8.0;
 const PLUNGER_CLAMP_MM: f64 = 12.0;
 
 /// Solids a part adds and cuts in its own frame, and a ball cover of what it adds.
-#[derive(Default)]
+#[derive(Clone, Default)]
 pub struct Pieces {
     /// Material added.
     pub add: Vec<Arc<dyn Sdf>>,

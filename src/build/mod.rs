@@ -104,20 +104,20 @@ pub enum BuildError {
         /// What the edge check found.
         summary: String,
     },
-    /// A part came out in several pieces.
-    #[error(
-        "the {part} is in {pieces} separate pieces that each carry contact surfaces ({detail})"
-    )]
+    /// A part came out in several pieces that cannot be left out (follower pieces with
+    /// contact surfaces, any piece of the support).
+    #[error("the {part} is in {pieces} separate pieces ({detail})")]
     Disconnected {
         /// Part.
         part: &'static str,
-        /// Pieces that carry contact surfaces.
+        /// Pieces kept.
         pieces: usize,
         /// Which.
         detail: String,
     },
-    /// The built parts collide or lose their design contacts.
-    #[error("the built parts fail the interference check: {0}")]
+    /// The built parts collide, bind at a contact, or no longer close the follower with
+    /// the contacts they keep.
+    #[error("the built parts fail the check: {0}")]
     Interference(String),
 }
 
@@ -169,11 +169,13 @@ pub struct Part {
     pub name: &'static str,
     /// The mesh in the part's own frame, mm.
     pub mesh: Mesh,
-    /// Loose fragments dropped (pieces of web cut off by the driver's sweep), with their
-    /// volume in mm³.
+    /// Loose fragments left out, with their volume in mm³: pieces of web cut off by the
+    /// driver's sweep (follower), pieces of band the carve isolates and no strut reaches
+    /// (driver; the check counts the contacts they would carry as lost).
     pub dropped: Vec<f64>,
-    /// When the part is in several pieces that carry contact surfaces (not printable as
-    /// one part), each piece's volume in mm³, largest first; empty when it is one piece.
+    /// When the part is in several pieces it cannot do without (not printable as one
+    /// part; see `Loose`), each piece's volume in mm³, largest first; empty when it is one
+    /// piece.
     pub pieces: Vec<f64>,
     /// Seconds spent meshing it.
     pub seconds: f64,
@@ -259,27 +261,24 @@ pub fn build(
                     .map(|fr| fr.o - fr.u * (0.5 * dims::RIM_DEPTH_MM))
             })
             .collect();
-        out.push(mesh_part("follower", &f, &apexes, opts.cell_mm)?);
+        out.push(mesh_part(
+            "follower",
+            &f,
+            Loose::Anchored(&apexes),
+            opts.cell_mm,
+        )?);
     }
     {
         progress("carving and meshing the driver");
         let d = design.driver_solid();
-        let anchors: Vec<Vec3> = design
-            .bands
-            .iter()
-            .flat_map(|b| {
-                b.frames()
-                    .iter()
-                    .step_by(10)
-                    .map(|fr| fr.o - fr.u * (0.5 * dims::BAND_DEPTH_MM))
-            })
-            .collect();
-        out.push(mesh_part("driver", &d, &anchors, opts.cell_mm)?);
+        // Every piece but the largest is one the carve isolated and no strut reached
+        // (`parts` joins all the others).
+        out.push(mesh_part("driver", &d, Loose::LeaveOut, opts.cell_mm)?);
     }
     {
         progress("meshing the support");
         let s = design.support_solid();
-        out.push(mesh_part("support", &s, &[], opts.cell_mm)?);
+        out.push(mesh_part("support", &s, Loose::Whole, opts.cell_mm)?);
     }
     // Order: driver, follower, support.
     out.swap(0, 1);
@@ -323,12 +322,24 @@ pub fn build(
     })
 }
 
-/// Mesh one part, check it, and drop loose fragments that hold none of the `anchors` (the
-/// part's functional points); more than one piece holding anchors is an error.
+/// What to do with the shells of a part beyond its largest.
+enum Loose<'a> {
+    /// Drop those that hold none of these functional points; more than one shell holding
+    /// them makes the part "in pieces" (follower: plates cut off would be an error).
+    Anchored(&'a [Vec3]),
+    /// Drop them all (driver: pieces of band no strut reaches; the check counts their
+    /// contacts as lost).
+    LeaveOut,
+    /// Keep every one of [`output::CRUMB_MM3`] or more, making the part "in pieces"
+    /// (support: nothing of it is expected to come loose).
+    Whole,
+}
+
+/// Mesh one part, check it, and sort out loose shells as `loose` says.
 fn mesh_part(
     name: &'static str,
     solid: &dyn Sdf,
-    anchors: &[Vec3],
+    loose: Loose<'_>,
     cell: f64,
 ) -> Result<Part, BuildError> {
     let t = Instant::now();
@@ -346,15 +357,14 @@ fn mesh_part(
     let mut dropped = Vec::new();
     if shells.len() > 1 {
         shells.sort_by(|a, b| b.volume().total_cmp(&a.volume()));
-        let holds = |m: &Mesh| {
-            if anchors.is_empty() {
-                return false;
-            }
-            anchors.iter().any(|a| m.contains([a.x, a.y, a.z]))
+        let keep = |m: &Mesh| match loose {
+            Loose::Anchored(anchors) => anchors.iter().any(|a| m.contains([a.x, a.y, a.z])),
+            Loose::LeaveOut => false,
+            Loose::Whole => m.volume() >= output::CRUMB_MM3,
         };
         let mut kept = Vec::new();
         for (i, s) in shells.into_iter().enumerate() {
-            if i == 0 || holds(&s) {
+            if i == 0 || keep(&s) {
                 kept.push(s);
             } else {
                 dropped.push(s.volume());

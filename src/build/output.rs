@@ -29,7 +29,7 @@ use crate::geometry::render::{RenderError, RenderOptions, Renderer, View};
 use crate::geometry::scene::{Pose, Scene, ScenePart};
 
 /// The `format` of `build.json`.
-pub const BUILD_FORMAT: &str = "mpcmech-build/1";
+pub const BUILD_FORMAT: &str = "mpcmech-build/2";
 
 /// Duration of one period in `assembly.glb`, s: one driver turn in 4 s (15 rpm) is slow
 /// enough to follow a contact by eye.
@@ -314,13 +314,81 @@ fn summary_json(
                 "what": p.what, "depth_mm": p.depth_mm, "t": p.t,
             })).collect::<Vec<_>>(),
             "gaps": f.gaps.iter().map(|g| json!({
-                "pair": g.pair, "min_mm": g.min_mm, "max_mm": g.max_mm,
-                "mean_mm": g.mean_mm, "worst_t": g.worst_t,
+                "pair": g.pair, "min_mm": g.min_mm, "min_t": g.min_t, "max_mm": g.max_mm,
+                "mean_kept_mm": finite(g.mean_mm), "lost_fraction": g.lost_fraction,
+                "lost_t": g.lost,
+                "cut_by": g.cut_by.iter().map(|(rim, f)| json!({"rim": rim, "fraction": f})).collect::<Vec<_>>(),
             })).collect::<Vec<_>>(),
+            "closure": {
+                "max_dist": f.closure.max_dist, "worst_t": f.closure.worst_t,
+                "robust_max_dist": f.closure.robust_max_dist,
+                "robust_worst_t": f.closure.robust_worst_t,
+                "robust_required": f.closure.robust_required,
+                "instants_with_lost_contacts": f.closure.instants_with_lost_contacts,
+                "samples": f.closure.samples,
+            },
             "failure": f.failure(),
         },
         "timings_s": built.timings.iter().map(|(w, s)| json!({"stage": w, "seconds": s})).collect::<Vec<_>>(),
     })
+}
+
+/// `t 0.120–0.180, 0.700–0.710` or `none`.
+fn lost_windows_text(w: &[[f64; 2]]) -> String {
+    if w.is_empty() {
+        return "none".into();
+    }
+    w.iter()
+        .map(|[a, b]| format!("{a:.3}–{b:.3}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// `1 (60.3 %), 3 (8.1 %)` or `none`.
+fn cut_by_text(c: &[(usize, f64)]) -> String {
+    if c.is_empty() {
+        return "none".into();
+    }
+    c.iter()
+        .map(|(rim, f)| format!("{rim} ({:.1} %)", 100.0 * f))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// The left-out fragments for people: pieces of at least [`CRUMB_MM3`] with their volumes,
+/// then how many crumbs (mesh slivers and the shells of tiny voids) there are.
+fn left_out_text(volumes: &[f64]) -> String {
+    let mut big: Vec<f64> = volumes
+        .iter()
+        .copied()
+        .filter(|v| v.abs() >= CRUMB_MM3)
+        .collect();
+    big.sort_by(|a, b| b.total_cmp(a));
+    let crumbs = volumes.len() - big.len();
+    let mut parts = Vec::new();
+    if !big.is_empty() {
+        parts.push(format!(
+            "{} piece{} ({} mm³)",
+            big.len(),
+            if big.len() == 1 { "" } else { "s" },
+            big.iter()
+                .map(|v| format!("{v:.0}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
+    if crumbs > 0 {
+        parts.push(format!("{crumbs} crumbs under {CRUMB_MM3} mm³"));
+    }
+    parts.join(" and ")
+}
+
+/// Loose shells smaller than this are crumbs, counted but not listed, mm³.
+pub const CRUMB_MM3: f64 = 1.0;
+
+/// JSON has no NaN: an undefined figure is null.
+fn finite(x: f64) -> Option<f64> {
+    x.is_finite().then_some(x)
 }
 
 fn summary_md(
@@ -377,6 +445,22 @@ fn summary_md(
             n = p.name
         );
     }
+    for p in built.parts.iter().filter(|p| !p.dropped.is_empty()) {
+        let _ = writeln!(
+            s,
+            "\nLeft out of the {}: {}{}.",
+            p.name,
+            left_out_text(&p.dropped),
+            match p.name {
+                "driver" => {
+                    ": pieces of band the rims' sweep cuts off where no strut reaches them; \
+                     the contacts they would carry count as lost below"
+                }
+                "follower" => ": pieces of web the driver's sweep cuts off",
+                _ => "",
+            }
+        );
+    }
     let _ = writeln!(
         s,
         "\n`mechanism.3mf` lays the parts out on a {:.0} × {:.0} mm bed.",
@@ -397,16 +481,44 @@ fn summary_md(
     }
     let _ = writeln!(
         s,
-        "\n| curve pair | gap min mm | max mm | mean mm | worst at t |"
+        "\n| curve pair | gap min mm | at t | max mm | mean kept mm | contact lost | lost over t | cut by the rim of pair |"
     );
-    let _ = writeln!(s, "|---:|---:|---:|---:|---:|");
+    let _ = writeln!(s, "|---:|---:|---:|---:|---:|---:|---|---|");
     for g in &f.gaps {
         let _ = writeln!(
             s,
-            "| {} | {:.3} | {:.3} | {:.3} | {:.4} |",
-            g.pair, g.min_mm, g.max_mm, g.mean_mm, g.worst_t
+            "| {} | {:.3} | {:.4} | {:.3} | {:.3} | {:.1} % | {} | {} |",
+            g.pair,
+            g.min_mm,
+            g.min_t,
+            g.max_mm,
+            g.mean_mm,
+            100.0 * g.lost_fraction,
+            lost_windows_text(&g.lost),
+            cut_by_text(&g.cut_by)
         );
     }
+    let c = &f.closure;
+    let _ = writeln!(
+        s,
+        "\nA contact is lost where its gap exceeds the clearance by more than {} mm (the carve \
+         took the driver's material there). With the contacts the parts keep ({} of {} \
+         instants lose one or more), E_maxDist = {} (worst at t = {:.4}) and robust \
+         E_maxDist = {} (worst at t = {:.4}){}; closure needs ≤ −{}.",
+        super::check::GAP_TOL_MM,
+        c.instants_with_lost_contacts,
+        c.samples,
+        crate::synth::closure::dist_text(c.max_dist),
+        c.worst_t,
+        crate::synth::closure::dist_text(c.robust_max_dist),
+        c.robust_worst_t,
+        if c.robust_required {
+            ""
+        } else {
+            ", reported only (the design does not hold robust closure)"
+        },
+        crate::synth::closure::EPSILON
+    );
     match f.failure() {
         None => {
             let _ = writeln!(s, "\nThe check passes.");
@@ -429,6 +541,22 @@ fn summary_md(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Guards the left-out line of `build.md`: pieces listed largest first with volumes,
+    /// crumbs (slivers and the shells of tiny voids, volume about ±0) only counted.
+    #[test]
+    fn left_out_pieces_are_listed_and_crumbs_counted() {
+        assert_eq!(
+            left_out_text(&[699.4, 0.0, 4723.0, -0.003, 1147.2, 0.2]),
+            "3 pieces (4723, 1147, 699 mm³) and 3 crumbs under 1 mm³"
+        );
+        assert_eq!(left_out_text(&[546.0]), "1 piece (546 mm³)");
+        assert_eq!(left_out_text(&[0.0, -0.0]), "2 crumbs under 1 mm³");
+        assert_eq!(
+            cut_by_text(&[(1, 0.603), (3, 0.081)]),
+            "1 (60.3 %), 3 (8.1 %)"
+        );
+    }
     use crate::geometry::io::gltf::glb_bytes;
     use crate::geometry::primitive_meshes;
     use crate::synth::mechanism::Mechanism;

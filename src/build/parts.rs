@@ -258,38 +258,76 @@ pub fn design(
     let driver_field = Arc::new(driver_field);
 
     // 6. The follower: webs and struts through space that the driver (bands, hub, column,
-    //    struts) and the support never enter.
-    progress("sweeping the driver's struts through the follower's frame");
-    let strut_covers: Vec<Balls> = driver_struts
-        .iter()
-        .map(|s| connect::strut_cover(s, Frame::Driver))
-        .collect();
-    if !strut_covers.is_empty() {
-        let swept = connect::clearance(&kin, &strut_covers, Frame::Follower, fgrid);
-        follower_other_field = follower_other_field.min(&swept);
-    }
-    let follower_field = Arc::new(f_bands.min(&follower_other_field));
-    let follower_other_field = Arc::new(follower_other_field);
+    //    struts) and the support never enter. When the struts to every piece of band leave
+    //    it no room, the follower is planned again around one strut per band (the other
+    //    pieces are then left out of the driver, and the check counts their contacts as
+    //    lost): a driver missing some groove beats no parts at all.
     let webs: Vec<Arc<ThickTriangles>> = webs_tris.into_iter().map(|(w, _)| Arc::new(w)).collect();
-    let web_clear = Arc::new(BandClearance {
-        kin: kin.clone(),
-        bands: bands.clone(),
-        band_fields,
-        others: follower_other_field.clone(),
-    });
-    // 3R: the IMU pad and end-effector on the follower, where nothing passes.
-    if kin.class() == Class::R3 && bench.reading == Reading::Imu {
-        place_imu_pad(&follower_field, &mut follower_pieces)?;
-    }
-    progress("planning the follower's struts");
-    let follower_struts = plan_follower_struts(
-        &layout,
-        &rims,
-        &web_clear,
-        &follower_field,
-        &follower_pieces,
-        &pairs,
-    )?;
+    let plan_follower = |struts: &[ThickPolyline]| -> Result<FollowerPlan, BuildError> {
+        progress("sweeping the driver's struts through the follower's frame");
+        let strut_covers: Vec<Balls> = struts
+            .iter()
+            .map(|s| connect::strut_cover(s, Frame::Driver))
+            .collect();
+        let mut others = follower_other_field.clone();
+        if !strut_covers.is_empty() {
+            let swept = connect::clearance(&kin, &strut_covers, Frame::Follower, fgrid);
+            others = others.min(&swept);
+        }
+        let field = Arc::new(f_bands.min(&others));
+        let others = Arc::new(others);
+        let web_clear = Arc::new(BandClearance {
+            kin: kin.clone(),
+            bands: bands.clone(),
+            band_fields: band_fields.clone(),
+            others,
+        });
+        let mut pieces = follower_pieces.clone();
+        // 3R: the IMU pad and end-effector on the follower, where nothing passes.
+        if kin.class() == Class::R3 && bench.reading == Reading::Imu {
+            place_imu_pad(&field, &mut pieces)?;
+        }
+        progress("planning the follower's struts");
+        let struts = plan_follower_struts(&layout, &rims, &web_clear, &field, &pieces, &pairs)?;
+        Ok(FollowerPlan {
+            field,
+            web_clear,
+            pieces,
+            struts,
+        })
+    };
+    let every: Vec<ThickPolyline> = driver_struts.iter().map(|(s, _)| s.clone()).collect();
+    let (driver_struts, plan) = match plan_follower(&every) {
+        Ok(plan) => (every, plan),
+        Err(e) => {
+            let main: Vec<ThickPolyline> = driver_struts
+                .iter()
+                .filter(|(_, main)| *main)
+                .map(|(s, _)| s.clone())
+                .collect();
+            if main.len() == every.len() {
+                return Err(e);
+            }
+            let why = match &e {
+                BuildError::NoRoom { what, detail } => format!("{what}: {detail}"),
+                other => other.to_string(),
+            };
+            progress(&format!(
+                "the follower cannot be joined around a strut to every piece of band ({why}); \
+                 planning it again around one strut per band (the {} other pieces are left \
+                 out of the driver)",
+                every.len() - main.len()
+            ));
+            let plan = plan_follower(&main)?;
+            (main, plan)
+        }
+    };
+    let FollowerPlan {
+        field: follower_field,
+        web_clear,
+        pieces: follower_pieces,
+        struts: follower_struts,
+    } = plan;
 
     Ok(Design {
         kin,
@@ -309,6 +347,14 @@ pub fn design(
         clearance: opts.clearance_mm,
         without_pair: opts.without_pair,
     })
+}
+
+/// The follower's plan around a given set of driver struts.
+struct FollowerPlan {
+    field: Arc<DistanceField>,
+    web_clear: Arc<BandClearance>,
+    pieces: Pieces,
+    struts: Vec<ThickPolyline>,
 }
 
 /// Radius of each part's column up its axis. 3.5 mm: a 7 mm round post.
@@ -409,7 +455,8 @@ fn plan_follower_struts(
 }
 
 /// Join every piece of every band (nearest the hub first) to the driver's hub: a band the
-/// rims' sweep cuts crosswise ([`segments::band_segments`]) needs a strut per piece.
+/// rims' sweep cuts crosswise ([`segments::band_segments`]) needs a strut per piece. Each
+/// strut comes with whether it joins its band's largest piece.
 #[allow(clippy::too_many_arguments)]
 fn plan_driver_struts(
     kin: &Kinematics,
@@ -421,7 +468,7 @@ fn plan_driver_struts(
     pairs: &[(usize, &crate::synth::mechanism::CurvePair)],
     clearance: f64,
     progress: &dyn Fn(&str),
-) -> Result<Vec<ThickPolyline>, BuildError> {
+) -> Result<Vec<(ThickPolyline, bool)>, BuildError> {
     let mut joined = Joined::new(field.grid);
     joined_mark_first(&mut joined, pieces);
     let hub = Vec3::new(0.0, 0.0, 0.5 * (layout.driver_hub.0 + layout.driver_hub.1));
@@ -510,11 +557,13 @@ fn plan_driver_struts(
         match planned {
             Ok(st) => {
                 joined.mark_balls(&seg.samples, 0.5);
-                struts.push(st);
+                struts.push((st, *j == 0));
             }
             // A band's largest piece must be joined; a smaller one that cannot be is left
             // for the mesh check, which reports the driver in pieces.
-            Err(e) if *j > 0 => progress(&format!("{what} stays loose: {e}")),
+            Err(BuildError::NoRoom { detail, .. }) if *j > 0 => {
+                progress(&format!("{what} stays loose: {detail}"))
+            }
             Err(e) => return Err(e),
         }
     }

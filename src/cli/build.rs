@@ -89,11 +89,25 @@ pub fn run(args: BuildArgs) -> anyhow::Result<ExitCode> {
         println!("{:<24} {:.3} mm at t = {:.4}", pe.what, pe.depth_mm, pe.t);
     }
     for g in &built.figures.gaps {
+        let lost = if g.lost.is_empty() {
+            String::new()
+        } else {
+            format!(
+                ", contact lost over {:.1} % of the period",
+                100.0 * g.lost_fraction
+            )
+        };
         println!(
-            "pair {}: gap {:.3}–{:.3} mm (mean {:.3})",
+            "pair {}: gap {:.3}–{:.3} mm (mean kept {:.3}){lost}",
             g.pair, g.min_mm, g.max_mm, g.mean_mm
         );
     }
+    let c = &built.figures.closure;
+    println!(
+        "closure with the contacts kept: E_maxDist {} (robust {})",
+        crate::synth::closure::dist_text(c.max_dist),
+        crate::synth::closure::dist_text(c.robust_max_dist)
+    );
     for (what, s) in &built.timings {
         println!("{what}: {s:.1} s");
     }
