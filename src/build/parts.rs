@@ -244,18 +244,22 @@ pub fn design(
     //    the follower's rule-placed features and the support never enter (the webs and
     //    the follower's struts then make way for them: they are the part that can give).
     progress("planning the driver's struts");
-    let driver_struts = plan_driver_struts(
-        &kin,
-        &layout,
-        &bands,
-        &rim_union,
-        &driver_field,
-        &driver_pieces,
-        &pairs,
-        opts.clearance_mm,
-        progress,
-    )?;
     let driver_field = Arc::new(driver_field);
+    let plan_driver = |every_piece: bool| {
+        plan_driver_struts(
+            &kin,
+            &layout,
+            &bands,
+            &rim_union,
+            &driver_field,
+            &driver_pieces,
+            &pairs,
+            opts.clearance_mm,
+            every_piece,
+            progress,
+        )
+    };
+    let driver_struts = plan_driver(true)?;
 
     // 6. The follower: webs and struts through space that the driver (bands, hub, column,
     //    struts) and the support never enter. When the struts to every piece of band leave
@@ -296,16 +300,13 @@ pub fn design(
             struts,
         })
     };
-    let every: Vec<ThickPolyline> = driver_struts.iter().map(|(s, _)| s.clone()).collect();
-    let (driver_struts, plan) = match plan_follower(&every) {
-        Ok(plan) => (every, plan),
+    let (driver_struts, plan) = match plan_follower(&driver_struts) {
+        Ok(plan) => (driver_struts, plan),
         Err(e) => {
-            let main: Vec<ThickPolyline> = driver_struts
-                .iter()
-                .filter(|(_, main)| *main)
-                .map(|(s, _)| s.clone())
-                .collect();
-            if main.len() == every.len() {
+            // Planned again, not filtered: a band's strut may have ended on a piece that
+            // only another piece's strut joined.
+            let main = plan_driver(false)?;
+            if main.len() == driver_struts.len() {
                 return Err(e);
             }
             let why = match &e {
@@ -314,9 +315,9 @@ pub fn design(
             };
             progress(&format!(
                 "the follower cannot be joined around a strut to every piece of band ({why}); \
-                 planning it again around one strut per band (the {} other pieces are left \
+                 planning both again with one strut per band (the {} other pieces are left \
                  out of the driver)",
-                every.len() - main.len()
+                driver_struts.len() - main.len()
             ));
             let plan = plan_follower(&main)?;
             (main, plan)
@@ -455,8 +456,8 @@ fn plan_follower_struts(
 }
 
 /// Join every piece of every band (nearest the hub first) to the driver's hub: a band the
-/// rims' sweep cuts crosswise ([`segments::band_segments`]) needs a strut per piece. Each
-/// strut comes with whether it joins its band's largest piece.
+/// rims' sweep cuts crosswise ([`segments::band_segments`]) needs a strut per piece. With
+/// `every_piece` false, only each band's largest piece (the others are left out).
 #[allow(clippy::too_many_arguments)]
 fn plan_driver_struts(
     kin: &Kinematics,
@@ -467,8 +468,9 @@ fn plan_driver_struts(
     pieces: &Pieces,
     pairs: &[(usize, &crate::synth::mechanism::CurvePair)],
     clearance: f64,
+    every_piece: bool,
     progress: &dyn Fn(&str),
-) -> Result<Vec<(ThickPolyline, bool)>, BuildError> {
+) -> Result<Vec<ThickPolyline>, BuildError> {
     let mut joined = Joined::new(field.grid);
     joined_mark_first(&mut joined, pieces);
     let hub = Vec3::new(0.0, 0.0, 0.5 * (layout.driver_hub.0 + layout.driver_hub.1));
@@ -500,7 +502,7 @@ fn plan_driver_struts(
     let mut items: Vec<(usize, usize, Segment)> = Vec::new();
     for (k, band) in bands.iter().enumerate() {
         let segs = segments::band_segments(band, &carve);
-        if segs.len() > 1 {
+        if segs.len() > 1 && every_piece {
             progress(&format!(
                 "band {} (curve pair {}) comes out of the carve in {} pieces: one strut each",
                 k + 1,
@@ -509,7 +511,7 @@ fn plan_driver_struts(
             ));
         }
         for (j, seg) in segs.into_iter().enumerate() {
-            if seg.samples.len() >= MIN_PIECE_SAMPLES {
+            if seg.samples.len() >= MIN_PIECE_SAMPLES && (every_piece || j == 0) {
                 items.push((k, j, seg));
             }
         }
@@ -557,7 +559,7 @@ fn plan_driver_struts(
         match planned {
             Ok(st) => {
                 joined.mark_balls(&seg.samples, 0.5);
-                struts.push((st, *j == 0));
+                struts.push(st);
             }
             // A band's largest piece must be joined; a smaller one that cannot be is left
             // for the mesh check, which reports the driver in pieces.
