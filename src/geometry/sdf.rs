@@ -258,8 +258,14 @@ impl Sdf for Union {
         let mut best = f64::INFINITY;
         for c in &self.children {
             // A child cannot be nearer than its box: skip it unless its box is within the
-            // best distance so far (or contains p).
-            if c.bounds().distance(pa) >= best.max(0.0) && best.is_finite() {
+            // best distance so far. Inside a child already (best < 0) the sign is settled
+            // and the rest are skipped; exactly on a child's face (best = 0) a child whose
+            // box holds p may still hold p inside, so it is looked at: skipping it made a
+            // plane of zeros where a face of one child lies inside another, and a mesher
+            // node on that plane cut the part in two there (the 1R1T support's clamp
+            // ring came off the base plate).
+            let d = c.bounds().distance(pa);
+            if best.is_finite() && d >= best.max(0.0) && (d > 0.0 || best < 0.0) {
                 continue;
             }
             best = best.min(c.dist(p));
@@ -466,6 +472,21 @@ impl<S: Sdf> Sdf for KeepClear<'_, S> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Guards the union's pruning on a face: a point on one child's face inside another
+    /// child is inside the union (it used to read 0, and a mesher node there split the part).
+    #[test]
+    fn a_face_inside_another_child_is_inside_the_union() {
+        let plate = Cuboid::aligned(Vec3::new(-20.0, -20.0, 0.0), Vec3::new(20.0, 20.0, 5.0));
+        let boss = Cylinder::z(-10.0, 0.0, -12.0, 5.0, 7.0);
+        let u = Union::new(vec![Box::new(plate), Box::new(boss)]);
+        // On the plate's bottom face, inside the boss's wall.
+        let v = u.dist(Vec3::new(-4.0, 0.0, 0.0));
+        assert!(v < 0.0, "{v}");
+        assert!((v + 1.0).abs() < 1e-12, "{v}");
+        // On the face, outside the boss: on the surface.
+        assert_eq!(u.dist(Vec3::new(10.0, 0.0, 0.0)), 0.0);
+    }
 
     /// Primitive distances are exact at probe points whose answers are known by hand.
     #[test]
