@@ -245,6 +245,15 @@ pub fn design(
     //    the follower's struts then make way for them: they are the part that can give).
     progress("planning the driver's struts");
     let driver_field = Arc::new(driver_field);
+    let band_pieces = carved_pieces(
+        &kin,
+        &bands,
+        &rim_union,
+        &driver_field,
+        opts.clearance_mm,
+        &pairs,
+        progress,
+    );
     let plan_driver = |every_piece: bool| {
         plan_driver_struts(
             &kin,
@@ -254,6 +263,7 @@ pub fn design(
             &driver_field,
             &driver_pieces,
             &pairs,
+            &band_pieces,
             opts.clearance_mm,
             every_piece,
             progress,
@@ -455,9 +465,52 @@ fn plan_follower_struts(
     Ok(struts)
 }
 
-/// Join every piece of every band (nearest the hub first) to the driver's hub: a band the
-/// rims' sweep cuts crosswise ([`segments::band_segments`]) needs a strut per piece. With
-/// `every_piece` false, only each band's largest piece (the others are left out).
+/// The pieces the carve leaves of each band ([`segments::band_segments`]), largest first,
+/// saying which bands come out in several.
+fn carved_pieces(
+    kin: &Kinematics,
+    bands: &[Sweep],
+    rims: &Union,
+    field: &DistanceField,
+    clearance: f64,
+    pairs: &[(usize, &crate::synth::mechanism::CurvePair)],
+    progress: &dyn Fn(&str),
+) -> Vec<Vec<Segment>> {
+    // What the carve leaves of each band: its swept distance less half the clearance.
+    let carve = |p: Vec3| {
+        ExactSweep {
+            kin,
+            solid: rims,
+            frame: Frame::Follower,
+            target: Frame::Driver,
+            cap: 0.5 * clearance + segments::BRIDGE_MM + 0.1,
+            coarse: Some(field),
+        }
+        .value(p)
+            - 0.5 * clearance
+    };
+    bands
+        .iter()
+        .enumerate()
+        .map(|(k, band)| {
+            let segs = segments::band_segments(band, &carve);
+            if segs.len() > 1 {
+                progress(&format!(
+                    "band {} (curve pair {}) comes out of the carve in {} pieces: one strut each",
+                    k + 1,
+                    pairs[k].0 + 1,
+                    segs.len()
+                ));
+            }
+            segs
+        })
+        .collect()
+}
+
+/// Join every piece of every band (`band_pieces`, from [`carved_pieces`]; nearest the hub
+/// first) to the driver's hub: a band the rims' sweep cuts crosswise needs a strut per
+/// piece. With `every_piece` false, only each band's largest piece (the others are left
+/// out).
 #[allow(clippy::too_many_arguments)]
 fn plan_driver_struts(
     kin: &Kinematics,
@@ -467,6 +520,7 @@ fn plan_driver_struts(
     field: &DistanceField,
     pieces: &Pieces,
     pairs: &[(usize, &crate::synth::mechanism::CurvePair)],
+    band_pieces: &[Vec<Segment>],
     clearance: f64,
     every_piece: bool,
     progress: &dyn Fn(&str),
@@ -485,32 +539,10 @@ fn plan_driver_struts(
         }
         .value(p)
     };
-    // What the carve leaves of each band: its swept distance less half the clearance.
-    let carve = |p: Vec3| {
-        ExactSweep {
-            kin,
-            solid: rims,
-            frame: Frame::Follower,
-            target: Frame::Driver,
-            cap: 0.5 * clearance + segments::BRIDGE_MM + 0.1,
-            coarse: Some(field),
-        }
-        .value(p)
-            - 0.5 * clearance
-    };
     // (band, piece number, piece), nearest the hub first.
-    let mut items: Vec<(usize, usize, Segment)> = Vec::new();
-    for (k, band) in bands.iter().enumerate() {
-        let segs = segments::band_segments(band, &carve);
-        if segs.len() > 1 && every_piece {
-            progress(&format!(
-                "band {} (curve pair {}) comes out of the carve in {} pieces: one strut each",
-                k + 1,
-                pairs[k].0 + 1,
-                segs.len()
-            ));
-        }
-        for (j, seg) in segs.into_iter().enumerate() {
+    let mut items: Vec<(usize, usize, &Segment)> = Vec::new();
+    for (k, segs) in band_pieces.iter().enumerate() {
+        for (j, seg) in segs.iter().enumerate() {
             if seg.samples.len() >= MIN_PIECE_SAMPLES && (every_piece || j == 0) {
                 items.push((k, j, seg));
             }
@@ -522,7 +554,7 @@ fn plan_driver_struts(
             .map(|p| (p - hub).norm())
             .fold(f64::INFINITY, f64::min)
     };
-    items.sort_by(|a, b| nearest(&a.2).total_cmp(&nearest(&b.2)));
+    items.sort_by(|a, b| nearest(a.2).total_cmp(&nearest(b.2)));
     let mut struts = Vec::new();
     for (k, j, seg) in &items {
         let what = if *j == 0 {

@@ -55,8 +55,9 @@ pub fn band_segments(band: &Sweep, carve: &(dyn Fn(Vec3) -> f64 + Sync)) -> Vec<
     let vs = samples_across(-half_width, half_width);
     let (nu, nv) = (us.len(), vs.len());
     let per_frame = nu * nv;
+    let axes: Vec<(Vec3, Vec3)> = (0..n).map(|i| section_axes(frames, i)).collect();
     let point = |i: usize, a: usize, b: usize| {
-        let (u, v) = section_axes(frames, i);
+        let (u, v) = axes[i];
         frames[i].o + u * us[a] + v * vs[b]
     };
     let solid: Vec<bool> = (0..n * per_frame)
