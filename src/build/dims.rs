@@ -11,14 +11,9 @@ pub const DEFAULT_CLEARANCE_MM: f64 = 0.2;
 /// the 0.1 mm budget, and the parts of the largest example mesh in about a minute.
 pub const DEFAULT_CELL_MM: f64 = 0.4;
 
-/// Follower rim: half-ellipse semi-axis along the contact normal (how deep the rim is).
-/// 3 mm: deep enough that the driver's groove walls (below) hold it, shallow enough to fit
-/// the 5 mm gaps between the bands at the default 10 mm per model unit.
-pub const RIM_DEPTH_MM: f64 = 3.0;
-/// Follower rim: half-ellipse semi-axis across the normal (half the rim's thickness).
-/// 1.6 mm: a 3.2 mm rim is eight 0.4 mm perimeters, and the apex radius b²/a = 0.85 mm is
-/// still well above the nozzle width.
-pub const RIM_HALF_WIDTH_MM: f64 = 1.6;
+/// The follower rim's section (depth along the contact normal, half width across it):
+/// synthesis owns it, since which contacts a printed pair keeps depends on it.
+pub use crate::synth::undercut::{RIM_DEPTH_MM, RIM_HALF_WIDTH_MM};
 /// Follower plate (the web that closes each rim): half thickness. 1.2 mm: a 2.4 mm plate,
 /// stiff enough in PLA over the 20–40 mm spans of the examples, thinner than the rim so
 /// the web never reaches the contact side of the rim.

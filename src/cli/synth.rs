@@ -55,9 +55,10 @@ pub struct SynthArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Candidates per band M (paper: 30).
-    #[arg(long, default_value_t = synth::search::CANDIDATES)]
-    pub candidates: usize,
+    /// Candidates per band M (default 30 as the paper's; 60 with --printed-rim, whose
+    /// candidates each keep fewer contacts).
+    #[arg(long)]
+    pub candidates: Option<usize>,
     /// GA generations (paper: 300).
     #[arg(long, default_value_t = synth::ga::GENERATIONS)]
     pub generations: usize,
@@ -81,6 +82,11 @@ pub struct SynthArgs {
     /// swept curves cross the other's hub column. Costs curve pairs (see docs/synthesis.md).
     #[arg(long, allow_negative_numbers = true)]
     pub axis_room: Option<f64>,
+    /// Close with the contacts the printed parts keep: a contact that its own rim (3 mm
+    /// deep, 3.2 mm wide at `--scale-mm`) cuts out of the driver band at another instant
+    /// does not count towards closure. Costs curve pairs (see docs/synthesis.md).
+    #[arg(long)]
+    pub printed_rim: bool,
 }
 
 /// Command-line names of [`synth::closure::NormalCone`].
@@ -200,7 +206,7 @@ fn summary(m: &Mechanism) -> String {
     format!(
         "class  K  d_x    E_valiTime  E_maxDist  robust_vali  robust_max  vali@4x  residual°  time s\n\
          {:<6} {:<2} {:<6} {:<11.4} {:<10} {:<12.4} {:<11} {:<8.4} {:<10.3} {:.1}{note}
-         layout: band gap {}, axis room {}
+         layout: band gap {}, axis room {}{}
          {LEGEND}
          best reached per K tried (closure margin asked: E_maxDist ≤ −{}):{}",
         m.class.label(),
@@ -216,6 +222,11 @@ fn summary(m: &Mechanism) -> String {
         m.solve.band_gap,
         m.solve.axis_room
             .map_or("none".to_string(), |a| format!("{a} (curves within d_x − {a} of the axes)")),
+        if m.solve.printed_rim {
+            "; closure counts only the contacts the printed rims keep (--printed-rim)"
+        } else {
+            ""
+        },
         m.solve.min_margin,
         tried.concat()
     )
@@ -264,13 +275,18 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
         samples: args.samples,
         threads: args.threads,
         cancel: Some(cancel),
-        candidates: args.candidates,
+        candidates: args.candidates.unwrap_or(if args.printed_rim {
+            synth::search::CANDIDATES_PRINTED_RIM
+        } else {
+            synth::search::CANDIDATES
+        }),
         generations: args.generations,
         scale_mm: args.scale_mm,
         cone: args.normal_cone.into(),
         min_margin: args.min_margin,
         band_gap: args.band_gap,
         axis_room: args.axis_room,
+        printed_rim: args.printed_rim,
         ..SynthOptions::default()
     };
     let bar = ProgressBar::new(0);

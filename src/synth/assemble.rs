@@ -74,13 +74,18 @@ pub fn assemble(
         .map(|i| closure::dist_at(class, &contacts_at(i)))
         .unzip();
     let summary = ClosureSummary::from_dists(dist, rdist);
-    // Oversampled closure from the splines.
+    // Oversampled closure from the splines; with printed rims, from the contacts they keep
+    // (a candidate's ñ is None where its rim cuts the contact, or where ñ vanishes, which
+    // adds nothing to a hull either).
     let m = n * OVERSAMPLE;
+    let kept =
+        |c: &Candidate, i: usize| !solve.printed_rim || c.ntilde.get(i).is_none_or(Option::is_some);
     let (od, ord): (Vec<f64>, Vec<f64>) = (0..m)
         .map(|i| {
             let pose = (poses.at)(i as f64 / m as f64);
             let cs: Vec<_> = chosen
                 .iter()
+                .filter(|c| kept(c, i))
                 .map(|c| {
                     let ct = model::contact_f64(&c.x, &pose, dx);
                     (ct.p.vals(), ct.n.vals())

@@ -121,6 +121,7 @@ pub fn band_problem(
         focus: None,
         stage: Stage::Full,
         axis_room: None,
+        rim: None,
     }
 }
 

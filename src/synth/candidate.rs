@@ -36,6 +36,7 @@ use super::energy::{PairProblem, Stage, LENGTH_BOUNDS};
 use super::math::{DMatrix, DVector, V3};
 use super::model::{self, ANGLE_CPS, CURVE_CPS, NV};
 use super::optimizer::{Minimizer, SolveStatus};
+use super::undercut;
 
 /// Largest accepted conjugation residual, degrees. Default 1° (conventions: acceptance).
 pub const MAX_RESIDUAL_DEG: f64 = 1.0;
@@ -541,6 +542,47 @@ fn oversampled(pb: &PairProblem, x: &[f64]) -> (f64, Vec<Option<[f64; 3]>>, Vec<
     (residual, ntilde, robust)
 }
 
+/// Drop from the oversampled closure data the contacts that the candidate's own printed rim
+/// cuts at another instant ([`undercut::cut_contacts`] on the N samples): an oversampled
+/// instant is dropped when either sample around it is cut, so a lost window is never
+/// narrowed by the interpolation.
+fn drop_cut_contacts(
+    pb: &PairProblem,
+    x: &[f64],
+    rim: &undercut::RimSection,
+    ntilde: &mut [Option<[f64; 3]>],
+    robust: &mut [bool],
+) {
+    let n = pb.poses.len();
+    let (mut c2, mut n2, mut c1, mut maps) = (
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+    );
+    for pose in &pb.poses.samples {
+        let c = model::contact_f64(x, pose, pb.dx);
+        c2.push(c.c2.vals());
+        n2.push((-c.n.rot_t(&pose.rot)).vals());
+        c1.push(c.c1.vals());
+        maps.push(undercut::DriverToFollower::new(
+            &pose.rot,
+            pose.trans,
+            TAU * pose.t,
+            pb.dx,
+        ));
+    }
+    let cut = undercut::cut_contacts(&c2, &n2, &c1, &maps, rim);
+    for (i, (nt, rb)) in ntilde.iter_mut().zip(robust.iter_mut()).enumerate() {
+        let j = i / OVERSAMPLE;
+        let exact = i % OVERSAMPLE == 0;
+        if cut[j] || (!exact && cut[(j + 1) % n]) {
+            *nt = None;
+            *rb = false;
+        }
+    }
+}
+
 /// Solve one candidate and run the checks.
 pub fn solve(
     pb: &PairProblem,
@@ -595,6 +637,9 @@ pub fn solve_from(
             reason = Some(format!("infeasible ({:?}): {worst}", res.status));
         }
         (residual, ntilde, robust) = oversampled(pb, &x);
+        if let Some(rim) = &pb.rim {
+            drop_cut_contacts(pb, &x, rim, &mut ntilde, &mut robust);
+        }
         if reason.is_none() && residual > MAX_RESIDUAL_DEG {
             reason = Some(format!(
                 "conjugation residual {residual:.2}° > {MAX_RESIDUAL_DEG}°"
@@ -652,7 +697,67 @@ pub(crate) mod tests {
             focus: None,
             stage: Stage::Full,
             axis_room: None,
+            rim: None,
         }
+    }
+
+    /// Guards the printed-rim judgement of a candidate: the same solve with a rim drops ñ
+    /// (and the robust flag) at every sample whose contact its own rim cuts, and only
+    /// there among the exact samples; without a rim those contacts count. A 1R candidate
+    /// on the half-turn-like motion (N = 60, band ±0.5) whose rim cuts part of its own
+    /// curve, so the test would see a mask that did nothing.
+    #[test]
+    fn a_printed_rim_drops_the_contacts_it_cuts() {
+        let rim = undercut::RimSection::printed(10.0);
+        let free = problem_1r(60);
+        let printed = PairProblem {
+            rim: Some(rim),
+            ..problem_1r(60)
+        };
+        let (a, b) = (0..8)
+            .map(|i| {
+                (
+                    solve(&free, &SlsqpRs, 3, 0, i, 300),
+                    solve(&printed, &SlsqpRs, 3, 0, i, 300),
+                )
+            })
+            .find(|(a, _)| a.valid)
+            .expect("a valid candidate among the first eight");
+        assert!(b.valid, "{:?}", b.reason);
+        assert_eq!(a.x, b.x, "the rim is not part of the objective");
+        let n = free.poses.len();
+        let (mut c2, mut n2, mut c1, mut maps) = (vec![], vec![], vec![], vec![]);
+        for pose in &free.poses.samples {
+            let c = model::contact_f64(&a.x, pose, free.dx);
+            c2.push(c.c2.vals());
+            n2.push((-c.n.rot_t(&pose.rot)).vals());
+            c1.push(c.c1.vals());
+            maps.push(undercut::DriverToFollower::new(
+                &pose.rot,
+                pose.trans,
+                TAU * pose.t,
+                free.dx,
+            ));
+        }
+        let cut = undercut::cut_contacts(&c2, &n2, &c1, &maps, &rim);
+        let cuts = cut.iter().filter(|c| **c).count();
+        assert!(cuts > 0 && cuts < n, "{cuts} of {n} samples cut");
+        for (j, &c) in cut.iter().enumerate() {
+            let i = OVERSAMPLE * j;
+            if c {
+                assert_eq!((b.ntilde[i], b.robust[i]), (None, false), "sample {j}");
+            } else {
+                assert_eq!(
+                    (b.ntilde[i], b.robust[i]),
+                    (a.ntilde[i], a.robust[i]),
+                    "sample {j}"
+                );
+            }
+        }
+        assert!(cut
+            .iter()
+            .zip(0..)
+            .any(|(&c, j)| c && a.ntilde[OVERSAMPLE * j].is_some()));
     }
 
     /// Guards the 3R start normal: unit, in the normal plane of T² (where the model's normals

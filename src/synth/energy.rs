@@ -139,6 +139,11 @@ pub struct PairProblem {
     /// stays at least A from the other's axis column (hub, shaft). Two more constraints,
     /// "follower reach" and "driver reach", after the others.
     pub axis_room: Option<f64>,
+    /// The printed rim the candidate is judged with (`None`: every contact counts). With a
+    /// rim, the contacts its own rim cuts at other instants ([`undercut`](super::undercut))
+    /// are dropped from the candidate's closure data, so the combination closes with the
+    /// contacts the printed parts keep. Not part of the objective.
+    pub rim: Option<super::undercut::RimSection>,
 }
 
 /// The objective a [`PairProblem`] evaluates.
@@ -684,6 +689,7 @@ mod tests {
                 focus: None,
                 stage: Stage::Full,
                 axis_room: None,
+                rim: None,
             },
             x,
         )

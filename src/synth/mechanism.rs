@@ -14,6 +14,7 @@ use serde::{Deserialize, Serialize};
 use super::closure::{self, Class, EPSILON, GAMMA0_DEG};
 use super::error::MechanismFileError;
 use super::math::{mat3_of_wxyz, rz, V3};
+use super::undercut::{self, DriverToFollower, RimSection};
 
 /// The format tag.
 pub const FORMAT: &str = "mpcmech-mechanism/1";
@@ -243,6 +244,11 @@ pub struct SolveInfo {
     /// in older files) when not asked for. `synth --check` verifies it when present.
     #[serde(default)]
     pub axis_room: Option<f64>,
+    /// Whether synthesis judged closure with only the contacts the printed rims keep (see
+    /// [`undercut`](super::undercut)); absent in older files (false). `synth --check`
+    /// requires that closure when true.
+    #[serde(default)]
+    pub printed_rim: bool,
 }
 
 /// A mechanism: the content of `mechanism.json`.
@@ -477,6 +483,54 @@ impl Mechanism {
         (rf, rd)
     }
 
+    /// Per pair and sample, whether the pair's own printed rim (at the file's `scale_mm`)
+    /// cuts that contact at another instant, so the printed parts do not keep it (see
+    /// [`undercut`](super::undercut)).
+    pub fn cut_contacts(&self) -> Vec<Vec<bool>> {
+        let n = self.follower_motion.len();
+        let poses: Vec<DriverToFollower> = self
+            .follower_motion
+            .iter()
+            .enumerate()
+            .map(|(i, fm)| {
+                let phi = std::f64::consts::TAU * i as f64 / n.max(1) as f64;
+                DriverToFollower::new(
+                    &mat3_of_wxyz(fm.rotation),
+                    fm.translation,
+                    phi,
+                    self.driver_offset,
+                )
+            })
+            .collect();
+        let rim = RimSection::printed(self.scale_mm);
+        self.curve_pairs
+            .iter()
+            .map(|cp| {
+                let s = &cp.samples;
+                undercut::cut_contacts(&s.c2, &s.n2, &s.c1, &poses, &rim)
+            })
+            .collect()
+    }
+
+    /// dist(t) and robust dist(t) from the contacts the printed parts keep (`cut[k][i]`
+    /// true drops pair k at sample i).
+    pub fn kept_closure(&self, cut: &[Vec<bool>]) -> closure::ClosureSummary {
+        let (mut dist, mut rdist) = (Vec::new(), Vec::new());
+        for i in 0..self.samples {
+            let contacts: Vec<_> = self
+                .curve_pairs
+                .iter()
+                .zip(cut)
+                .filter(|(_, c)| !c[i])
+                .map(|(cp, _)| (cp.samples.p[i], cp.samples.n[i]))
+                .collect();
+            let (a, b) = closure::dist_at(self.class, &contacts);
+            dist.push(a);
+            rdist.push(b);
+        }
+        closure::ClosureSummary::from_dists(dist, rdist)
+    }
+
     /// Re-verify from the sampled arrays alone (the `synth --check` verification).
     pub fn check(&self) -> CheckReport {
         let mut r = CheckReport::default();
@@ -674,6 +728,39 @@ impl Mechanism {
                 ),
             );
         }
+        // Contacts the printed parts keep (paper §5.3's carve): reported, and required of
+        // a design synthesized for them.
+        let cut = self.cut_contacts();
+        let kept = self.kept_closure(&cut);
+        let lost: Vec<String> = cut
+            .iter()
+            .map(|c| {
+                format!(
+                    "{:.0}%",
+                    100.0 * c.iter().filter(|x| **x).count() as f64 / c.len().max(1) as f64
+                )
+            })
+            .collect();
+        let kept_ok = kept.vali_time >= 1.0
+            && kept.max_dist <= -EPSILON
+            && (!robust_required || kept.robust_max_dist <= -EPSILON);
+        r.add(
+            "printed contacts",
+            kept_ok || !self.solve.printed_rim,
+            format!(
+                "own rim cuts {} of each pair's contacts; with the rest E_valiTime = {:.4}, \
+                 E_maxDist = {:.4}, robust {:.4}{}",
+                lost.join("/"),
+                kept.vali_time,
+                kept.max_dist,
+                kept.robust_max_dist,
+                if self.solve.printed_rim {
+                    ""
+                } else {
+                    " (reported only: not synthesized for printed rims)"
+                }
+            ),
+        );
         r
     }
 }

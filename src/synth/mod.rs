@@ -23,6 +23,7 @@ pub mod outcome;
 pub mod pose;
 pub mod report;
 pub mod search;
+pub mod undercut;
 
 pub use closure::Class;
 pub use error::{MechanismFileError, ReportError, SynthError};

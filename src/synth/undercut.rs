@@ -1,0 +1,256 @@
+//! Contacts a printed pair keeps: where a pair's own rim, moving with the follower, cuts
+//! its driver band at another instant and so removes the contact it is designed to make.
+//!
+//! The printed follower carries each curve c²ₖ as a rim (a half ellipse with its apex on
+//! the curve and its major axis along the follower's outward normal n²ₖ, paper §5.3), and
+//! the driver's band is carved by that rim over a whole period. A contact c¹ₖ(u) survives
+//! the carve only if the rim never reaches past it at any other instant t: the classical
+//! undercutting of gear design, which the paper's local conditions (Eq. 4) do not see. This
+//! module owns that test on sampled curves, in model units, and the printed section it is
+//! made for ([`RIM_DEPTH_MM`], [`RIM_HALF_WIDTH_MM`]; `build::dims` reads them from here).
+//! Synthesis drops the contacts it finds cut before it judges closure, so a design closes
+//! with the contacts its parts keep; `Mechanism::check` reports the same figure for a file.
+//!
+//! It tests each pair against its own rim only: another pair's rim lies in another band
+//! (the slabs are disjoint and `band_gap` apart), and the built parts' check
+//! (`build::check`) measures every rim against every band on the meshes. It does not model
+//! the follower's web or struts (the build plans those around the driver).
+
+use super::math::{Mat3, V3};
+
+/// Follower rim: half-ellipse semi-axis along the contact normal (how deep the rim is).
+/// 3 mm: deep enough that the driver's groove walls hold it, shallow enough to fit the 5 mm
+/// gaps between the bands at the default 10 mm per model unit.
+pub const RIM_DEPTH_MM: f64 = 3.0;
+/// Follower rim: half-ellipse semi-axis across the normal (half the rim's thickness).
+/// 1.6 mm: a 3.2 mm rim is eight 0.4 mm perimeters, and the apex radius b²/a = 0.85 mm is
+/// still well above the nozzle width.
+pub const RIM_HALF_WIDTH_MM: f64 = 1.6;
+/// How far past a contact a rim must reach for the contact to count as cut, mm. 0.1 mm: the
+/// built parts' check calls a contact lost when its gap exceeds the clearance by as much.
+pub const CUT_TOLERANCE_MM: f64 = 0.1;
+
+/// The rim section in model units.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RimSection {
+    /// Semi-axis along the normal.
+    pub depth: f64,
+    /// Semi-axis across the normal.
+    pub half_width: f64,
+    /// Depth past a contact that cuts it.
+    pub tolerance: f64,
+}
+
+impl RimSection {
+    /// The printed rim at `scale_mm` millimetres per model unit.
+    pub fn printed(scale_mm: f64) -> Self {
+        Self {
+            depth: RIM_DEPTH_MM / scale_mm,
+            half_width: RIM_HALF_WIDTH_MM / scale_mm,
+            tolerance: CUT_TOLERANCE_MM / scale_mm,
+        }
+    }
+}
+
+/// One instant's rigid map from driver-local to follower-local coordinates: y = A·x + b.
+#[derive(Clone, Copy, Debug)]
+pub struct DriverToFollower {
+    /// Rotation R₂ᵀ·Rz(φ).
+    pub a: Mat3,
+    /// Translation R₂ᵀ·(D − T₂).
+    pub b: [f64; 3],
+}
+
+impl DriverToFollower {
+    /// From the follower's rotation `r2` and translation `t2` in frame R, the driver angle
+    /// `phi` and the driver axis offset `dx`.
+    pub fn new(r2: &Mat3, t2: [f64; 3], phi: f64, dx: f64) -> Self {
+        let rz = super::math::rz(phi);
+        let a = std::array::from_fn(|r| {
+            std::array::from_fn(|c| (0..3).map(|k| r2[k][r] * rz[k][c]).sum())
+        });
+        let b = V3::new(dx - t2[0], -t2[1], -t2[2]).rot_t(r2).vals();
+        Self { a, b }
+    }
+
+    fn apply(&self, x: V3<f64>) -> V3<f64> {
+        x.rot(&self.a) + V3::from(self.b)
+    }
+}
+
+/// Samples of the follower curve per chunk when pruning by bounding spheres.
+const CHUNK: usize = 16;
+
+/// The contacts of one pair that its own rim cuts.
+///
+/// `c2[i]`, `n2[i]` (follower-local curve and outward normal) and `c1[i]` (driver-local
+/// curve) are sampled at the instants of `poses[i]`, evenly over one period. Returns, per
+/// instant i, whether the rim at some other instant reaches more than `rim.tolerance` past
+/// c¹(i). The rim's section at each sample is tested within half the distance to the
+/// neighbouring samples along the tangent, so it is exact up to the curves' sampling.
+pub fn cut_contacts(
+    c2: &[[f64; 3]],
+    n2: &[[f64; 3]],
+    c1: &[[f64; 3]],
+    poses: &[DriverToFollower],
+    rim: &RimSection,
+) -> Vec<bool> {
+    let n = c2.len();
+    if n < 3 || n2.len() != n || c1.len() != n || poses.len() != n {
+        return vec![false; n];
+    }
+    let sections: Vec<Section> = (0..n).map(|s| Section::new(c2, n2, s)).collect();
+    let reach = rim.depth + rim.half_width;
+    let chunks: Vec<(V3<f64>, f64, std::ops::Range<usize>)> = (0..n)
+        .step_by(CHUNK)
+        .map(|lo| {
+            let r = lo..(lo + CHUNK).min(n);
+            let c = r
+                .clone()
+                .fold(V3::zero(), |acc, s| acc + V3::from(c2[s]))
+                .scalec(1.0 / r.len() as f64);
+            let rad = r
+                .clone()
+                .map(|s| (V3::from(c2[s]) - c).norm())
+                .fold(0.0, f64::max);
+            (c, rad + reach, r)
+        })
+        .collect();
+    let mut cut = vec![false; n];
+    for pose in poses {
+        for (u, flag) in cut.iter_mut().enumerate() {
+            if *flag {
+                continue;
+            }
+            let y = pose.apply(V3::from(c1[u]));
+            *flag = chunks.iter().any(|(c, r, range)| {
+                (y - *c).norm2() <= r * r && range.clone().any(|s| sections[s].cuts(y, rim))
+            });
+        }
+    }
+    cut
+}
+
+/// The rim's section at one sample: its apex, frame and the tangential extent it stands for.
+struct Section {
+    apex: V3<f64>,
+    tangent: V3<f64>,
+    normal: V3<f64>,
+    binormal: V3<f64>,
+    half_step: f64,
+}
+
+impl Section {
+    fn new(c2: &[[f64; 3]], n2: &[[f64; 3]], s: usize) -> Self {
+        let n = c2.len();
+        let at = |i: usize| V3::from(c2[i % n]);
+        let (prev, here, next) = (at(s + n - 1), at(s), at(s + 1));
+        let tangent = (next - prev).unit();
+        let raw = V3::from(n2[s]);
+        let normal = (raw - tangent.scale(raw.dot(tangent))).unit();
+        Self {
+            apex: here,
+            tangent,
+            normal,
+            binormal: tangent.cross(normal),
+            // Half the larger neighbouring step, so the sections tile the curve.
+            half_step: 0.5 * (next - here).norm().max((here - prev).norm()),
+        }
+    }
+
+    /// Whether `y` lies inside the section's half ellipse by more than the tolerance.
+    fn cuts(&self, y: V3<f64>, rim: &RimSection) -> bool {
+        let d = y - self.apex;
+        if d.dot(self.tangent).abs() > self.half_step {
+            return false;
+        }
+        // Depth behind the apex and offset across the normal.
+        let h = -d.dot(self.normal);
+        let w = d.dot(self.binormal);
+        if h <= rim.tolerance || h > rim.depth {
+            return false;
+        }
+        let (a, b) = (rim.depth, rim.half_width);
+        let (qh, qw) = ((h - a) / a, w / b);
+        let q = qh.hypot(qw);
+        if q >= 1.0 {
+            return false;
+        }
+        // First-order distance to the ellipse: (1 − |q|) over the gradient of |q|.
+        let g = (qh / a).hypot(qw / b) / q.max(f64::MIN_POSITIVE);
+        (1.0 - q) / g.max(f64::MIN_POSITIVE) > rim.tolerance
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::TAU;
+
+    /// c², n², c¹ and the driver-to-follower maps of a sampled pair.
+    type Sampled = (
+        Vec<[f64; 3]>,
+        Vec<[f64; 3]>,
+        Vec<[f64; 3]>,
+        Vec<DriverToFollower>,
+    );
+
+    /// Two discs rolling on each other (a friction-wheel pair, driver radius 3 at d_x = 6,
+    /// follower radius 3 turning the other way), with the contact normal along the line of
+    /// centres: the rim touches each driver point only at its own instant, so nothing is cut.
+    fn wheels(n: usize, follower_speed: f64) -> Sampled {
+        let (r, dx) = (3.0, 6.0);
+        let mut c2 = Vec::new();
+        let mut n2 = Vec::new();
+        let mut c1 = Vec::new();
+        let mut poses = Vec::new();
+        for i in 0..n {
+            let t = i as f64 / n as f64;
+            let phi = TAU * t;
+            let psi = -follower_speed * TAU * t;
+            // Contact at (r, 0, 0) in R, every instant.
+            let r2 = super::super::math::rz(psi);
+            c2.push(V3::new(r, 0.0, 0.0).rot_t(&r2).vals());
+            // Follower's outward normal points from the follower to the driver (+x).
+            n2.push(V3::new(1.0, 0.0, 0.0).rot_t(&r2).vals());
+            c1.push(
+                V3::new(r - dx, 0.0, 0.0)
+                    .rot_t(&super::super::math::rz(phi))
+                    .vals(),
+            );
+            poses.push(DriverToFollower::new(&r2, [0.0; 3], phi, dx));
+        }
+        (c2, n2, c1, poses)
+    }
+
+    /// Rolling wheels keep every contact: the rim is tangent at the contact and clear of the
+    /// driver curve elsewhere.
+    #[test]
+    fn rolling_wheels_keep_every_contact() {
+        let (c2, n2, c1, poses) = wheels(360, 1.0);
+        let cut = cut_contacts(&c2, &n2, &c1, &poses, &RimSection::printed(10.0));
+        assert_eq!(cut.iter().filter(|c| **c).count(), 0);
+    }
+
+    /// A follower curve whose rim sweeps back through its own driver curve: the same wheel
+    /// pair with the follower's normal reversed (the rim's body then lies on the driver's
+    /// side of the contact, inside the band), so every contact is cut.
+    #[test]
+    fn a_rim_on_the_driver_side_cuts_its_contacts() {
+        let (c2, n2, c1, poses) = wheels(360, 1.0);
+        let flipped: Vec<[f64; 3]> = n2.iter().map(|v| (-V3::from(*v)).vals()).collect();
+        let cut = cut_contacts(&c2, &flipped, &c1, &poses, &RimSection::printed(10.0));
+        assert_eq!(cut.iter().filter(|c| **c).count(), 360);
+    }
+
+    /// The driver-to-follower map takes a driver curve point to the follower curve point it
+    /// touches at the same instant.
+    #[test]
+    fn the_map_takes_each_contact_to_its_follower_point() {
+        let (c2, _, c1, poses) = wheels(36, 1.0);
+        for i in 0..36 {
+            let y = poses[i].apply(V3::from(c1[i]));
+            assert!((y - V3::from(c2[i])).norm() < 1e-12, "sample {i}");
+        }
+    }
+}
