@@ -196,35 +196,99 @@ pub fn strut(
     })
 }
 
+/// What the rays leaving a piece found: the starts, and for a piece without any, why.
+#[derive(Clone, Debug, Default)]
+pub struct RayStarts {
+    /// Starts found (at most one per ray).
+    pub starts: Vec<Start>,
+    /// Rays tried.
+    pub rays: usize,
+    /// Rays that came within the root clearance of the other part's functional surfaces
+    /// before they found free space.
+    pub blocked: usize,
+    /// How far the rays went, mm.
+    pub reach: f64,
+    /// The root clearance asked, mm.
+    pub root_clearance: f64,
+}
+
+impl RayStarts {
+    /// Why no strut can start from the piece, for [`BuildError::NoRoom`]: how many rays ran
+    /// into the other part's functional surfaces and how many found no free point.
+    pub fn none_detail(&self) -> String {
+        let need = STRUT_RADIUS_MM + STRUT_MARGIN_MM;
+        let unreached = self.rays - self.blocked - self.starts.len();
+        let (reach, clear) = (self.reach, self.root_clearance);
+        let verb =
+            |n: usize, one: &'static str, many: &'static str| if n == 1 { one } else { many };
+        let blocked = |n| {
+            format!(
+                "{} within {clear:.1} mm of the other part's moving contact surfaces",
+                verb(n, "comes", "come")
+            )
+        };
+        let unreached_text = |n| {
+            format!(
+                "{} no point {need:.1} mm clear of the other part's swept volume within {reach:.0} mm",
+                verb(n, "reaches", "reach")
+            )
+        };
+        let what = match (self.blocked, unreached) {
+            (0, _) => format!(
+                "none of the {} rays leaving it reach a point {need:.1} mm clear of the other \
+                 part's swept volume within {reach:.0} mm",
+                self.rays
+            ),
+            (b, 0) => format!("all {} rays leaving it {}", self.rays, blocked(b)),
+            (b, u) => format!(
+                "of the {} rays leaving it, {b} {} and {u} {}",
+                self.rays,
+                blocked(b),
+                unreached_text(u)
+            ),
+        };
+        format!("{what}, so no strut can start there")
+    }
+}
+
 /// Starts along rays leaving a piece: from each `(root, dir)`, the first point at distance
-/// `from + s` (s = 1, 2, … up to `reach` mm) whose coarse clearance in `field` suffices,
-/// provided `exact` (the exact clearance from the other part's functional surfaces) stays
-/// at least `root_clearance` from the root up to there.
+/// s = 1, 2, … up to `reach` mm whose coarse clearance in `field` suffices, provided
+/// `exact` (the exact clearance from the other part's functional surfaces) stays at least
+/// `root_clearance` from the root up to there.
 pub fn ray_starts(
     rays: &[(Vec3, Vec3)],
     field: &DistanceField,
     exact: &(dyn Fn(Vec3) -> f64 + Sync),
     root_clearance: f64,
     reach: f64,
-) -> Vec<Start> {
+) -> RayStarts {
     use rayon::prelude::*;
     let need = STRUT_RADIUS_MM + STRUT_MARGIN_MM;
-    rays.par_iter()
-        .filter_map(|&(root, dir)| {
+    // Per ray: Ok(start), Err(true) when blocked, Err(false) when out of reach.
+    let found: Vec<Result<Start, bool>> = rays
+        .par_iter()
+        .map(|&(root, dir)| {
             let mut s = 1.0;
             while s <= reach {
                 let p = root + dir * s;
                 if exact(p) < root_clearance {
-                    return None;
+                    return Err(true);
                 }
                 if field.sample(p) >= need {
-                    return Some(Start { root, at: p });
+                    return Ok(Start { root, at: p });
                 }
                 s += 1.0;
             }
-            None
+            Err(false)
         })
-        .collect()
+        .collect();
+    RayStarts {
+        rays: rays.len(),
+        blocked: found.iter().filter(|f| matches!(f, Err(true))).count(),
+        starts: found.into_iter().filter_map(Result::ok).collect(),
+        reach,
+        root_clearance,
+    }
 }
 
 /// Points along a polyline, every `step` mm, for covers and marking.
@@ -266,4 +330,41 @@ pub fn free_spot(field: &DistanceField, dir: Vec3, from: f64, to: f64, need: f64
 /// Convert a list of points into `[f64; 3]` (for reports).
 pub fn points_mm(p: &[Vec3]) -> Vec<[f64; 3]> {
     p.iter().map(|v| arr(*v)).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn starts(rays: usize, blocked: usize) -> RayStarts {
+        RayStarts {
+            starts: Vec::new(),
+            rays,
+            blocked,
+            reach: 12.0,
+            root_clearance: 2.5,
+        }
+    }
+
+    /// Guards the three wordings of why no strut can start from a piece, whole: every ray
+    /// blocked by the other part's contact surfaces, none blocked, and a mix.
+    #[test]
+    fn a_piece_without_starts_says_what_stopped_its_rays() {
+        assert_eq!(
+            starts(180, 180).none_detail(),
+            "all 180 rays leaving it come within 2.5 mm of the other part's moving contact \
+             surfaces, so no strut can start there"
+        );
+        assert_eq!(
+            starts(90, 0).none_detail(),
+            "none of the 90 rays leaving it reach a point 3.4 mm clear of the other part's \
+             swept volume within 12 mm, so no strut can start there"
+        );
+        assert_eq!(
+            starts(90, 30).none_detail(),
+            "of the 90 rays leaving it, 30 come within 2.5 mm of the other part's moving \
+             contact surfaces and 60 reach no point 3.4 mm clear of the other part's swept \
+             volume within 12 mm, so no strut can start there"
+        );
+    }
 }

@@ -451,7 +451,7 @@ fn plan_follower_struts(
             })
             .collect();
         let starts = connect::ray_starts(&rays, field, &|_| f64::INFINITY, 0.0, RAY_REACH_MM);
-        let st = connect::strut(
+        let st = strut_from_starts(
             field,
             &joined,
             &starts,
@@ -847,6 +847,24 @@ fn strut_from_behind(
     strut_from_rays(&rays, root_clearance, field, exact, joined, toward, what)
 }
 
+/// [`connect::strut`] from the starts the rays found; when they found none, the error says
+/// what stopped the rays.
+fn strut_from_starts(
+    field: &DistanceField,
+    joined: &connect::Joined,
+    starts: &connect::RayStarts,
+    toward: Vec3,
+    what: &str,
+) -> Result<ThickPolyline, BuildError> {
+    connect::strut(field, joined, &starts.starts, toward, what).map_err(|e| match e {
+        BuildError::NoRoom { what, .. } if starts.starts.is_empty() => BuildError::NoRoom {
+            what,
+            detail: starts.none_detail(),
+        },
+        e => e,
+    })
+}
+
 /// A strut from one of `rays` (root, direction away from the contact) to what its part has
 /// joined so far, aimed at `toward`; `exact` stays at least `root_clearance` along the ray
 /// up to the start; the strut is marked joined.
@@ -860,7 +878,7 @@ fn strut_from_rays(
     what: &str,
 ) -> Result<ThickPolyline, BuildError> {
     let starts = connect::ray_starts(rays, field, exact, root_clearance, RAY_REACH_MM);
-    let st = connect::strut(field, joined, &starts, toward, what)?;
+    let st = strut_from_starts(field, joined, &starts, toward, what)?;
     joined.mark_balls(&connect::polyline_points(&st, 0.5), st.radius);
     Ok(st)
 }
