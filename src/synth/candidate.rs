@@ -543,7 +543,8 @@ fn oversampled(pb: &PairProblem, x: &[f64]) -> (f64, Vec<Option<[f64; 3]>>, Vec<
 }
 
 /// Drop from the oversampled closure data the contacts that the candidate's own printed rim
-/// cuts at another instant ([`undercut::cut_contacts`] on the N samples): an oversampled
+/// cuts at another instant, or leaves on an island of band ([`undercut::cut_contacts`] and
+/// [`undercut::island_contacts`] on the N samples): an oversampled
 /// instant is dropped when either sample around it is cut, so a lost window is never
 /// narrowed by the interpolation.
 fn drop_cut_contacts(
@@ -554,7 +555,8 @@ fn drop_cut_contacts(
     robust: &mut [bool],
 ) {
     let n = pb.poses.len();
-    let (mut c2, mut n2, mut c1, mut maps) = (
+    let (mut c2, mut n2, mut c1, mut n1, mut maps) = (
+        Vec::with_capacity(n),
         Vec::with_capacity(n),
         Vec::with_capacity(n),
         Vec::with_capacity(n),
@@ -565,6 +567,7 @@ fn drop_cut_contacts(
         c2.push(c.c2.vals());
         n2.push((-c.n.rot_t(&pose.rot)).vals());
         c1.push(c.c1.vals());
+        n1.push(c.n.rot_t(&super::math::rz(TAU * pose.t)).vals());
         maps.push(undercut::DriverToFollower::new(
             &pose.rot,
             pose.trans,
@@ -572,7 +575,11 @@ fn drop_cut_contacts(
             pb.dx,
         ));
     }
-    let cut = undercut::cut_contacts(&c2, &n2, &c1, &maps, rim);
+    let mut cut = undercut::cut_contacts(&c2, &n2, &c1, &maps, rim);
+    let island = undercut::island_contacts(&c2, &n2, &c1, &n1, &maps, rim, &cut);
+    for (c, i) in cut.iter_mut().zip(island) {
+        *c |= i;
+    }
     for (i, (nt, rb)) in ntilde.iter_mut().zip(robust.iter_mut()).enumerate() {
         let j = i / OVERSAMPLE;
         let exact = i % OVERSAMPLE == 0;
@@ -702,8 +709,8 @@ pub(crate) mod tests {
     }
 
     /// Guards the printed-rim judgement of a candidate: the same solve with a rim drops ñ
-    /// (and the robust flag) at every sample whose contact its own rim cuts, and only
-    /// there among the exact samples; without a rim those contacts count. A 1R candidate
+    /// (and the robust flag) at every sample whose contact its own rim cuts or leaves on an
+    /// island, and only there among the exact samples; without a rim those contacts count. A 1R candidate
     /// on the half-turn-like motion (N = 60, band ±0.5) whose rim cuts part of its own
     /// curve, so the test would see a mask that did nothing.
     #[test]
@@ -726,12 +733,13 @@ pub(crate) mod tests {
         assert!(b.valid, "{:?}", b.reason);
         assert_eq!(a.x, b.x, "the rim is not part of the objective");
         let n = free.poses.len();
-        let (mut c2, mut n2, mut c1, mut maps) = (vec![], vec![], vec![], vec![]);
+        let (mut c2, mut n2, mut c1, mut n1, mut maps) = (vec![], vec![], vec![], vec![], vec![]);
         for pose in &free.poses.samples {
             let c = model::contact_f64(&a.x, pose, free.dx);
             c2.push(c.c2.vals());
             n2.push((-c.n.rot_t(&pose.rot)).vals());
             c1.push(c.c1.vals());
+            n1.push(c.n.rot_t(&crate::synth::math::rz(TAU * pose.t)).vals());
             maps.push(undercut::DriverToFollower::new(
                 &pose.rot,
                 pose.trans,
@@ -739,7 +747,11 @@ pub(crate) mod tests {
                 free.dx,
             ));
         }
-        let cut = undercut::cut_contacts(&c2, &n2, &c1, &maps, &rim);
+        let mut cut = undercut::cut_contacts(&c2, &n2, &c1, &maps, &rim);
+        let island = undercut::island_contacts(&c2, &n2, &c1, &n1, &maps, &rim, &cut);
+        for (c, i) in cut.iter_mut().zip(island) {
+            *c |= i;
+        }
         let cuts = cut.iter().filter(|c| **c).count();
         assert!(cuts > 0 && cuts < n, "{cuts} of {n} samples cut");
         for (j, &c) in cut.iter().enumerate() {

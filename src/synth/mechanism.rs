@@ -483,9 +483,9 @@ impl Mechanism {
         (rf, rd)
     }
 
-    /// Per pair and sample, whether the pair's own printed rim (at the file's `scale_mm`)
-    /// cuts that contact at another instant, so the printed parts do not keep it (see
-    /// [`undercut`](super::undercut)).
+    /// Per pair and sample, whether the printed parts lose that contact: the pair's own
+    /// printed rim (at the file's `scale_mm`) cuts it at another instant, or it lies on an
+    /// island of band no strut can leave (see [`undercut`](super::undercut)).
     pub fn cut_contacts(&self) -> Vec<Vec<bool>> {
         let n = self.follower_motion.len();
         let poses: Vec<DriverToFollower> = self
@@ -507,7 +507,10 @@ impl Mechanism {
             .iter()
             .map(|cp| {
                 let s = &cp.samples;
-                undercut::cut_contacts(&s.c2, &s.n2, &s.c1, &poses, &rim)
+                let cut = undercut::cut_contacts(&s.c2, &s.n2, &s.c1, &poses, &rim);
+                let island =
+                    undercut::island_contacts(&s.c2, &s.n2, &s.c1, &s.n1, &poses, &rim, &cut);
+                cut.iter().zip(island).map(|(c, i)| *c || i).collect()
             })
             .collect()
     }
@@ -748,7 +751,7 @@ impl Mechanism {
             "printed contacts",
             kept_ok || !self.solve.printed_rim,
             format!(
-                "own rim cuts {} of each pair's contacts; with the rest E_valiTime = {:.4}, \
+                "own rims lose {} of each pair's contacts (cut, or on islands); with the rest E_valiTime = {:.4}, \
                  E_maxDist = {:.4}, robust {:.4}{}",
                 lost.join("/"),
                 kept.vali_time,

@@ -1017,7 +1017,7 @@ mod tests {
     /// rims keep; and the run is judged on those contacts. The two runs (with and without
     /// the option) here choose the same curves, which makes the figures comparable: without
     /// the option the recorded 4× E_valiTime is the all-contacts one (0.73), above the
-    /// kept-contacts one (0.53); with it, it is at most the kept one (0.52).
+    /// kept-contacts one (0.50); with it, it is at most the kept one (0.49).
     #[test]
     fn a_printed_rim_run_is_judged_on_the_contacts_its_rims_keep() {
         let run = |printed_rim| {

@@ -8,8 +8,11 @@
 //! undercutting of gear design, which the paper's local conditions (Eq. 4) do not see. This
 //! module owns that test on sampled curves, in model units, and the printed section it is
 //! made for ([`RIM_DEPTH_MM`], [`RIM_HALF_WIDTH_MM`]; `build::dims` reads them from here).
-//! Synthesis drops the contacts it finds cut before it judges closure, so a design closes
-//! with the contacts its parts keep; `Mechanism::check` reports the same figure for a file.
+//! It also finds the contacts the build cannot keep although no rim cuts them: runs of
+//! band between two cuts that the rim's sweep hems in behind and on both sides, so no
+//! strut can leave them ([`island_contacts`]). Synthesis drops both before it judges
+//! closure, so a design closes with the contacts its parts keep; `Mechanism::check`
+//! reports the same figure for a file.
 //!
 //! It tests each pair against its own rim only: another pair's rim lies in another band
 //! (the slabs are disjoint and `band_gap` apart), and the built parts' check
@@ -30,6 +33,18 @@ pub const RIM_HALF_WIDTH_MM: f64 = 1.6;
 /// built parts' check calls a contact lost when its gap exceeds the clearance by as much.
 pub const CUT_TOLERANCE_MM: f64 = 0.1;
 
+/// Where a strut leaves a band, behind its contact, mm: the build roots driver struts in
+/// the deepest row of the carved band (`build::segments`), about 0.5 mm in front of the
+/// band's 3.5 mm deep back face.
+pub const ESCAPE_ROOT_MM: f64 = 3.0;
+/// How far a strut's first segment runs from its root before the build's planner takes
+/// over, mm: through the rest of the band (3.5 mm half width) and the strut's own clearance
+/// (3.4 mm) beyond it.
+pub const ESCAPE_REACH_MM: f64 = 7.0;
+/// The clearance a strut's core keeps from the rims' sweep where it leaves a band, mm: the
+/// build's 1 mm core plus half the default 0.2 mm print clearance.
+pub const ESCAPE_CLEARANCE_MM: f64 = 1.1;
+
 /// The rim section in model units.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RimSection {
@@ -39,6 +54,12 @@ pub struct RimSection {
     pub half_width: f64,
     /// Depth past a contact that cuts it.
     pub tolerance: f64,
+    /// [`ESCAPE_ROOT_MM`] in model units.
+    pub escape_root: f64,
+    /// [`ESCAPE_REACH_MM`] in model units.
+    pub escape_reach: f64,
+    /// [`ESCAPE_CLEARANCE_MM`] in model units.
+    pub escape_clearance: f64,
 }
 
 impl RimSection {
@@ -48,6 +69,9 @@ impl RimSection {
             depth: RIM_DEPTH_MM / scale_mm,
             half_width: RIM_HALF_WIDTH_MM / scale_mm,
             tolerance: CUT_TOLERANCE_MM / scale_mm,
+            escape_root: ESCAPE_ROOT_MM / scale_mm,
+            escape_reach: ESCAPE_REACH_MM / scale_mm,
+            escape_clearance: ESCAPE_CLEARANCE_MM / scale_mm,
         }
     }
 }
@@ -131,6 +155,113 @@ pub fn cut_contacts(
     cut
 }
 
+/// The contacts that lie on islands of band: runs of contacts the rim does not cut (`cut`
+/// from [`cut_contacts`]) from none of whose samples a strut could leave the band clear of
+/// the rim's sweep, so the build can only leave them out.
+///
+/// From each contact, rays start [`ESCAPE_ROOT_MM`] behind it (along −n¹, the driver's
+/// inward normal `n1` negated) and run [`ESCAPE_REACH_MM`] behind or across the band (−n¹,
+/// ±v, −n¹ ± v with v = T̂¹ × n¹); a ray is free when every point on it, 1 mm apart, stays
+/// [`ESCAPE_CLEARANCE_MM`] clear of the rim at every instant. A run with one free ray is
+/// anchored. This is the pair's own rim only, as [`cut_contacts`]; it does not see the
+/// follower's web, struts or other rims, which the build plans around.
+pub fn island_contacts(
+    c2: &[[f64; 3]],
+    n2: &[[f64; 3]],
+    c1: &[[f64; 3]],
+    n1: &[[f64; 3]],
+    poses: &[DriverToFollower],
+    rim: &RimSection,
+    cut: &[bool],
+) -> Vec<bool> {
+    let n = c2.len();
+    let mut island = vec![false; n];
+    if n < 3 || n1.len() != n || cut.len() != n || cut.iter().all(|c| !c) {
+        // Nothing cut: the band is whole and the build roots its strut anywhere.
+        return island;
+    }
+    let rims = Rims::new(c2, n2, rim.depth + rim.half_width + rim.escape_clearance);
+    let step = 1.0 / ESCAPE_REACH_MM * rim.escape_reach;
+    let steps = ESCAPE_REACH_MM.floor() as usize;
+    let free_from = |u: usize| -> bool {
+        let c = V3::from(c1[u]);
+        let nn = V3::from(n1[u]).unit();
+        let t = (V3::from(c1[(u + 1) % n]) - V3::from(c1[(u + n - 1) % n])).unit();
+        let v = t.cross(nn).unit();
+        let back = -nn;
+        let root = c + back.scalec(rim.escape_root);
+        let h = std::f64::consts::FRAC_1_SQRT_2;
+        let dirs = [back, v, -v, (back + v).scalec(h), (back - v).scalec(h)];
+        dirs.iter().any(|&d| {
+            (1..=steps).all(|k| {
+                let p = root + d.scalec(step * k as f64);
+                poses
+                    .iter()
+                    .all(|pose| !rims.near(pose.apply(p), rim, rim.escape_clearance))
+            })
+        })
+    };
+    // Runs of uncut contacts, cyclically, starting after a cut sample.
+    let start = (0..n).find(|&i| cut[i]).unwrap_or(0);
+    let mut i = 1;
+    while i <= n {
+        let u = (start + i) % n;
+        if cut[u] {
+            i += 1;
+            continue;
+        }
+        let mut run = Vec::new();
+        while i <= n && !cut[(start + i) % n] {
+            run.push((start + i) % n);
+            i += 1;
+        }
+        if !run.iter().any(|&u| free_from(u)) {
+            for u in run {
+                island[u] = true;
+            }
+        }
+    }
+    island
+}
+
+/// The rim's sections with bounding spheres per [`CHUNK`] samples, for "is this point in
+/// or near the rim" queries.
+struct Rims {
+    sections: Vec<Section>,
+    chunks: Vec<(V3<f64>, f64, std::ops::Range<usize>)>,
+}
+
+impl Rims {
+    fn new(c2: &[[f64; 3]], n2: &[[f64; 3]], reach: f64) -> Self {
+        let n = c2.len();
+        let sections = (0..n).map(|s| Section::new(c2, n2, s)).collect();
+        let chunks = (0..n)
+            .step_by(CHUNK)
+            .map(|lo| {
+                let r = lo..(lo + CHUNK).min(n);
+                let c = r
+                    .clone()
+                    .fold(V3::zero(), |acc, s| acc + V3::from(c2[s]))
+                    .scalec(1.0 / r.len() as f64);
+                let rad = r
+                    .clone()
+                    .map(|s| (V3::from(c2[s]) - c).norm())
+                    .fold(0.0, f64::max);
+                (c, rad + reach, r)
+            })
+            .collect();
+        Self { sections, chunks }
+    }
+
+    /// Whether `y` (follower frame) lies within `margin` of the rim's half ellipse.
+    fn near(&self, y: V3<f64>, rim: &RimSection, margin: f64) -> bool {
+        self.chunks.iter().any(|(c, r, range)| {
+            (y - *c).norm2() <= r * r
+                && range.clone().any(|s| self.sections[s].near(y, rim, margin))
+        })
+    }
+}
+
 /// The rim's section at one sample: its apex, frame and the tangential extent it stands for.
 struct Section {
     apex: V3<f64>,
@@ -156,6 +287,23 @@ impl Section {
             // Half the larger neighbouring step, so the sections tile the curve.
             half_step: 0.5 * (next - here).norm().max((here - prev).norm()),
         }
+    }
+
+    /// Whether `y` lies within `margin` of the section's half ellipse (the ellipse grown
+    /// by `margin` on both semi-axes, which contains the true offset region near the
+    /// apex and slightly exceeds it on the flanks).
+    fn near(&self, y: V3<f64>, rim: &RimSection, margin: f64) -> bool {
+        let d = y - self.apex;
+        if d.dot(self.tangent).abs() > self.half_step + margin {
+            return false;
+        }
+        let h = -d.dot(self.normal);
+        let w = d.dot(self.binormal);
+        if h < -margin || h > rim.depth + margin {
+            return false;
+        }
+        let (a, b) = (rim.depth, rim.half_width);
+        ((h - a) / (a + margin)).hypot(w / (b + margin)) < 1.0
     }
 
     /// Whether `y` lies inside the section's half ellipse by more than the tolerance.
@@ -241,6 +389,37 @@ mod tests {
         let flipped: Vec<[f64; 3]> = n2.iter().map(|v| (-V3::from(*v)).vals()).collect();
         let cut = cut_contacts(&c2, &flipped, &c1, &poses, &RimSection::printed(10.0));
         assert_eq!(cut.iter().filter(|c| **c).count(), 360);
+    }
+
+    /// The driver's outward normal n¹ of the wheels (−x in R at the contact).
+    fn wheel_n1(n: usize) -> Vec<[f64; 3]> {
+        (0..n)
+            .map(|i| {
+                let phi = TAU * i as f64 / n as f64;
+                V3::new(-1.0, 0.0, 0.0)
+                    .rot_t(&super::super::math::rz(phi))
+                    .vals()
+            })
+            .collect()
+    }
+
+    /// Guards the island test: with half the contacts marked cut, the other half is an
+    /// island when the rim sweeps behind and beside the band everywhere along it (the rim
+    /// on the driver's side of the contact sweeps an annulus 3 mm deep into the driver),
+    /// and anchored when the rim stays on the follower's side (rolling wheels).
+    #[test]
+    fn a_run_hemmed_in_by_the_rims_sweep_is_an_island() {
+        let n = 120;
+        let (c2, n2, c1, poses) = wheels(n, 1.0);
+        let n1 = wheel_n1(n);
+        let rim = RimSection::printed(10.0);
+        let cut: Vec<bool> = (0..n).map(|i| i < n / 2).collect();
+        let rolling = island_contacts(&c2, &n2, &c1, &n1, &poses, &rim, &cut);
+        assert_eq!(rolling.iter().filter(|c| **c).count(), 0);
+        let flipped: Vec<[f64; 3]> = n2.iter().map(|v| (-V3::from(*v)).vals()).collect();
+        let hemmed = island_contacts(&c2, &flipped, &c1, &n1, &poses, &rim, &cut);
+        let expected: Vec<bool> = cut.iter().map(|c| !c).collect();
+        assert_eq!(hemmed, expected);
     }
 
     /// The driver-to-follower map takes a driver curve point to the follower curve point it
