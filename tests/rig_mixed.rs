@@ -228,9 +228,6 @@ fn measure_cli_against_sim_device_mixed_and_swapped_ports() {
     );
 }
 
-/// Guards a brief USB drop of the sensor board on a mixed bench: the board's link
-/// reconnects, the session still finishes complete, the reconnect is counted and marked on
-/// a row, and the bus's driver angle stays interpolated across it.
 /// Guards a driver servo that reboots mid-run on a mixed bench (a brown-out on the bus
 /// side): the run ends as a disconnection whose reason names the reboot, rather than going
 /// on with the servo's zeroed block as the driver angle; the rows before it are kept and
@@ -259,6 +256,9 @@ fn a_driver_reboot_on_a_mixed_bench_ends_the_run_with_its_reason() {
     );
 }
 
+/// Guards a brief USB drop of the sensor board on a mixed bench: the board's link
+/// reconnects, the session still finishes complete, the reconnect is counted and marked on
+/// a row, and the bus's driver angle stays interpolated across it.
 #[test]
 fn a_brief_board_dropout_is_bridged() {
     let run = run_session(
