@@ -11,6 +11,8 @@ use mpc_rig::motion::Motion;
 use mpc_rig::rig::session::{measure, MeasureOptions, TargetSpec};
 use mpc_rig::rig::sim::dynamixel::{spawn, MotionTarget, SimDynamixelOptions};
 use mpc_rig::rig::sim::plant::PlantConfig;
+#[path = "support/serial_group.rs"]
+mod serial_group;
 
 fn repo(p: &str) -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(p)
@@ -22,6 +24,7 @@ fn repo(p: &str) -> std::path::PathBuf {
 /// half-turn ratio stays 2 within 0.05.
 #[test]
 fn plant_backlash_and_lag_are_recovered_from_a_simulated_session() {
+    let _serial = serial_group::lock();
     let motion_path = repo("data/motions/half-turn-2to1.toml");
     let motion = Motion::from_file(&motion_path).unwrap();
     let mut opts = SimDynamixelOptions::new(Arc::new(MotionTarget::new(motion).unwrap()));

@@ -2,6 +2,8 @@
 //! (A full build of a printable design takes minutes; see docs/build.md for its figures.)
 
 use assert_cmd::Command;
+#[path = "support/serial_group.rs"]
+mod serial_group;
 
 const TEST_MECHANISM: &str = "tests/data/mechanism/half-turn-2to1";
 
@@ -11,6 +13,7 @@ const TEST_MECHANISM: &str = "tests/data/mechanism/half-turn-2to1";
 /// joined (docs/build.md, "Printable designs").
 #[test]
 fn a_design_without_room_is_refused_whole_and_writes_nothing() {
+    let _serial = serial_group::lock();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("parts");
     let assert = Command::cargo_bin("mpc-rig")

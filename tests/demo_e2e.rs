@@ -4,6 +4,8 @@
 //! backlash shows up in the report.
 
 use std::path::{Path, PathBuf};
+#[path = "support/serial_group.rs"]
+mod serial_group;
 
 fn demo(out: &Path, extra: &[&str]) -> (std::process::Output, String) {
     let out = assert_cmd::Command::cargo_bin("mpc-rig")
@@ -32,6 +34,7 @@ fn summary_of(stdout: &str) -> serde_json::Value {
 /// run, and `--fault backlash=2` yields a driver-side backlash of 2° ± 0.5°.
 #[test]
 fn demo_end_to_end_with_cache_and_backlash() {
+    let _serial = serial_group::lock();
     let tmp = tempfile::tempdir().unwrap();
     let (out, stdout) = demo(tmp.path(), &[]);
     assert!(

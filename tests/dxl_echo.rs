@@ -18,6 +18,8 @@ use mpc_rig::rig::RigError;
 
 mod support;
 use support::SimChild;
+#[path = "support/serial_group.rs"]
+mod serial_group;
 
 fn repo(p: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(p)
@@ -47,6 +49,7 @@ fn measure(rig: &str, ports: &[&str], motion: &str, out: &Path) -> (bool, String
 /// with a message naming the echo and the port, and nothing panics.
 #[test]
 fn an_echoing_adapter_is_refused_without_a_panic() {
+    let _serial = serial_group::lock();
     let tmp = tempfile::tempdir().unwrap();
     let dxl = SimChild::spawn([
         "sim-device",
@@ -104,6 +107,7 @@ fn short_status(id: u8) -> Vec<u8> {
 /// that names the library's panic after the usual retries, and the process goes on.
 #[test]
 fn a_reply_the_library_cannot_parse_is_an_error_not_a_dead_thread() {
+    let _serial = serial_group::lock();
     let mut pty = Pty::open().unwrap();
     let path = pty.path().to_path_buf();
     let stop = Arc::new(AtomicBool::new(false));

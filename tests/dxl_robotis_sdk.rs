@@ -8,6 +8,8 @@ use std::sync::Arc;
 
 use mpc_rig::rig::sim::dynamixel::{spawn, SimDynamixelOptions};
 use mpc_rig::rig::sim::plant::WobbleTurn;
+#[path = "support/serial_group.rs"]
+mod serial_group;
 
 fn sdk_available() -> Result<(), String> {
     match Command::new("python3")
@@ -26,6 +28,7 @@ fn sdk_available() -> Result<(), String> {
 /// implementation: the script exits 0 only if every step behaves like a real XL430 pair.
 #[test]
 fn robotis_python_sdk_talks_to_the_simulator() {
+    let _serial = serial_group::lock();
     if let Err(why) = sdk_available() {
         eprintln!("SKIPPED robotis_python_sdk_talks_to_the_simulator: {why}");
         return;

@@ -19,6 +19,8 @@ use mpc_rig::rig::sim::plant::PlantConfig;
 
 mod support;
 use support::SimChild;
+#[path = "support/serial_group.rs"]
+mod serial_group;
 
 fn repo(p: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(p)
@@ -104,6 +106,7 @@ fn analyse_ideal(run: &Run, label: &str) -> mpc_rig::analysis::Summary {
 /// driver per ms, so under 1.7 ms).
 #[test]
 fn mixed_bench_measures_a_3r_follower_turned_by_a_servo() {
+    let _serial = serial_group::lock();
     let run = run_session(
         "rigs/sim-dynamixel-imu.toml",
         "data/motions/cone-sweep.toml",
@@ -133,6 +136,7 @@ fn mixed_bench_measures_a_3r_follower_turned_by_a_servo() {
 /// clock misalignment showing as phase lag.
 #[test]
 fn mixed_bench_measures_a_1r1t_follower_turned_by_a_servo() {
+    let _serial = serial_group::lock();
     let run = run_session(
         "rigs/sim-dynamixel-1r1t.toml",
         "data/motions/screw-bob.toml",
@@ -150,6 +154,7 @@ fn mixed_bench_measures_a_1r1t_follower_turned_by_a_servo() {
 /// the still-connected bus is left with its torque off.
 #[test]
 fn unplugging_the_sensor_board_keeps_the_recording_and_stops_the_servo() {
+    let _serial = serial_group::lock();
     let run = run_session(
         "rigs/sim-dynamixel-imu.toml",
         "data/motions/cone-sweep.toml",
@@ -179,6 +184,7 @@ fn bin() -> std::process::Command {
 /// the port does not hold the servos the rig describes.
 #[test]
 fn measure_cli_against_sim_device_mixed_and_swapped_ports() {
+    let _serial = serial_group::lock();
     let motion = repo("data/motions/figure-eight.toml");
     let sim = SimChild::spawn([
         "sim-device".into(),
@@ -234,6 +240,7 @@ fn measure_cli_against_sim_device_mixed_and_swapped_ports() {
 /// the rebooted driver is left with torque off.
 #[test]
 fn a_driver_reboot_on_a_mixed_bench_ends_the_run_with_its_reason() {
+    let _serial = serial_group::lock();
     let run = run_session_with(
         "rigs/sim-dynamixel-imu.toml",
         "data/motions/cone-sweep.toml",
@@ -261,6 +268,7 @@ fn a_driver_reboot_on_a_mixed_bench_ends_the_run_with_its_reason() {
 /// a row, and the bus's driver angle stays interpolated across it.
 #[test]
 fn a_brief_board_dropout_is_bridged() {
+    let _serial = serial_group::lock();
     let run = run_session(
         "rigs/sim-dynamixel-imu.toml",
         "data/motions/cone-sweep.toml",

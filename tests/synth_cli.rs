@@ -4,6 +4,8 @@
 
 use assert_cmd::Command;
 use predicates::prelude::*;
+#[path = "support/serial_group.rs"]
+mod serial_group;
 
 const MOTION: &str = "data/motions/half-turn-2to1.toml";
 
@@ -44,6 +46,7 @@ fn synth_reduced(
 /// wrong.
 #[test]
 fn synth_end_to_end_then_check_and_reject_tampering() {
+    let _serial = serial_group::lock();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("ht");
     synth_small(&out)
@@ -228,6 +231,7 @@ fn synth_refuses_k_below_minimum() {
 /// to use the printed cone (|n·p̂| ≤ sin 10°) fails the cone check.
 #[test]
 fn synth_3r_with_arm_cone_closes_and_check_knows_the_cone() {
+    let _serial = serial_group::lock();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("cs");
     synth_reduced(
