@@ -6,13 +6,12 @@ use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
+use crate::support::serial_group;
 use mpc_rig::analysis::{analyze_and_report, ReportOptions};
 use mpc_rig::motion::Motion;
 use mpc_rig::rig::session::{measure, MeasureOptions, TargetSpec};
 use mpc_rig::rig::sim::dynamixel::{spawn, MotionTarget, SimDynamixelOptions};
 use mpc_rig::rig::sim::plant::PlantConfig;
-#[path = "support/serial_group.rs"]
-mod serial_group;
 
 fn repo(p: &str) -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(p)

@@ -1,9 +1,8 @@
 //! End-to-end tests of `mpc-rig build` that run in seconds: the refusals a user meets first.
 //! (A full build of a printable design takes minutes; see docs/build.md for its figures.)
 
+use crate::support::serial_group;
 use assert_cmd::Command;
-#[path = "support/serial_group.rs"]
-mod serial_group;
 
 const TEST_MECHANISM: &str = "tests/data/mechanism/half-turn-2to1";
 

@@ -3,9 +3,8 @@
 //! real session, analysis and report; then the cached mechanism is reused and an injected
 //! backlash shows up in the report.
 
+use crate::support::serial_group;
 use std::path::{Path, PathBuf};
-#[path = "support/serial_group.rs"]
-mod serial_group;
 
 fn demo(out: &Path, extra: &[&str]) -> (std::process::Output, String) {
     let out = assert_cmd::Command::cargo_bin("mpc-rig")

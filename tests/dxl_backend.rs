@@ -7,14 +7,13 @@ use std::path::Path;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use crate::support::serial_group;
 use mpc_rig::rig::backend::dynamixel::DynamixelBench;
 use mpc_rig::rig::backend::{Driver, SampleStream};
 use mpc_rig::rig::config::RigConfig;
 use mpc_rig::rig::sim::dynamixel::{spawn, SimDynamixelHandle, SimDynamixelOptions};
 use mpc_rig::rig::sim::plant::{PlantConfig, WobbleTurn};
 use mpc_rig::rig::RigError;
-#[path = "support/serial_group.rs"]
-mod serial_group;
 
 fn rig(path: &Path) -> RigConfig {
     let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("rigs/sim-dynamixel.toml");

@@ -5,10 +5,8 @@
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-mod support;
-use support::SimChild;
-#[path = "support/serial_group.rs"]
-mod serial_group;
+use crate::support::serial_group;
+use crate::support::SimChild;
 
 /// Repeat a transaction that timed out (up to 5 attempts): on a busy machine the simulator
 /// thread may get the CPU later than `dynamixel2`'s fixed 34 ms reply timeout.

@@ -16,10 +16,8 @@ use mpc_rig::rig::config::RigConfig;
 use mpc_rig::rig::sim::pty::Pty;
 use mpc_rig::rig::RigError;
 
-mod support;
-use support::SimChild;
-#[path = "support/serial_group.rs"]
-mod serial_group;
+use crate::support::serial_group;
+use crate::support::SimChild;
 
 fn repo(p: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(p)

@@ -15,10 +15,8 @@ use mpc_rig::rig::session::{self, EndReason, MeasureOptions, TargetSpec};
 use mpc_rig::rig::sim::dynamixel::{spawn, MotionTarget, SimDynamixelOptions};
 use mpc_rig::rig::sim::plant::PlantConfig;
 
-mod support;
-use support::SimChild;
-#[path = "support/serial_group.rs"]
-mod serial_group;
+use crate::support::serial_group;
+use crate::support::SimChild;
 
 fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))

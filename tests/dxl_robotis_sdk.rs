@@ -6,10 +6,9 @@
 use std::process::Command;
 use std::sync::Arc;
 
+use crate::support::serial_group;
 use mpc_rig::rig::sim::dynamixel::{spawn, SimDynamixelOptions};
 use mpc_rig::rig::sim::plant::WobbleTurn;
-#[path = "support/serial_group.rs"]
-mod serial_group;
 
 fn sdk_available() -> Result<(), String> {
     match Command::new("python3")

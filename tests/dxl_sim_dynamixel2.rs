@@ -5,11 +5,10 @@
 use std::sync::Arc;
 use std::time::Duration;
 
+use crate::support::serial_group;
 use mpc_rig::rig::sim::dynamixel::control_table::{addr, mode};
 use mpc_rig::rig::sim::dynamixel::{spawn, SimDynamixelOptions};
 use mpc_rig::rig::sim::plant::WobbleTurn;
-#[path = "support/serial_group.rs"]
-mod serial_group;
 
 /// Repeat a transaction that timed out (up to 5 attempts): on a busy machine the simulator
 /// thread may get the CPU later than `dynamixel2`'s fixed 34 ms reply timeout.

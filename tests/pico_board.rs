@@ -16,6 +16,7 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
+use crate::support::serial_group;
 use mpc_rig::motion::Motion;
 use mpc_rig::rig::sim::pico::{self, BoardFiles, PicoHandle, PicoStatus, SimPicoOptions};
 use mpc_rig::rig::sim::plant::PlantConfig;
@@ -24,8 +25,6 @@ use mpc_wire::{
     encode_frame_vec, AckCode, Command, Config, Decoder, Event, EventKind, Report, Sample,
     SensorSet, ESTOP_BY_INPUT, PROTOCOL_VERSION,
 };
-#[path = "support/serial_group.rs"]
-mod serial_group;
 
 /// Longest wait for a reply, wall clock: generous, the emulator may run behind real time
 /// on a loaded machine.

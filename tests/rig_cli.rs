@@ -5,10 +5,8 @@
 use std::path::Path;
 use std::process::{Command, Stdio};
 
-mod support;
-use support::SimChild;
-#[path = "support/serial_group.rs"]
-mod serial_group;
+use crate::support::serial_group;
+use crate::support::SimChild;
 
 fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_mpc-rig")

@@ -12,13 +12,9 @@ use mpc_rig::rig::session::{measure, EndReason};
 use mpc_rig::rig::sim::mixed;
 use mpc_rig::rig::sim::plant::PlantConfig;
 
-mod support;
-use support::SimChild;
-#[path = "support/bench.rs"]
-mod bench;
-use bench::{dxl_sim, motion, options, repo, stepper_sim};
-#[path = "support/serial_group.rs"]
-mod serial_group;
+use crate::support::bench::{dxl_sim, motion, options, repo, stepper_sim};
+use crate::support::serial_group;
+use crate::support::SimChild;
 
 /// Holes in the CSV's device time at the recording's nominal rate: (gaps, missing).
 fn holes_on_disk(rec: &Recording) -> (u64, u64) {

@@ -6,12 +6,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
+use crate::support::serial_group;
 use mpc_rig::rig::backend::stepper::StepperBench;
 use mpc_rig::rig::config::RigConfig;
 use mpc_rig::rig::sim::pty::Pty;
 use mpc_rig::rig::RigError;
-#[path = "support/serial_group.rs"]
-mod serial_group;
 
 fn rig_on(path: &Path) -> RigConfig {
     let mut rig =

@@ -17,10 +17,8 @@ use mpc_rig::rig::session::{measure, EndReason, MeasureOptions, MeasureOutcome, 
 use mpc_rig::rig::sim::mixed::{spawn_with, SimMixedHandle};
 use mpc_rig::rig::sim::plant::PlantConfig;
 
-mod support;
-use support::SimChild;
-#[path = "support/serial_group.rs"]
-mod serial_group;
+use crate::support::serial_group;
+use crate::support::SimChild;
 
 fn repo(p: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(p)

@@ -14,11 +14,8 @@ use mpc_rig::rig::session::{measure, EndReason, MeasureOptions, MeasureOutcome};
 use mpc_rig::rig::sim::stepper::SimHandle;
 use mpc_rig::rig::RigError;
 
-#[path = "support/bench.rs"]
-mod bench;
-use bench::{dxl_sim, repo};
-#[path = "support/serial_group.rs"]
-mod serial_group;
+use crate::support::bench::{self, dxl_sim, repo};
+use crate::support::serial_group;
 
 fn motion_path() -> PathBuf {
     repo("data/motions/half-turn-2to1.toml")

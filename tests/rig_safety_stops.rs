@@ -13,11 +13,8 @@ use mpc_rig::rig::session::{measure, EndReason};
 use mpc_rig::rig::sim::mixed;
 use mpc_rig::rig::sim::plant::PlantConfig;
 
-#[path = "support/bench.rs"]
-mod bench;
-use bench::{motion, options, repo};
-#[path = "support/serial_group.rs"]
-mod serial_group;
+use crate::support::bench::{self, motion, options, repo};
+use crate::support::serial_group;
 
 /// The fault injected 2 s after the simulator starts: well into the run (setup takes a
 /// fraction of a second, the plan several seconds).

@@ -16,11 +16,8 @@ use mpc_rig::rig::recording::{load_meta, Recording};
 use mpc_rig::rig::sim::mixed;
 use mpc_rig::rig::sim::plant::PlantConfig;
 
-#[path = "support/bench.rs"]
-mod bench;
-use bench::{dxl_sim, motion, repo, stepper_sim};
-#[path = "support/serial_group.rs"]
-mod serial_group;
+use crate::support::bench::{dxl_sim, motion, repo, stepper_sim};
+use crate::support::serial_group;
 
 /// Run `measure` with `rig`, `ports` and `motion` into `dir`, send `signal` once a second of
 /// rows is on disk, and return the exit code and standard error.

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
+use crate::support::serial_group;
 use mpc_rig::motion::Motion;
 use mpc_rig::rig::backend::stepper::StepperBench;
 use mpc_rig::rig::config::RigConfig;
@@ -15,8 +16,6 @@ use mpc_rig::rig::session::{measure, EndReason, MeasureOptions, MeasureOutcome, 
 use mpc_rig::rig::sim::plant::PlantConfig;
 use mpc_rig::rig::sim::stepper::{self, Mechanics, SimHandle, SimStatus, SimStepperOptions};
 use mpc_rig::rig::RigError;
-#[path = "support/serial_group.rs"]
-mod serial_group;
 
 fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -15,11 +15,8 @@ use mpc_rig::rig::sim::mixed;
 use mpc_rig::rig::sim::plant::PlantConfig;
 use mpc_rig::rig::RigError;
 
-#[path = "support/bench.rs"]
-mod bench;
-use bench::{dxl_sim, motion, repo, stepper_sim};
-#[path = "support/serial_group.rs"]
-mod serial_group;
+use crate::support::bench::{self, dxl_sim, motion, repo, stepper_sim};
+use crate::support::serial_group;
 
 /// The accepted half-turn mechanism (N = 90, K = 4) the broken variants are made from.
 fn good_mechanism() -> Value {

@@ -2,10 +2,9 @@
 //! example with reduced settings (fewer samples, candidates and generations; the same code
 //! path as the defaults).
 
+use crate::support::serial_group;
 use assert_cmd::Command;
 use predicates::prelude::*;
-#[path = "support/serial_group.rs"]
-mod serial_group;
 
 const MOTION: &str = "data/motions/half-turn-2to1.toml";
 
