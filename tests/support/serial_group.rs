@@ -16,8 +16,9 @@
 //!
 //! The other tests (reading files, analysing synthetic recordings, exporting and reading
 //! back meshes, sessions against the in-memory fake bench, refusals of bad arguments before
-//! any device is opened or any work starts) do not take it: one of them at a time runs
-//! beside the member of the group that holds it, which costs that member little.
+//! any device is opened or any work starts) do not take it: they run beside the member
+//! of the group that holds it (with libtest's default of one thread per core, one of them
+//! at a time on a 2-core machine), which costs that member little.
 //!
 //! Taken by every test of `analysis_sim_bench`, `demo_e2e`, `dxl_backend`, `dxl_echo`,
 //! `dxl_measure`, `dxl_robotis_sdk`, `dxl_sim_dynamixel2`, `pico_board`, `rig_cli`,
