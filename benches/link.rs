@@ -21,9 +21,9 @@ use mpc_rig::rig::backend::mixed::MixedBench;
 use mpc_rig::rig::backend::stepper::StepperBench;
 use mpc_rig::rig::backend::{Driver, SampleStream};
 use mpc_rig::rig::config::RigConfig;
-#[path = "../tests/support/mod.rs"]
-mod support;
-use support::SimChild;
+#[path = "../tests/support/sim_child.rs"]
+mod sim_child;
+use sim_child::SimChild;
 
 use mpc_wire::{encode_frame_vec, Decoder, Report, Sample, SampleBatch, SampleFlags, SensorSet};
 

@@ -6,6 +6,7 @@ use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
+use crate::support::serial_group;
 use mpc_rig::analysis::{analyze_and_report, ReportOptions};
 use mpc_rig::motion::Motion;
 use mpc_rig::rig::session::{measure, MeasureOptions, TargetSpec};
@@ -22,6 +23,7 @@ fn repo(p: &str) -> std::path::PathBuf {
 /// half-turn ratio stays 2 within 0.05.
 #[test]
 fn plant_backlash_and_lag_are_recovered_from_a_simulated_session() {
+    let _serial = serial_group::lock();
     let motion_path = repo("data/motions/half-turn-2to1.toml");
     let motion = Motion::from_file(&motion_path).unwrap();
     let mut opts = SimDynamixelOptions::new(Arc::new(MotionTarget::new(motion).unwrap()));

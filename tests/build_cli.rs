@@ -1,6 +1,7 @@
 //! End-to-end tests of `mpc-rig build` that run in seconds: the refusals a user meets first.
 //! (A full build of a printable design takes minutes; see docs/build.md for its figures.)
 
+use crate::support::serial_group;
 use assert_cmd::Command;
 
 const TEST_MECHANISM: &str = "tests/data/mechanism/half-turn-2to1";
@@ -11,6 +12,7 @@ const TEST_MECHANISM: &str = "tests/data/mechanism/half-turn-2to1";
 /// joined (docs/build.md, "Printable designs").
 #[test]
 fn a_design_without_room_is_refused_whole_and_writes_nothing() {
+    let _serial = serial_group::lock();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("parts");
     let assert = Command::cargo_bin("mpc-rig")

@@ -3,6 +3,7 @@
 //! real session, analysis and report; then the cached mechanism is reused and an injected
 //! backlash shows up in the report.
 
+use crate::support::serial_group;
 use std::path::{Path, PathBuf};
 
 fn demo(out: &Path, extra: &[&str]) -> (std::process::Output, String) {
@@ -32,6 +33,7 @@ fn summary_of(stdout: &str) -> serde_json::Value {
 /// run, and `--fault backlash=2` yields a driver-side backlash of 2° ± 0.5°.
 #[test]
 fn demo_end_to_end_with_cache_and_backlash() {
+    let _serial = serial_group::lock();
     let tmp = tempfile::tempdir().unwrap();
     let (out, stdout) = demo(tmp.path(), &[]);
     assert!(

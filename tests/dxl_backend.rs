@@ -7,6 +7,7 @@ use std::path::Path;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use crate::support::serial_group;
 use mpc_rig::rig::backend::dynamixel::DynamixelBench;
 use mpc_rig::rig::backend::{Driver, SampleStream};
 use mpc_rig::rig::config::RigConfig;
@@ -67,6 +68,7 @@ fn run_until_the_stream_ends(
 /// θ = φ + 0.3·sin φ read through the calibration, and shutdown leaves torque off.
 #[test]
 fn streams_a_constant_speed_run_with_the_follower_on_the_target_law() {
+    let _serial = serial_group::lock();
     let sim = sim_with(PlantConfig::default());
     let rig = rig(sim.path());
     let mut bench = DynamixelBench::from_rig(&rig).expect("bench opens");
@@ -133,6 +135,7 @@ fn streams_a_constant_speed_run_with_the_follower_on_the_target_law() {
 /// rig's max speed and the servo's Velocity Limit refuse too fast a run.
 #[test]
 fn speed_conversion_and_safety_refusals() {
+    let _serial = serial_group::lock();
     let sim = sim_with(PlantConfig::default());
     let mut rig = rig(sim.path());
     let mpc_rig::rig::config::DriverConfig::Dynamixel(d) = &mut rig.driver else {
@@ -156,6 +159,7 @@ fn speed_conversion_and_safety_refusals() {
 /// position_deg reads it back.
 #[test]
 fn extended_position_move_to_lands_on_target() {
+    let _serial = serial_group::lock();
     let sim = sim_with(PlantConfig::default());
     let mut rig = rig(sim.path());
     let mpc_rig::rig::config::DriverConfig::Dynamixel(d) = &mut rig.driver else {
@@ -188,6 +192,7 @@ fn extended_position_move_to_lands_on_target() {
 /// the rig file's model.
 #[test]
 fn wrong_id_and_wrong_model_are_explained() {
+    let _serial = serial_group::lock();
     let sim = sim_with(PlantConfig::default());
     let mut rig = rig(sim.path());
     let mpc_rig::rig::config::DriverConfig::Dynamixel(d) = &mut rig.driver else {
@@ -215,6 +220,7 @@ fn wrong_id_and_wrong_model_are_explained() {
 /// disconnection (not a hang, not a panic) and dropping the bench afterwards is clean.
 #[test]
 fn lost_bus_is_reported_as_disconnected() {
+    let _serial = serial_group::lock();
     let plant = PlantConfig::from_faults(&["disconnect_at_s=1.0"]).unwrap();
     let sim = sim_with(plant);
     let rig = rig(sim.path());
@@ -233,6 +239,7 @@ fn lost_bus_is_reported_as_disconnected() {
 /// 0x1, got 0x2"; seen once in CI under load).
 #[test]
 fn late_replies_after_a_stall_do_not_desynchronize_the_stream() {
+    let _serial = serial_group::lock();
     let plant = PlantConfig::from_faults(&["stall_at_s=1.0", "stall_s=0.06"]).unwrap();
     let sim = sim_with(plant);
     let rig = rig(sim.path());
@@ -254,6 +261,7 @@ fn late_replies_after_a_stall_do_not_desynchronize_the_stream() {
 /// with a device clock that kept pace with the host's.
 #[test]
 fn a_driver_reboot_ends_the_stream_with_its_reason() {
+    let _serial = serial_group::lock();
     let sim = sim_with(PlantConfig::from_faults(&["reboot_at_s=1.5"]).unwrap());
     let rig = rig(sim.path());
     let mut bench = DynamixelBench::from_rig(&rig).unwrap();
@@ -299,6 +307,7 @@ fn a_driver_reboot_ends_the_stream_with_its_reason() {
 /// failures are counted as gaps/CRC errors and flagged on the next sample, nothing panics.
 #[test]
 fn corrupted_link_is_counted_not_fatal() {
+    let _serial = serial_group::lock();
     let plant =
         PlantConfig::from_faults(&["corrupt_prob=0.002", "drop_prob=0.001", "seed=7"]).unwrap();
     let sim = sim_with(plant);
@@ -325,6 +334,7 @@ fn corrupted_link_is_counted_not_fatal() {
 /// profile, watchdog, indirect block — and shuts down with torque off.
 #[test]
 fn setup_survives_the_noise_the_stream_survives() {
+    let _serial = serial_group::lock();
     for seed in 1..=10 {
         let sim = sim_with(
             PlantConfig::from_faults(&["corrupt_prob=0.01", &format!("seed={seed}")]).unwrap(),

@@ -5,8 +5,8 @@
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-mod support;
-use support::SimChild;
+use crate::support::serial_group;
+use crate::support::SimChild;
 
 /// Repeat a transaction that timed out (up to 5 attempts): on a busy machine the simulator
 /// thread may get the CPU later than `dynamixel2`'s fixed 34 ms reply timeout.
@@ -48,6 +48,7 @@ fn serve(extra: &[&str]) -> SimChild {
 /// Protocol 2.0 host finds the XL430 driver and follower on it.
 #[test]
 fn prints_pty_path_and_serves_the_bus() {
+    let _serial = serial_group::lock();
     let served = serve(&[]);
     assert!(
         served.first_line.starts_with("/dev/"),
@@ -63,6 +64,7 @@ fn prints_pty_path_and_serves_the_bus() {
 /// `disconnect_at_s` and the port stops answering.
 #[test]
 fn custom_ids_and_configured_disconnect() {
+    let _serial = serial_group::lock();
     let mut served = serve(&[
         "--driver-id",
         "5",

@@ -16,8 +16,8 @@ use mpc_rig::rig::config::RigConfig;
 use mpc_rig::rig::sim::pty::Pty;
 use mpc_rig::rig::RigError;
 
-mod support;
-use support::SimChild;
+use crate::support::serial_group;
+use crate::support::SimChild;
 
 fn repo(p: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(p)
@@ -47,6 +47,7 @@ fn measure(rig: &str, ports: &[&str], motion: &str, out: &Path) -> (bool, String
 /// with a message naming the echo and the port, and nothing panics.
 #[test]
 fn an_echoing_adapter_is_refused_without_a_panic() {
+    let _serial = serial_group::lock();
     let tmp = tempfile::tempdir().unwrap();
     let dxl = SimChild::spawn([
         "sim-device",
@@ -104,6 +105,7 @@ fn short_status(id: u8) -> Vec<u8> {
 /// that names the library's panic after the usual retries, and the process goes on.
 #[test]
 fn a_reply_the_library_cannot_parse_is_an_error_not_a_dead_thread() {
+    let _serial = serial_group::lock();
     let mut pty = Pty::open().unwrap();
     let path = pty.path().to_path_buf();
     let stop = Arc::new(AtomicBool::new(false));

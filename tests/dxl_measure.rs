@@ -15,8 +15,8 @@ use mpc_rig::rig::session::{self, EndReason, MeasureOptions, TargetSpec};
 use mpc_rig::rig::sim::dynamixel::{spawn, MotionTarget, SimDynamixelOptions};
 use mpc_rig::rig::sim::plant::PlantConfig;
 
-mod support;
-use support::SimChild;
+use crate::support::serial_group;
+use crate::support::SimChild;
 
 fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -53,6 +53,7 @@ fn sim_process(faults: &[&str]) -> SimChild {
 /// and the analysis at the end writes its report with a small error for an ideal plant.
 #[test]
 fn measure_cli_records_forward_and_reverse_and_analyses() {
+    let _serial = serial_group::lock();
     let sim = sim_process(&[]);
     let out = tempfile::tempdir().unwrap();
     let dir = out.path().join("rec");
@@ -105,6 +106,7 @@ fn measure_cli_records_forward_and_reverse_and_analyses() {
 /// failures counted, and the driver servo ends with torque off and at rest.
 #[test]
 fn session_with_link_faults_survives_and_stops_the_motor() {
+    let _serial = serial_group::lock();
     let motion = Motion::from_file(&motion_file()).unwrap();
     let mut opts = SimDynamixelOptions::new(Arc::new(MotionTarget::new(motion).unwrap()));
     opts.plant = PlantConfig::from_faults(&[
@@ -154,6 +156,7 @@ fn session_with_link_faults_survives_and_stops_the_motor() {
 /// resumes the run, and the session finishes with the drop-out counted.
 #[test]
 fn brief_dropout_rearms_the_watchdog_and_finishes() {
+    let _serial = serial_group::lock();
     let motion = Motion::from_file(&motion_file()).unwrap();
     let mut opts = SimDynamixelOptions::new(Arc::new(MotionTarget::new(motion).unwrap()));
     opts.plant = PlantConfig::from_faults(&["dropout_at_s=1.5", "dropout_s=0.6"]).unwrap();
@@ -195,6 +198,7 @@ fn brief_dropout_rearms_the_watchdog_and_finishes() {
 /// marks it incomplete with the reason, says so clearly and exits with code 5 (`EXIT_DISCONNECTED`; 3 is a missed tolerance).
 #[test]
 fn unplug_mid_run_keeps_the_recording_and_exits_disconnected() {
+    let _serial = serial_group::lock();
     let sim = sim_process(&["disconnect_at_s=2.5"]);
     let out = tempfile::tempdir().unwrap();
     let dir = out.path().join("unplugged");

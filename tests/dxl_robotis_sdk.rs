@@ -6,6 +6,7 @@
 use std::process::Command;
 use std::sync::Arc;
 
+use crate::support::serial_group;
 use mpc_rig::rig::sim::dynamixel::{spawn, SimDynamixelOptions};
 use mpc_rig::rig::sim::plant::WobbleTurn;
 
@@ -26,6 +27,7 @@ fn sdk_available() -> Result<(), String> {
 /// implementation: the script exits 0 only if every step behaves like a real XL430 pair.
 #[test]
 fn robotis_python_sdk_talks_to_the_simulator() {
+    let _serial = serial_group::lock();
     if let Err(why) = sdk_available() {
         eprintln!("SKIPPED robotis_python_sdk_talks_to_the_simulator: {why}");
         return;

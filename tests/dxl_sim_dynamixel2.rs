@@ -5,6 +5,7 @@
 use std::sync::Arc;
 use std::time::Duration;
 
+use crate::support::serial_group;
 use mpc_rig::rig::sim::dynamixel::control_table::{addr, mode};
 use mpc_rig::rig::sim::dynamixel::{spawn, SimDynamixelOptions};
 use mpc_rig::rig::sim::plant::WobbleTurn;
@@ -40,6 +41,7 @@ fn open(path: &std::path::Path) -> dynamixel2::Bus<Vec<u8>, Vec<u8>> {
 /// reporting the XL430-W250 model number 1060.
 #[test]
 fn dynamixel2_scan_and_ping_find_two_xl430() {
+    let _serial = serial_group::lock();
     let sim = sim();
     let mut bus = open(sim.path());
     // A scan waits a fixed time for all replies; on a busy machine repeat it.
@@ -66,6 +68,7 @@ fn dynamixel2_scan_and_ping_find_two_xl430() {
 /// read-only item refused.
 #[test]
 fn dynamixel2_read_write_and_errors() {
+    let _serial = serial_group::lock();
     let sim = sim();
     let mut bus = open(sim.path());
     assert_eq!(retry!(bus.read_u8(1, addr::BAUD_RATE)).unwrap().data, 1);
@@ -102,6 +105,7 @@ fn dynamixel2_read_write_and_errors() {
 /// driver turn for this law), and the realtime tick advances in milliseconds.
 #[test]
 fn dynamixel2_sync_read_follower_tracks_driver() {
+    let _serial = serial_group::lock();
     let sim = sim();
     let mut bus = open(sim.path());
     retry!(bus.write_u8(1, addr::OPERATING_MODE, mode::VELOCITY)).unwrap();

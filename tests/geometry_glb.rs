@@ -12,8 +12,7 @@ use gltf::buffer::Source;
 use mpc_rig::geometry::io::gltf::{glb_bytes, write_glb};
 use mpc_rig::geometry::{Mesh, Scene};
 
-#[path = "support/scenes.rs"]
-mod scenes;
+use crate::support::scenes;
 
 /// Keys of the test scene: 5° of driver turn per key.
 const KEYS: usize = 72;

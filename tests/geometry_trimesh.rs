@@ -8,8 +8,7 @@ use std::process::Command;
 use mpc_rig::geometry::io::gltf::write_glb;
 use mpc_rig::geometry::io::threemf::{write_3mf, Bed, Part};
 
-#[path = "support/scenes.rs"]
-mod scenes;
+use crate::support::scenes;
 
 fn trimesh_available() -> Result<(), String> {
     match Command::new("python3")

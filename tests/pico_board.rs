@@ -8,13 +8,15 @@
 //! Needs the release image (`cd firmware/rp2040 && cargo build --release`), the boot ROM
 //! (`cd firmware/emu/rom && cargo build --release`), Node.js and `npm ci` in firmware/emu;
 //! without them every test says what is missing and passes without running, unless
-//! `MPC_PICO_REQUIRED` is set, as in CI's emulated-board step, which builds them first. The
-//! boards run one at a time so that each keeps pace with the wall clock.
+//! `MPC_PICO_REQUIRED` is set, as in CI's emulated-board step, which builds them first. Each
+//! test holds the serial group (`support/serial_group.rs`), so the boards run one at a time
+//! and beside no other real-time or CPU-heavy test: each needs most of a core to keep pace
+//! with the wall clock.
 
 use std::path::Path;
-use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
+use crate::support::serial_group;
 use mpc_rig::motion::Motion;
 use mpc_rig::rig::sim::pico::{self, BoardFiles, PicoHandle, PicoStatus, SimPicoOptions};
 use mpc_rig::rig::sim::plant::PlantConfig;
@@ -23,9 +25,6 @@ use mpc_wire::{
     encode_frame_vec, AckCode, Command, Config, Decoder, Event, EventKind, Report, Sample,
     SensorSet, ESTOP_BY_INPUT, PROTOCOL_VERSION,
 };
-
-/// One emulated board at a time (each needs most of a core to keep real time).
-static ONE_BOARD: Mutex<()> = Mutex::new(());
 
 /// Longest wait for a reply, wall clock: generous, the emulator may run behind real time
 /// on a loaded machine.
@@ -232,7 +231,7 @@ fn status_after(board: &PicoHandle, t_s: f64) -> PicoStatus {
 /// puts it (a wrong STEP, DIR or EN pin moves nothing, the wrong way, or disabled).
 #[test]
 fn sensors_pins_and_serial_number_as_wired() {
-    let _one = ONE_BOARD.lock().unwrap_or_else(|p| p.into_inner());
+    let _serial = serial_group::lock();
     let Some(files) = files() else { return };
     let b = board(files, all_sensors(), 0x0123_4567_89ab_cdef);
     let mut host = Host::open(b.path());
@@ -281,7 +280,7 @@ fn sensors_pins_and_serial_number_as_wired() {
 /// (device clock), disables the driver at its EN input, and no step follows.
 #[test]
 fn watchdog_stops_the_motor_when_the_host_goes_silent() {
-    let _one = ONE_BOARD.lock().unwrap_or_else(|p| p.into_inner());
+    let _serial = serial_group::lock();
     let Some(files) = files() else { return };
     let b = board(files, Mechanics::default(), pico::DEFAULT_FLASH_ID);
     let mut host = Host::open(b.path());
@@ -318,7 +317,7 @@ fn watchdog_stops_the_motor_when_the_host_goes_silent() {
 /// the button is pressed and can be after it is released (the motor staying disabled).
 #[test]
 fn estop_input_stops_and_latches() {
-    let _one = ONE_BOARD.lock().unwrap_or_else(|p| p.into_inner());
+    let _serial = serial_group::lock();
     let Some(files) = files() else { return };
     let b = board(files, Mechanics::default(), pico::DEFAULT_FLASH_ID);
     let mut host = Host::open(b.path());
@@ -359,7 +358,7 @@ fn estop_input_stops_and_latches() {
 /// refuses a configuration that asks for one.
 #[test]
 fn missing_sensors_at_boot_are_not_capabilities() {
-    let _one = ONE_BOARD.lock().unwrap_or_else(|p| p.into_inner());
+    let _serial = serial_group::lock();
     let Some(files) = files() else { return };
     let none = Mechanics {
         as5600: false,

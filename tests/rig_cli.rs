@@ -5,8 +5,8 @@
 use std::path::Path;
 use std::process::{Command, Stdio};
 
-mod support;
-use support::SimChild;
+use crate::support::serial_group;
+use crate::support::SimChild;
 
 fn bin() -> &'static str {
     env!("CARGO_BIN_EXE_mpc-rig")
@@ -49,6 +49,7 @@ fn measure(sim: &SimChild, out: &Path) -> std::process::Output {
 /// Guards: the simulator prints a usable pseudo-terminal path on its first line.
 #[test]
 fn sim_device_prints_pty_path_first() {
+    let _serial = serial_group::lock();
     let sim = start_sim(&[]);
     assert!(
         sim.first_line.starts_with("/dev/pts/"),
@@ -64,6 +65,7 @@ fn sim_device_prints_pty_path_first() {
 /// incomplete but readable recording.
 #[test]
 fn measure_reports_unplug_with_exit_code_and_kept_recording() {
+    let _serial = serial_group::lock();
     let dir = tempfile::tempdir().unwrap();
     let rec = dir.path().join("rec");
     let sim = start_sim(&["disconnect_at_s=1.5"]);
@@ -86,6 +88,7 @@ fn measure_reports_unplug_with_exit_code_and_kept_recording() {
 /// a message naming both protocol versions.
 #[test]
 fn measure_reports_version_mismatch() {
+    let _serial = serial_group::lock();
     let dir = tempfile::tempdir().unwrap();
     let sim = start_sim(&["protocol_version=7"]);
     let out = measure(&sim, &dir.path().join("rec"));
@@ -102,6 +105,7 @@ fn measure_reports_version_mismatch() {
 /// analyzable, marked incomplete.
 #[test]
 fn host_crash_leaves_valid_recording_and_watchdog_stops_motor() {
+    let _serial = serial_group::lock();
     use mpc_rig::motion::Motion;
     use mpc_rig::rig::sim::plant::PlantConfig;
     use mpc_rig::rig::sim::stepper::{self, Mechanics, SimStepperOptions};

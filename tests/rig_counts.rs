@@ -12,11 +12,9 @@ use mpc_rig::rig::session::{measure, EndReason};
 use mpc_rig::rig::sim::mixed;
 use mpc_rig::rig::sim::plant::PlantConfig;
 
-mod support;
-use support::SimChild;
-#[path = "support/bench.rs"]
-mod bench;
-use bench::{dxl_sim, motion, options, repo, stepper_sim};
+use crate::support::bench::{dxl_sim, motion, options, repo, stepper_sim};
+use crate::support::serial_group;
+use crate::support::SimChild;
 
 /// Holes in the CSV's device time at the recording's nominal rate: (gaps, missing).
 fn holes_on_disk(rec: &Recording) -> (u64, u64) {
@@ -41,6 +39,7 @@ fn assert_counts_match_disk(dir: &Path) -> (u64, u64) {
 /// disk, counted exactly in the sidecar.
 #[test]
 fn stepper_counts_match_the_csv() {
+    let _serial = serial_group::lock();
     let sim = stepper_sim("half-turn-2to1", &["drop_prob=0.002", "seed=5"]);
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("rec");
@@ -62,6 +61,7 @@ fn stepper_counts_match_the_csv() {
 /// hole on disk is counted, for each.
 #[test]
 fn dynamixel_counts_match_the_csv() {
+    let _serial = serial_group::lock();
     let tmp = tempfile::tempdir().unwrap();
     for (faults, name) in [
         (&["dropout_at_s=1.5", "dropout_s=1.0"][..], "dropout"),
@@ -92,6 +92,7 @@ fn dynamixel_counts_match_the_csv() {
 /// board's link its holes are counted exactly (bus losses are bridged, not holes).
 #[test]
 fn mixed_counts_match_the_csv() {
+    let _serial = serial_group::lock();
     let rig = RigConfig::load(&repo("rigs/sim-dynamixel-1r1t.toml")).unwrap();
     let sim = mixed::spawn_with(
         &rig,
@@ -120,6 +121,7 @@ fn mixed_counts_match_the_csv() {
 /// counts no complete cycle (it printed a ratio from "0 cycles" before).
 #[test]
 fn a_run_missing_most_samples_is_degraded() {
+    let _serial = serial_group::lock();
     let sim = SimChild::spawn([
         "sim-device".into(),
         "stepper".into(),

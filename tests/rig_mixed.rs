@@ -17,8 +17,8 @@ use mpc_rig::rig::session::{measure, EndReason, MeasureOptions, MeasureOutcome, 
 use mpc_rig::rig::sim::mixed::{spawn_with, SimMixedHandle};
 use mpc_rig::rig::sim::plant::PlantConfig;
 
-mod support;
-use support::SimChild;
+use crate::support::serial_group;
+use crate::support::SimChild;
 
 fn repo(p: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(p)
@@ -104,6 +104,7 @@ fn analyse_ideal(run: &Run, label: &str) -> mpc_rig::analysis::Summary {
 /// driver per ms, so under 1.7 ms).
 #[test]
 fn mixed_bench_measures_a_3r_follower_turned_by_a_servo() {
+    let _serial = serial_group::lock();
     let run = run_session(
         "rigs/sim-dynamixel-imu.toml",
         "data/motions/cone-sweep.toml",
@@ -133,6 +134,7 @@ fn mixed_bench_measures_a_3r_follower_turned_by_a_servo() {
 /// clock misalignment showing as phase lag.
 #[test]
 fn mixed_bench_measures_a_1r1t_follower_turned_by_a_servo() {
+    let _serial = serial_group::lock();
     let run = run_session(
         "rigs/sim-dynamixel-1r1t.toml",
         "data/motions/screw-bob.toml",
@@ -150,6 +152,7 @@ fn mixed_bench_measures_a_1r1t_follower_turned_by_a_servo() {
 /// the still-connected bus is left with its torque off.
 #[test]
 fn unplugging_the_sensor_board_keeps_the_recording_and_stops_the_servo() {
+    let _serial = serial_group::lock();
     let run = run_session(
         "rigs/sim-dynamixel-imu.toml",
         "data/motions/cone-sweep.toml",
@@ -179,6 +182,7 @@ fn bin() -> std::process::Command {
 /// the port does not hold the servos the rig describes.
 #[test]
 fn measure_cli_against_sim_device_mixed_and_swapped_ports() {
+    let _serial = serial_group::lock();
     let motion = repo("data/motions/figure-eight.toml");
     let sim = SimChild::spawn([
         "sim-device".into(),
@@ -228,15 +232,13 @@ fn measure_cli_against_sim_device_mixed_and_swapped_ports() {
     );
 }
 
-/// Guards a brief USB drop of the sensor board on a mixed bench: the board's link
-/// reconnects, the session still finishes complete, the reconnect is counted and marked on
-/// a row, and the bus's driver angle stays interpolated across it.
 /// Guards a driver servo that reboots mid-run on a mixed bench (a brown-out on the bus
 /// side): the run ends as a disconnection whose reason names the reboot, rather than going
 /// on with the servo's zeroed block as the driver angle; the rows before it are kept and
 /// the rebooted driver is left with torque off.
 #[test]
 fn a_driver_reboot_on_a_mixed_bench_ends_the_run_with_its_reason() {
+    let _serial = serial_group::lock();
     let run = run_session_with(
         "rigs/sim-dynamixel-imu.toml",
         "data/motions/cone-sweep.toml",
@@ -259,8 +261,12 @@ fn a_driver_reboot_on_a_mixed_bench_ends_the_run_with_its_reason() {
     );
 }
 
+/// Guards a brief USB drop of the sensor board on a mixed bench: the board's link
+/// reconnects, the session still finishes complete, the reconnect is counted and marked on
+/// a row, and the bus's driver angle stays interpolated across it.
 #[test]
 fn a_brief_board_dropout_is_bridged() {
+    let _serial = serial_group::lock();
     let run = run_session(
         "rigs/sim-dynamixel-imu.toml",
         "data/motions/cone-sweep.toml",

@@ -16,9 +16,8 @@ use mpc_rig::rig::recording::{load_meta, Recording};
 use mpc_rig::rig::sim::mixed;
 use mpc_rig::rig::sim::plant::PlantConfig;
 
-#[path = "support/bench.rs"]
-mod bench;
-use bench::{dxl_sim, motion, repo, stepper_sim};
+use crate::support::bench::{dxl_sim, motion, repo, stepper_sim};
+use crate::support::serial_group;
 
 /// Run `measure` with `rig`, `ports` and `motion` into `dir`, send `signal` once a second of
 /// rows is on disk, and return the exit code and standard error.
@@ -81,6 +80,7 @@ fn assert_cancelled_recording(dir: &Path) {
 /// simulated motor disabled and still.
 #[test]
 fn sigterm_stops_a_stepper_run_like_ctrl_c() {
+    let _serial = serial_group::lock();
     let sim = stepper_sim::<&str>("half-turn-2to1", &[]);
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("rec");
@@ -103,6 +103,7 @@ fn sigterm_stops_a_stepper_run_like_ctrl_c() {
 /// and flushed, the driver servo's torque off and its velocity 0.
 #[test]
 fn sighup_stops_a_dynamixel_run_like_ctrl_c() {
+    let _serial = serial_group::lock();
     let sim = dxl_sim::<&str>("half-turn-2to1", &[]);
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("rec");
@@ -125,6 +126,7 @@ fn sighup_stops_a_dynamixel_run_like_ctrl_c() {
 /// recording cancelled and flushed, the driver servo stopped with its torque off.
 #[test]
 fn sigterm_stops_a_mixed_run_like_ctrl_c() {
+    let _serial = serial_group::lock();
     let rig = RigConfig::load(&repo("rigs/sim-dynamixel-imu.toml")).unwrap();
     let sim = mixed::spawn(&rig, motion("cone-sweep"), PlantConfig::default()).unwrap();
     let tmp = tempfile::tempdir().unwrap();

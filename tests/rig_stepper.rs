@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
+use crate::support::serial_group;
 use mpc_rig::motion::Motion;
 use mpc_rig::rig::backend::stepper::StepperBench;
 use mpc_rig::rig::config::RigConfig;
@@ -64,6 +65,7 @@ fn assert_motor_stopped(status: &SimStatus) {
 /// stopped.
 #[test]
 fn full_session_against_simulated_stepper_bench() {
+    let _serial = serial_group::lock();
     let dir = tempfile::tempdir().unwrap();
     let sim = sim(&[]);
     let out = session(&sim, dir.path(), 1, true);
@@ -115,6 +117,7 @@ fn full_session_against_simulated_stepper_bench() {
 /// recording, and ends with the motor stopped.
 #[test]
 fn faulty_link_session_survives_and_counts() {
+    let _serial = serial_group::lock();
     let dir = tempfile::tempdir().unwrap();
     let sim = sim(&[
         "drop_prob=0.0005",
@@ -143,6 +146,7 @@ fn faulty_link_session_survives_and_counts() {
 /// first sample after it is flagged.
 #[test]
 fn brief_unplug_reconnects_without_losing_recording() {
+    let _serial = serial_group::lock();
     let dir = tempfile::tempdir().unwrap();
     let sim = sim(&["dropout_at_s=1.5", "dropout_s=0.4"]);
     let out = session(&sim, dir.path(), 2, false);
@@ -160,6 +164,7 @@ fn brief_unplug_reconnects_without_losing_recording() {
 /// samples recorded so far in a valid recording marked incomplete, and does not panic.
 #[test]
 fn unplug_mid_run_keeps_incomplete_recording() {
+    let _serial = serial_group::lock();
     let dir = tempfile::tempdir().unwrap();
     let sim = sim(&["disconnect_at_s=1.5"]);
     let out = session(&sim, dir.path(), 3, false);
@@ -186,6 +191,7 @@ fn unplug_mid_run_keeps_incomplete_recording() {
 /// a message naming both versions and what to do.
 #[test]
 fn version_mismatch_is_reported_clearly() {
+    let _serial = serial_group::lock();
     let sim = sim(&["protocol_version=9"]);
     let mut rig = RigConfig::load(&root().join("rigs/sim-stepper.toml")).unwrap();
     rig.apply_port_overrides(&[sim.path().display().to_string()])
@@ -208,6 +214,7 @@ fn version_mismatch_is_reported_clearly() {
 /// IMU world frame, measured at home), with repeated IMU values flagged stale.
 #[test]
 fn imu_bench_records_follower_orientation() {
+    let _serial = serial_group::lock();
     let dir = tempfile::tempdir().unwrap();
     let rig_path = root().join("rigs/pico-bno055.toml");
     let motion_file = root().join("data/motions/figure-eight.toml");

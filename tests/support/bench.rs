@@ -1,7 +1,5 @@
 //! Simulated benches and session options shared by the integration tests of the bench's
-//! safety and data integrity; a test crate says `#[path = "support/bench.rs"] mod bench;`
-//! and uses the part it needs.
-#![allow(dead_code)]
+//! safety and data integrity; each uses the part it needs.
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;

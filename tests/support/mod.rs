@@ -1,46 +1,19 @@
-//! Helpers shared by the integration tests; each test crate that needs them says
-//! `mod support;` (the link benchmark includes this file by `#[path]`).
+//! Helpers shared by the integration tests, which are all modules of one test binary
+//! (`tests/main.rs`):
+//!
+//! - [`serial_group`]: the lock that keeps the real-time bench tests and the CPU-heavy
+//!   tests from running beside each other; its doc gives the rule and lists its members.
+//! - [`SimChild`]: an `mpc-rig sim-device` child process, killed on drop.
+//! - [`bench`]: simulated benches and session options for the tests of the bench's safety
+//!   and data integrity.
+//! - [`scenes`]: a small animated scene for the geometry export tests.
+//!
+//! Python scripts run by tests live here too: `dxl_robotis_sdk_check.py`
+//! (`dxl_robotis_sdk`) and `trimesh_check.py` (`geometry_trimesh`).
 
-use std::ffi::OsStr;
-use std::io::{BufRead, BufReader};
-use std::process::{Child, Command, Stdio};
+pub mod bench;
+pub mod scenes;
+pub mod serial_group;
+mod sim_child;
 
-/// A `mpc-rig sim-device …` child process and the first line it printed (the
-/// pseudo-terminal path, or `NAME=PATH` pairs for a mixed bench); killed on drop.
-pub struct SimChild {
-    /// The simulator process.
-    pub child: Child,
-    /// Its first line of standard output, trimmed.
-    pub first_line: String,
-}
-
-impl SimChild {
-    /// Run `mpc-rig` with `args` (starting with `sim-device`) and wait for its first line.
-    pub fn spawn<I, S>(args: I) -> SimChild
-    where
-        I: IntoIterator<Item = S>,
-        S: AsRef<OsStr>,
-    {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_mpc-rig"))
-            .args(args)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("mpc-rig runs");
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().expect("piped stdout"))
-            .read_line(&mut line)
-            .expect("the simulator prints its first line");
-        SimChild {
-            child,
-            first_line: line.trim().to_string(),
-        }
-    }
-}
-
-impl Drop for SimChild {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
+pub use sim_child::SimChild;

@@ -2,7 +2,7 @@
 //! plate, an orange driver (a torus with a box lug) turning once about the z axis through
 //! (30, 0, 0), and a blue follower (a sphere on an arm) swinging ±40° about z while sliding
 //! 5 mm up and down, over a period of 2 s in `keys` steps (the last key equals the first).
-//! Included by `#[path]` from the geometry test crates.
+//! Used by the geometry export tests (`geometry_glb`, `geometry_trimesh`).
 
 use mpc_rig::geometry::primitive_meshes::{cuboid, torus, uv_sphere};
 use mpc_rig::geometry::{Mesh, Pose, Scene, ScenePart};
