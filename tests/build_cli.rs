@@ -1,5 +1,6 @@
-//! End-to-end tests of `mpc-rig build` that run in seconds: the refusals a user meets first.
-//! (A full build of a printable design takes minutes; see docs/build.md for its figures.)
+//! End-to-end tests of `mpc-rig build` that stop early: the refusals a user meets first (the
+//! refused build plans the parts before it refuses, 10–20 s). A full build of a printable design
+//! takes many minutes; see docs/build.md for its figures.
 
 use crate::support::serial_group;
 use assert_cmd::Command;
