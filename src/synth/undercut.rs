@@ -123,23 +123,7 @@ pub fn cut_contacts(
     if n < 3 || n2.len() != n || c1.len() != n || poses.len() != n {
         return vec![false; n];
     }
-    let sections: Vec<Section> = (0..n).map(|s| Section::new(c2, n2, s)).collect();
-    let reach = rim.depth + rim.half_width;
-    let chunks: Vec<(V3<f64>, f64, std::ops::Range<usize>)> = (0..n)
-        .step_by(CHUNK)
-        .map(|lo| {
-            let r = lo..(lo + CHUNK).min(n);
-            let c = r
-                .clone()
-                .fold(V3::zero(), |acc, s| acc + V3::from(c2[s]))
-                .scalec(1.0 / r.len() as f64);
-            let rad = r
-                .clone()
-                .map(|s| (V3::from(c2[s]) - c).norm())
-                .fold(0.0, f64::max);
-            (c, rad + reach, r)
-        })
-        .collect();
+    let rims = Rims::new(c2, n2, rim.depth + rim.half_width);
     let mut cut = vec![false; n];
     for pose in poses {
         for (u, flag) in cut.iter_mut().enumerate() {
@@ -147,9 +131,7 @@ pub fn cut_contacts(
                 continue;
             }
             let y = pose.apply(V3::from(c1[u]));
-            *flag = chunks.iter().any(|(c, r, range)| {
-                (y - *c).norm2() <= r * r && range.clone().any(|s| sections[s].cuts(y, rim))
-            });
+            *flag = rims.any(y, |s| s.cuts(y, rim));
         }
     }
     cut
@@ -255,9 +237,13 @@ impl Rims {
 
     /// Whether `y` (follower frame) lies within `margin` of the rim's half ellipse.
     fn near(&self, y: V3<f64>, rim: &RimSection, margin: f64) -> bool {
+        self.any(y, |s| s.near(y, rim, margin))
+    }
+
+    /// Whether `test` holds for a section whose chunk's sphere holds `y` (follower frame).
+    fn any(&self, y: V3<f64>, test: impl Fn(&Section) -> bool) -> bool {
         self.chunks.iter().any(|(c, r, range)| {
-            (y - *c).norm2() <= r * r
-                && range.clone().any(|s| self.sections[s].near(y, rim, margin))
+            (y - *c).norm2() <= r * r && range.clone().any(|s| test(&self.sections[s]))
         })
     }
 }
