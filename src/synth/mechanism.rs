@@ -245,7 +245,7 @@ pub struct SolveInfo {
     #[serde(default)]
     pub axis_room: Option<f64>,
     /// Whether synthesis judged closure with only the contacts the printed rims keep (see
-    /// [`undercut`](super::undercut)); absent in older files (false). `synth --check`
+    /// [`undercut`]); absent in older files (false). `synth --check`
     /// requires that closure when true.
     #[serde(default)]
     pub printed_rim: bool,
@@ -485,7 +485,7 @@ impl Mechanism {
 
     /// Per pair and sample, whether the printed parts lose that contact: the pair's own
     /// printed rim (at the file's `scale_mm`) cuts it at another instant, or it lies on an
-    /// island of band no strut can leave (see [`undercut`](super::undercut)).
+    /// island of band no strut can leave (see [`undercut`]).
     pub fn cut_contacts(&self) -> Vec<Vec<bool>> {
         let n = self.follower_motion.len();
         let poses: Vec<DriverToFollower> = self
