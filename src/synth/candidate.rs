@@ -542,18 +542,10 @@ fn oversampled(pb: &PairProblem, x: &[f64]) -> (f64, Vec<Option<[f64; 3]>>, Vec<
     (residual, ntilde, robust)
 }
 
-/// Drop from the oversampled closure data the contacts that the candidate's own printed rim
-/// cuts at another instant, or leaves on an island of band ([`undercut::cut_contacts`] and
-/// [`undercut::island_contacts`] on the N samples): an oversampled
-/// instant is dropped when either sample around it is cut, so a lost window is never
-/// narrowed by the interpolation.
-fn drop_cut_contacts(
-    pb: &PairProblem,
-    x: &[f64],
-    rim: &undercut::RimSection,
-    ntilde: &mut [Option<[f64; 3]>],
-    robust: &mut [bool],
-) {
+/// Per sample, whether the printed parts lose the candidate's contact: its own printed rim
+/// cuts it at another instant or leaves it on an island of band
+/// ([`undercut::lost_contacts`] on the N samples).
+fn lost_samples(pb: &PairProblem, x: &[f64], rim: &undercut::RimSection) -> Vec<bool> {
     let n = pb.poses.len();
     let (mut c2, mut n2, mut c1, mut n1, mut maps) = (
         Vec::with_capacity(n),
@@ -564,26 +556,34 @@ fn drop_cut_contacts(
     );
     for pose in &pb.poses.samples {
         let c = model::contact_f64(x, pose, pb.dx);
+        let phi = TAU * pose.t;
         c2.push(c.c2.vals());
         n2.push((-c.n.rot_t(&pose.rot)).vals());
         c1.push(c.c1.vals());
-        n1.push(c.n.rot_t(&super::math::rz(TAU * pose.t)).vals());
+        n1.push(c.n.rot_t(&super::math::rz(phi)).vals());
         maps.push(undercut::DriverToFollower::new(
-            &pose.rot,
-            pose.trans,
-            TAU * pose.t,
-            pb.dx,
+            &pose.rot, pose.trans, phi, pb.dx,
         ));
     }
-    let mut cut = undercut::cut_contacts(&c2, &n2, &c1, &maps, rim);
-    let island = undercut::island_contacts(&c2, &n2, &c1, &n1, &maps, rim, &cut);
-    for (c, i) in cut.iter_mut().zip(island) {
-        *c |= i;
-    }
+    undercut::lost_contacts(&c2, &n2, &c1, &n1, &maps, rim)
+}
+
+/// Drop from the oversampled closure data the contacts the printed parts lose
+/// ([`lost_samples`]): an oversampled instant is dropped when either sample around it is
+/// lost, so a lost window is never narrowed by the interpolation.
+fn drop_lost_contacts(
+    pb: &PairProblem,
+    x: &[f64],
+    rim: &undercut::RimSection,
+    ntilde: &mut [Option<[f64; 3]>],
+    robust: &mut [bool],
+) {
+    let n = pb.poses.len();
+    let lost = lost_samples(pb, x, rim);
     for (i, (nt, rb)) in ntilde.iter_mut().zip(robust.iter_mut()).enumerate() {
         let j = i / OVERSAMPLE;
         let exact = i % OVERSAMPLE == 0;
-        if cut[j] || (!exact && cut[(j + 1) % n]) {
+        if lost[j] || (!exact && lost[(j + 1) % n]) {
             *nt = None;
             *rb = false;
         }
@@ -645,7 +645,7 @@ pub fn solve_from(
         }
         (residual, ntilde, robust) = oversampled(pb, &x);
         if let Some(rim) = &pb.rim {
-            drop_cut_contacts(pb, &x, rim, &mut ntilde, &mut robust);
+            drop_lost_contacts(pb, &x, rim, &mut ntilde, &mut robust);
         }
         if reason.is_none() && residual > MAX_RESIDUAL_DEG {
             reason = Some(format!(
@@ -733,25 +733,7 @@ pub(crate) mod tests {
         assert!(b.valid, "{:?}", b.reason);
         assert_eq!(a.x, b.x, "the rim is not part of the objective");
         let n = free.poses.len();
-        let (mut c2, mut n2, mut c1, mut n1, mut maps) = (vec![], vec![], vec![], vec![], vec![]);
-        for pose in &free.poses.samples {
-            let c = model::contact_f64(&a.x, pose, free.dx);
-            c2.push(c.c2.vals());
-            n2.push((-c.n.rot_t(&pose.rot)).vals());
-            c1.push(c.c1.vals());
-            n1.push(c.n.rot_t(&crate::synth::math::rz(TAU * pose.t)).vals());
-            maps.push(undercut::DriverToFollower::new(
-                &pose.rot,
-                pose.trans,
-                TAU * pose.t,
-                free.dx,
-            ));
-        }
-        let mut cut = undercut::cut_contacts(&c2, &n2, &c1, &maps, &rim);
-        let island = undercut::island_contacts(&c2, &n2, &c1, &n1, &maps, &rim, &cut);
-        for (c, i) in cut.iter_mut().zip(island) {
-            *c |= i;
-        }
+        let cut = lost_samples(&free, &a.x, &rim);
         let cuts = cut.iter().filter(|c| **c).count();
         assert!(cuts > 0 && cuts < n, "{cuts} of {n} samples cut");
         for (j, &c) in cut.iter().enumerate() {

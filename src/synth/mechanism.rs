@@ -486,7 +486,7 @@ impl Mechanism {
     /// Per pair and sample, whether the printed parts lose that contact: the pair's own
     /// printed rim (at the file's `scale_mm`) cuts it at another instant, or it lies on an
     /// island of band no strut can leave (see [`undercut`]).
-    pub fn cut_contacts(&self) -> Vec<Vec<bool>> {
+    pub fn lost_contacts(&self) -> Vec<Vec<bool>> {
         let n = self.follower_motion.len();
         let poses: Vec<DriverToFollower> = self
             .follower_motion
@@ -507,31 +507,33 @@ impl Mechanism {
             .iter()
             .map(|cp| {
                 let s = &cp.samples;
-                let cut = undercut::cut_contacts(&s.c2, &s.n2, &s.c1, &poses, &rim);
-                let island =
-                    undercut::island_contacts(&s.c2, &s.n2, &s.c1, &s.n1, &poses, &rim, &cut);
-                cut.iter().zip(island).map(|(c, i)| *c || i).collect()
+                undercut::lost_contacts(&s.c2, &s.n2, &s.c1, &s.n1, &poses, &rim)
             })
             .collect()
     }
 
-    /// dist(t) and robust dist(t) from the contacts the printed parts keep (`cut[k][i]`
-    /// true drops pair k at sample i).
-    pub fn kept_closure(&self, cut: &[Vec<bool>]) -> closure::ClosureSummary {
-        let (mut dist, mut rdist) = (Vec::new(), Vec::new());
-        for i in 0..self.samples {
-            let contacts: Vec<_> = self
-                .curve_pairs
-                .iter()
-                .zip(cut)
-                .filter(|(_, c)| !c[i])
-                .map(|(cp, _)| (cp.samples.p[i], cp.samples.n[i]))
-                .collect();
-            let (a, b) = closure::dist_at(self.class, &contacts);
-            dist.push(a);
-            rdist.push(b);
-        }
+    /// dist(t) and robust dist(t) at every sample from the contacts `keep(k, i)` admits
+    /// (pair k at sample i): every contact for the paper's closure, the kept ones for the
+    /// printed parts' closure.
+    pub fn closure_with(&self, keep: impl Fn(usize, usize) -> bool) -> closure::ClosureSummary {
+        let (dist, rdist): (Vec<f64>, Vec<f64>) = (0..self.samples)
+            .map(|i| {
+                let contacts: Vec<_> = self
+                    .curve_pairs
+                    .iter()
+                    .enumerate()
+                    .filter(|(k, _)| keep(*k, i))
+                    .map(|(_, cp)| (cp.samples.p[i], cp.samples.n[i]))
+                    .collect();
+                closure::dist_at(self.class, &contacts)
+            })
+            .unzip();
         closure::ClosureSummary::from_dists(dist, rdist)
+    }
+
+    /// [`closure_with`](Self::closure_with) the contacts not `lost[k][i]`.
+    pub fn kept_closure(&self, lost: &[Vec<bool>]) -> closure::ClosureSummary {
+        self.closure_with(|k, i| !lost[k][i])
     }
 
     /// Re-verify from the sampled arrays alone (the `synth --check` verification).
@@ -631,24 +633,13 @@ impl Mechanism {
         r.add("band separation", band_ok, band_detail);
         // Closure recomputed from p, n.
         let class = self.class;
-        let mut dist = Vec::with_capacity(n);
-        let mut rdist = Vec::with_capacity(n);
-        for i in 0..n {
-            let contacts: Vec<_> = self
-                .curve_pairs
-                .iter()
-                .map(|cp| (cp.samples.p[i], cp.samples.n[i]))
-                .collect();
-            let (a, b) = closure::dist_at(class, &contacts);
-            dist.push(a);
-            rdist.push(b);
-        }
-        let mismatch = dist
+        let s = self.closure_with(|_, _| true);
+        let mismatch = s
+            .dist
             .iter()
             .zip(&self.closure.dist)
             .map(|(a, b)| (a - b).abs())
             .fold(0.0, f64::max);
-        let s = closure::ClosureSummary::from_dists(dist, rdist);
         r.add(
             "stored dist(t) reproduced",
             mismatch <= DIST_TOL
@@ -733,9 +724,9 @@ impl Mechanism {
         }
         // Contacts the printed parts keep (paper §5.3's carve): reported, and required of
         // a design synthesized for them.
-        let cut = self.cut_contacts();
-        let kept = self.kept_closure(&cut);
-        let lost: Vec<String> = cut
+        let lost = self.lost_contacts();
+        let kept = self.kept_closure(&lost);
+        let shares: Vec<String> = lost
             .iter()
             .map(|c| {
                 format!(
@@ -753,7 +744,7 @@ impl Mechanism {
             format!(
                 "own rims lose {} of each pair's contacts (cut, or on islands); with the rest E_valiTime = {:.4}, \
                  E_maxDist = {:.4}, robust {:.4}{}",
-                lost.join("/"),
+                shares.join("/"),
                 kept.vali_time,
                 kept.max_dist,
                 kept.robust_max_dist,

@@ -1042,14 +1042,14 @@ mod tests {
             .iter()
             .find(|i| i.name == "printed contacts")
             .expect("the check reports printed contacts");
-        let kept = m.kept_closure(&m.cut_contacts());
+        let kept = m.kept_closure(&m.lost_contacts());
         assert_eq!(
             item.passed,
             kept.vali_time >= 1.0 && kept.max_dist <= -EPSILON && kept.robust_max_dist <= -EPSILON,
             "{}",
             item.detail
         );
-        let lost: usize = m.cut_contacts().iter().flatten().filter(|c| **c).count();
+        let lost: usize = m.lost_contacts().iter().flatten().filter(|c| **c).count();
         assert!(
             lost > 0,
             "the rims of the reduced run cut nothing: the test sees no mask"
@@ -1068,7 +1068,7 @@ mod tests {
                 m.closure.dist.clone(),
                 m.closure.robust_dist.clone(),
             );
-            let kept = m.kept_closure(&m.cut_contacts());
+            let kept = m.kept_closure(&m.lost_contacts());
             eprintln!(
                 "4x robust {:.4} vali {:.4}; all robust {:.4} vali {:.4}; kept robust {:.4} vali {:.4}",
                 over.robust_vali_time,

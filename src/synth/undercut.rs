@@ -137,6 +137,22 @@ pub fn cut_contacts(
     cut
 }
 
+/// The contacts of one pair the printed parts lose: those its own rim cuts
+/// ([`cut_contacts`]) and those left on islands of band ([`island_contacts`]). `n1[i]` is
+/// the driver-local outward normal; the other arguments are as for [`cut_contacts`].
+pub fn lost_contacts(
+    c2: &[[f64; 3]],
+    n2: &[[f64; 3]],
+    c1: &[[f64; 3]],
+    n1: &[[f64; 3]],
+    poses: &[DriverToFollower],
+    rim: &RimSection,
+) -> Vec<bool> {
+    let cut = cut_contacts(c2, n2, c1, poses, rim);
+    let island = island_contacts(c2, n2, c1, n1, poses, rim, &cut);
+    cut.iter().zip(island).map(|(c, i)| *c || i).collect()
+}
+
 /// The contacts that lie on islands of band: runs of contacts the rim does not cut (`cut`
 /// from [`cut_contacts`]) from none of whose samples a strut could leave the band clear of
 /// the rim's sweep, so the build can only leave them out.
@@ -163,7 +179,8 @@ pub fn island_contacts(
         return island;
     }
     let rims = Rims::new(c2, n2, rim.depth + rim.half_width + rim.escape_clearance);
-    let step = 1.0 / ESCAPE_REACH_MM * rim.escape_reach;
+    // One millimetre in model units: the spacing of the points tested along a ray.
+    let step = rim.escape_reach / ESCAPE_REACH_MM;
     let steps = ESCAPE_REACH_MM.floor() as usize;
     let free_from = |u: usize| -> bool {
         let c = V3::from(c1[u]);
