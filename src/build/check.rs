@@ -519,44 +519,44 @@ fn culprits(
         .collect()
 }
 
-/// dist(t) at every sample from the contacts kept there (gap ≤ `kept_limit`).
+/// dist(t) at every sample from the contacts kept there (gap ≤ `kept_limit`), through
+/// [`Mechanism::closure_with`]: the pairs built are `pairs`, `gaps` in their order.
 fn built_closure(
     mech: &Mechanism,
     pairs: &[(usize, &crate::synth::mechanism::CurvePair)],
     gaps: &[Vec<f64>],
     kept_limit: f64,
 ) -> BuiltClosure {
-    use crate::synth::closure::{self, EPSILON};
-    let n = pairs.first().map_or(0, |(_, cp)| cp.samples.p.len());
-    let mut worst = (f64::NEG_INFINITY, 0.0);
-    let mut robust_worst = (f64::NEG_INFINITY, 0.0);
-    let mut with_lost = 0;
-    for i in 0..n {
-        let mut contacts = Vec::with_capacity(pairs.len());
-        for ((_, cp), g) in pairs.iter().zip(gaps) {
-            if g[i] <= kept_limit {
-                contacts.push((cp.samples.p[i], cp.samples.n[i]));
-            }
-        }
-        if contacts.len() < pairs.len() {
-            with_lost += 1;
-        }
-        let (d, r) = closure::dist_at(mech.class, &contacts);
-        let t = i as f64 / n as f64;
-        if d > worst.0 {
-            worst = (d, t);
-        }
-        if r > robust_worst.0 {
-            robust_worst = (r, t);
-        }
+    use crate::synth::closure::EPSILON;
+    let mut gap_of: Vec<Option<&Vec<f64>>> = vec![None; mech.curve_pairs.len()];
+    for ((k, _), g) in pairs.iter().zip(gaps) {
+        gap_of[*k] = Some(g);
     }
+    let s = mech.closure_with(|k, i| gap_of[k].is_some_and(|g| g[i] <= kept_limit));
+    let n = s.dist.len();
+    // The first sample where `d` is largest, as a time.
+    let worst = |d: &[f64]| {
+        d.iter()
+            .enumerate()
+            .fold((f64::NEG_INFINITY, 0.0), |w, (i, &v)| {
+                if v > w.0 {
+                    (v, i as f64 / n as f64)
+                } else {
+                    w
+                }
+            })
+    };
+    let (max_dist, worst_t) = worst(&s.dist);
+    let (robust_max_dist, robust_worst_t) = worst(&s.robust_dist);
     BuiltClosure {
-        max_dist: worst.0,
-        worst_t: worst.1,
-        robust_max_dist: robust_worst.0,
-        robust_worst_t: robust_worst.1,
+        max_dist,
+        worst_t,
+        robust_max_dist,
+        robust_worst_t,
         robust_required: mech.closure.robust_max_dist <= -EPSILON,
-        instants_with_lost_contacts: with_lost,
+        instants_with_lost_contacts: (0..n)
+            .filter(|&i| gaps.iter().any(|g| g[i] > kept_limit))
+            .count(),
         samples: n,
     }
 }
@@ -564,6 +564,7 @@ fn built_closure(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::build::tests::test_mechanism;
     use crate::synth::closure::{self, EPSILON};
 
     /// Guards the lost-contact windows: runs of lost samples as first and last sample time,
@@ -578,12 +579,6 @@ mod tests {
         assert_eq!(f(&[1, 0, 0, 1, 1]), vec![[0.6, 0.0]]);
         assert_eq!(f(&[0, 0, 0]), Vec::<[f64; 2]>::new());
         assert_eq!(f(&[1, 1]), vec![[0.0, 0.5]]);
-    }
-
-    fn test_mechanism() -> Mechanism {
-        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("tests/data/mechanism/half-turn-2to1/mechanism.json");
-        Mechanism::load(&file).expect("the test mechanism loads")
     }
 
     /// Guards the closure of the parts as built: with every contact kept it is the file's

@@ -399,10 +399,11 @@ fn mesh_part(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn test_mechanism() -> Mechanism {
+    /// The small 1R mechanism of `tests/data` the build's unit tests share.
+    pub(crate) fn test_mechanism() -> Mechanism {
         let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("tests/data/mechanism/half-turn-2to1/mechanism.json");
         Mechanism::load(&file).expect("the test mechanism loads")
