@@ -23,6 +23,7 @@
 //! - [`build`]: printable parts from a mechanism (rims, carved driver, struts, support),
 //!   their checks over the period.
 //! - [`geometry`]: triangle meshes in mm, the watertightness check, scenes of moving parts.
+//! - [`predict`]: the virtual prototype: how the built parts move the follower.
 //! - [`plot`]: PNG/SVG charts with an embedded font, shared by every report.
 //! - [`cli`]: one file per subcommand; calls into the modules above.
 //!
@@ -34,5 +35,6 @@ pub mod cli;
 pub mod geometry;
 pub mod motion;
 pub mod plot;
+pub mod predict;
 pub mod rig;
 pub mod synth;

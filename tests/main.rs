@@ -38,4 +38,5 @@ mod rig_session;
 mod rig_signals;
 mod rig_stepper;
 mod rig_target;
+mod simulate_cli;
 mod synth_cli;

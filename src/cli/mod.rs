@@ -50,6 +50,7 @@ pub mod motion;
 pub mod ports;
 pub mod sim_device;
 pub mod sim_pico;
+pub mod simulate;
 pub mod synth;
 pub mod wire_dump;
 
@@ -88,6 +89,8 @@ pub enum Command {
     SimDevice(sim_device::SimDeviceArgs),
     /// Measure a mechanism on a bench (real or simulated) and record it.
     Measure(measure::MeasureArgs),
+    /// Predict how the built parts move the follower (the virtual prototype).
+    Simulate(simulate::SimulateArgs),
     /// Print a captured byte stream of the bench link frame by frame, to debug a link.
     WireDump(wire_dump::WireDumpArgs),
 }
@@ -135,6 +138,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Synth(args) => synth::run(args),
         Command::SimDevice(args) => sim_device::run(args),
         Command::Measure(args) => measure::run(args),
+        Command::Simulate(args) => simulate::run(args),
         Command::WireDump(args) => wire_dump::run(args),
     }
 }

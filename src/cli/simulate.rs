@@ -1,0 +1,119 @@
+//! `mpc-rig simulate`: how the built parts move the follower (the virtual prototype).
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::Context;
+use clap::Args;
+
+use crate::motion::MECHANISM_FILE;
+use crate::predict::{self, output, PredictOptions, DEFAULT_SAMPLES, DRIVE_LOST_DEG};
+use crate::synth::mechanism::Mechanism;
+
+/// The output folder beside the parts when `-o` is not given.
+pub const DEFAULT_OUT_DIR: &str = "prediction";
+
+/// Arguments of `mpc-rig simulate`.
+#[derive(Debug, Args)]
+pub struct SimulateArgs {
+    /// The mechanism file (or its directory).
+    pub mechanism: PathBuf,
+    /// The folder `mpc-rig build` wrote the parts into (default: `parts/` beside the
+    /// mechanism file).
+    #[arg(long, value_name = "DIR")]
+    pub parts: Option<PathBuf>,
+    /// Output folder (default: `prediction/` beside the mechanism file).
+    #[arg(short = 'o', long = "output", alias = "out", value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Driver angles per period.
+    #[arg(long, default_value_t = DEFAULT_SAMPLES)]
+    pub samples: usize,
+}
+
+/// Run `mpc-rig simulate`.
+pub fn run(args: SimulateArgs) -> anyhow::Result<ExitCode> {
+    let file = if args.mechanism.is_dir() {
+        args.mechanism.join(MECHANISM_FILE)
+    } else {
+        args.mechanism.clone()
+    };
+    let mech = Mechanism::load(&file)?;
+    let dir = file
+        .parent()
+        .map(|p| p.to_path_buf())
+        .unwrap_or_else(|| PathBuf::from("."));
+    let parts = args
+        .parts
+        .clone()
+        .unwrap_or_else(|| dir.join(super::build::DEFAULT_OUT_DIR));
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| dir.join(DEFAULT_OUT_DIR));
+    let opts = PredictOptions {
+        samples: args.samples,
+    };
+    let p = predict::predict(&mech, &parts, &opts)
+        .with_context(|| format!("simulating the parts in {}", parts.display()))?;
+    let files = output::write(&p, &file, &parts, &out)?;
+    let lost = p.samples.iter().filter(|s| s.drive_lost).count();
+    println!(
+        "{} driver angles, load {}, clearance {:.2} mm{}",
+        p.samples.len(),
+        p.load,
+        p.clearance_mm,
+        p.without_pair
+            .map_or(String::new(), |k| format!(", parts without curve pair {k}"))
+    );
+    println!(
+        "worst play {:.3}° at driver {:.2}°; worst deviation from the target {:.3}° at driver {:.2}°",
+        p.worst_play.deg, p.worst_play.driver_deg, p.worst_deviation.deg, p.worst_deviation.driver_deg
+    );
+    if lost == 0 {
+        println!("the driver holds the follower at every angle (play ≤ {DRIVE_LOST_DEG}°)");
+    } else {
+        let windows: Vec<String> = p
+            .drive_lost_windows
+            .iter()
+            .map(|[a, b]| format!("{a:.2}–{b:.2}°"))
+            .collect();
+        println!(
+            "drive lost at {lost} of {} angles (play > {DRIVE_LOST_DEG}°): driver {}",
+            p.samples.len(),
+            windows.join(", ")
+        );
+    }
+    for (what, c) in [
+        ("the file's closure dist(t)", &p.closure),
+        (
+            "the closure of the contacts the build kept",
+            &p.kept_closure,
+        ),
+    ] {
+        println!(
+            "against {what}, at its {} samples: lost by both {}, by it only {}, by the parts only {}, held by both {}",
+            c.lost_both + c.lost_by_file_only + c.lost_by_parts_only + c.held_both,
+            c.lost_both,
+            c.lost_by_file_only,
+            c.lost_by_parts_only,
+            c.held_both
+        );
+    }
+    if p.overlap_mm > 0.0 {
+        println!(
+            "the meshes overlap by up to {:.3} mm at the design pose (driver {:.2}°); those vertices are not traced",
+            p.overlap_mm, p.overlap_driver_deg
+        );
+    }
+    println!(
+        "{} + {} vertices, {} distance queries, {:.1} s",
+        p.vertices[0], p.vertices[1], p.queries, p.seconds
+    );
+    println!("wrote {} files to {}", files.len(), out.display());
+    if !super::quiet() {
+        for f in &files {
+            println!("  {}", f.display());
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}

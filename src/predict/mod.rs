@@ -1,0 +1,451 @@
+//! The virtual prototype: how the built parts move the follower (`mpc-rig simulate`).
+//!
+//! Owns [`predict`] and [`Prediction`]. From a mechanism and the meshes `mpc-rig build`
+//! wrote for it, at every one of n driver angles (default [`DEFAULT_SAMPLES`]) it finds how
+//! far the follower can turn from its design pose either way before the printed parts
+//! touch ([`play`]), then where a quasi-static load leaves it driven forward and in reverse
+//! ([`law`]). Where the free turn exceeds [`DRIVE_LOST_DEG`] the driver no longer holds the
+//! follower: the instant is reported as `drive_lost`, the paper's dynamic form closure
+//! failing on the parts as printed.
+//!
+//! So far it handles 1R mechanisms under a drag load (friction that opposes motion); the
+//! cylindrical and spherical joints, a constant torque and a spring are issue 15's next
+//! steps, and [`predict`] says so instead of guessing. It reads no serial port and does not
+//! build parts; `cli::simulate` writes its files.
+
+pub mod law;
+pub mod output;
+pub mod play;
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use nalgebra::{Isometry3, Point3, UnitQuaternion};
+use serde::{Deserialize, Serialize};
+
+use crate::build::kinematics::Kinematics;
+use crate::geometry::io::stl::{read_stl, StlError};
+use crate::synth::closure::Class;
+use crate::synth::mechanism::Mechanism;
+
+use play::{free_turns, PartMotion, Solid, SolidError};
+
+/// Driver angles per period. 1 440 (every 0.25°): the issue's floor, four times the
+/// mechanism file's 360 samples, so a loss of drive shorter than one file sample shows.
+pub const DEFAULT_SAMPLES: usize = 1440;
+/// Fewest driver angles accepted: the mechanism file's own 360.
+pub const MIN_SAMPLES: usize = 360;
+/// A follower free to turn more than this (both ways together) is not driven, degrees.
+/// 5°: about ten times the play the default 0.2 mm clearance gives at the 20–40 mm levers
+/// of the examples' contacts (0.2 mm / 30 mm ≈ 0.4° each way), and well under the cap.
+pub const DRIVE_LOST_DEG: f64 = 5.0;
+/// Largest free turn traced each way, degrees: twice [`DRIVE_LOST_DEG`], so a lost drive
+/// is seen clearly and the trace stays short. A side that reaches it is free (no contact
+/// holds the follower that way within the cap).
+pub const FREE_CAP_DEG: f64 = 10.0;
+
+/// Error of [`predict`].
+#[derive(Debug, thiserror::Error)]
+pub enum PredictError {
+    /// The mechanism's class is not handled yet.
+    #[error(
+        "simulate handles 1R mechanisms so far; this one is {}: its cylindrical or spherical \
+         joint needs the free motion in more than one coordinate, which is not built yet",
+        class.label()
+    )]
+    Class {
+        /// The mechanism's class.
+        class: Class,
+    },
+    /// A part's mesh is missing or unreadable.
+    #[error("{0}. Build the parts first: mpc-rig build MECHANISM")]
+    Stl(#[from] StlError),
+    /// `build.json` is missing or unreadable.
+    #[error("{path}: {message}. Build the parts first: mpc-rig build MECHANISM")]
+    Build {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// A mesh cannot be queried.
+    #[error(transparent)]
+    Solid(#[from] SolidError),
+    /// The law could not be rebuilt from the mechanism.
+    #[error(transparent)]
+    Law(#[from] crate::build::BuildError),
+    /// An option is out of range.
+    #[error("{option}: {message}")]
+    BadOption {
+        /// The option as typed.
+        option: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// What `build.json` says about the parts that matters here.
+#[derive(Debug, Clone, Deserialize)]
+pub struct BuiltParts {
+    /// Millimetres per model unit the parts were built at.
+    pub scale_mm: f64,
+    /// Print clearance, mm.
+    pub clearance_mm: f64,
+    /// Curve pair left out (1-based), for an experiment.
+    #[serde(default)]
+    pub without_pair: Option<usize>,
+    /// Mesher cell, mm.
+    pub cell_mm: f64,
+    /// The build's check: which design contacts the parts keep.
+    pub check: BuiltCheck,
+}
+
+/// The part of the build's check read here.
+#[derive(Debug, Clone, Deserialize)]
+pub struct BuiltCheck {
+    /// Per curve pair in the parts.
+    pub gaps: Vec<BuiltGap>,
+}
+
+/// One curve pair's contact as the build's check found it.
+#[derive(Debug, Clone, Deserialize)]
+pub struct BuiltGap {
+    /// Curve pair, 1-based.
+    pub pair: usize,
+    /// Windows `[first, last]` of sample times (fractions of the period) where the built
+    /// parts do not keep the contact; `first > last` wraps past t = 1.
+    #[serde(default)]
+    pub lost_t: Vec<[f64; 2]>,
+}
+
+impl BuiltParts {
+    /// Whether the parts keep curve pair `k`'s (0-based) contact at time `t`: the pair is
+    /// in the parts and no lost window holds `t`.
+    pub fn keeps(&self, k: usize, t: f64) -> bool {
+        /// Slack on window ends, in fractions of a period (the times are i / n exactly
+        /// up to rounding in the JSON).
+        const EDGE: f64 = 1e-9;
+        let Some(g) = self.check.gaps.iter().find(|g| g.pair == k + 1) else {
+            return false;
+        };
+        !g.lost_t.iter().any(|&[a, b]| {
+            if a <= b {
+                t >= a - EDGE && t <= b + EDGE
+            } else {
+                t >= a - EDGE || t <= b + EDGE
+            }
+        })
+    }
+
+    /// Read `dir/build.json`.
+    pub fn load(dir: &Path) -> Result<BuiltParts, PredictError> {
+        let path = dir.join("build.json");
+        let text = std::fs::read_to_string(&path).map_err(|e| PredictError::Build {
+            path: path.clone(),
+            message: e.to_string(),
+        })?;
+        serde_json::from_str(&text).map_err(|e| PredictError::Build {
+            path,
+            message: e.to_string(),
+        })
+    }
+}
+
+/// Options of [`predict`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct PredictOptions {
+    /// Driver angles per period.
+    pub samples: usize,
+}
+
+impl Default for PredictOptions {
+    fn default() -> Self {
+        PredictOptions {
+            samples: DEFAULT_SAMPLES,
+        }
+    }
+}
+
+/// The follower at one driver angle.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Sample {
+    /// Driver angle within the period, degrees.
+    pub driver_deg: f64,
+    /// Target follower angle, degrees (unwrapped over the period).
+    pub target_deg: f64,
+    /// Predicted follower angle driven forward, degrees.
+    pub forward_deg: f64,
+    /// Predicted follower angle driven in reverse, degrees.
+    pub reverse_deg: f64,
+    /// Free turn from the design pose, positive sense, degrees (capped at
+    /// [`FREE_CAP_DEG`]).
+    pub free_plus_deg: f64,
+    /// Free turn from the design pose, negative sense, degrees (a magnitude, capped).
+    pub free_minus_deg: f64,
+    /// The whole free interval, degrees.
+    pub play_deg: f64,
+    /// The play exceeds [`DRIVE_LOST_DEG`]: the driver does not hold the follower.
+    pub drive_lost: bool,
+    /// The paper's dist(t) from the mechanism file at the nearest file sample, with the
+    /// curve pairs the parts have (> 0: the design contacts do not hold the follower).
+    pub file_dist: f64,
+}
+
+/// A figure and the driver angle where it occurs.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Worst {
+    /// The figure, degrees.
+    pub deg: f64,
+    /// Where, driver degrees.
+    pub driver_deg: f64,
+}
+
+/// The prediction over one period.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Prediction {
+    /// Mechanism class label.
+    pub class: String,
+    /// Load model.
+    pub load: String,
+    /// Print clearance of the parts, mm.
+    pub clearance_mm: f64,
+    /// Curve pair the parts leave out, if any.
+    pub without_pair: Option<usize>,
+    /// One per driver angle.
+    pub samples: Vec<Sample>,
+    /// Largest play.
+    pub worst_play: Worst,
+    /// Largest |predicted − target| of either direction.
+    pub worst_deviation: Worst,
+    /// Driver-angle windows `[from, to]` (degrees) where the drive is lost.
+    pub drive_lost_windows: Vec<[f64; 2]>,
+    /// Deepest overlap of the parts at the design pose, mm (their meshes' interference),
+    /// and where: such vertices are left out of the free-turn test.
+    pub overlap_mm: f64,
+    /// Where the overlap is, driver degrees.
+    pub overlap_driver_deg: f64,
+    /// Vertices tested: driver, follower.
+    pub vertices: [usize; 2],
+    /// Point–mesh distance queries made.
+    pub queries: u64,
+    /// Wall time of the free-turn tracing, s.
+    pub seconds: f64,
+    /// The parts' drive against the paper's closure computed from the file with the same
+    /// curve pairs.
+    pub closure: ClosureAgreement,
+    /// The same against the closure of only the contacts the build's check found the parts
+    /// keep (`build.json` `check.gaps[].lost_t`).
+    pub kept_closure: ClosureAgreement,
+}
+
+/// How the predicted loss of drive agrees with the paper's dynamic form closure computed
+/// from the mechanism file (with the pair the parts leave out left out too), at the
+/// file's sample times: dist(t) > 0 means no contact set holds the follower there.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct ClosureAgreement {
+    /// File samples where dist(t) > 0 and the parts lose the drive.
+    pub lost_both: usize,
+    /// Where dist(t) > 0 but the parts still hold the follower (something other than the
+    /// design contacts holds it, or the play stays under the threshold).
+    pub lost_by_file_only: usize,
+    /// Where dist(t) ≤ 0 but the parts lose the drive (contacts the build lost, or
+    /// play from the clearance above the threshold).
+    pub lost_by_parts_only: usize,
+    /// Where both hold.
+    pub held_both: usize,
+}
+
+impl Prediction {
+    /// Share of the period where the drive is lost.
+    pub fn lost_fraction(&self) -> f64 {
+        let n = self.samples.len().max(1);
+        self.samples.iter().filter(|s| s.drive_lost).count() as f64 / n as f64
+    }
+}
+
+impl ClosureAgreement {
+    /// Count the file samples (dist per sample) against the prediction's samples nearest
+    /// in time.
+    fn count(dist: &[f64], samples: &[Sample]) -> ClosureAgreement {
+        let mut c = ClosureAgreement {
+            lost_both: 0,
+            lost_by_file_only: 0,
+            lost_by_parts_only: 0,
+            held_both: 0,
+        };
+        let (m, n) = (dist.len(), samples.len());
+        for (i, d) in dist.iter().enumerate() {
+            let j = (i * n + m / 2) / m % n;
+            match (*d > 0.0, samples[j].drive_lost) {
+                (true, true) => c.lost_both += 1,
+                (true, false) => c.lost_by_file_only += 1,
+                (false, true) => c.lost_by_parts_only += 1,
+                (false, false) => c.held_both += 1,
+            }
+        }
+        c
+    }
+}
+
+/// The parts' motion for [`play`]: the build's kinematics, with the reach bounds a 1R
+/// follower and the driver have.
+struct PartsMotion<'a>(&'a Kinematics);
+
+impl PartMotion for PartsMotion<'_> {
+    fn follower(&self, t: f64) -> Isometry3<f64> {
+        self.0.follower(t)
+    }
+    fn driver(&self, t: f64) -> Isometry3<f64> {
+        self.0.driver(t)
+    }
+    fn follower_speed(&self, q: &Point3<f64>) -> f64 {
+        self.0.speed_follower_point_in_driver(q.coords)
+    }
+    fn driver_speed(&self, p: &Point3<f64>) -> f64 {
+        self.0.speed_driver_point_in_follower(p.coords)
+    }
+    fn follower_reach(&self, q: &Point3<f64>) -> f64 {
+        q.coords.norm() + self.0.translation_max_mm()
+    }
+    fn driver_reach(&self, p: &Point3<f64>) -> f64 {
+        self.0.dx_mm() + p.coords.xy().norm()
+    }
+}
+
+/// Signed turn about +z from `a` to `b`, rad, in (−π, π].
+fn turn_about_z(a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>) -> f64 {
+    let d = b * a.inverse();
+    let axis = d.axis().map_or(0.0, |ax| ax.z.signum());
+    axis * d.angle()
+}
+
+/// Predict how the parts in `parts_dir` (built from `mech`) move the follower.
+pub fn predict(
+    mech: &Mechanism,
+    parts_dir: &Path,
+    opts: &PredictOptions,
+) -> Result<Prediction, PredictError> {
+    if mech.class != Class::R1 {
+        return Err(PredictError::Class { class: mech.class });
+    }
+    if opts.samples < MIN_SAMPLES {
+        return Err(PredictError::BadOption {
+            option: format!("--samples {}", opts.samples),
+            message: format!("at least {MIN_SAMPLES} driver angles per period"),
+        });
+    }
+    let built = BuiltParts::load(parts_dir)?;
+    let kin = Kinematics::new(mech, built.scale_mm)?;
+    let driver = read_stl(&parts_dir.join("driver.stl"))?;
+    let follower = read_stl(&parts_dir.join("follower.stl"))?;
+    let driver = Solid::new(&driver, "driver")?;
+    let follower = Solid::new(&follower, "follower")?;
+    let n = opts.samples;
+    let cap = FREE_CAP_DEG.to_radians();
+    let started = Instant::now();
+    let free = free_turns(&PartsMotion(&kin), &driver, &follower, n, cap);
+    let seconds = started.elapsed().as_secs_f64();
+
+    // The target law as steps between samples, and unwrapped from its first pose.
+    let rot: Vec<UnitQuaternion<f64>> = (0..=n)
+        .map(|i| kin.follower(i as f64 / n as f64).rotation)
+        .collect();
+    let step: Vec<f64> = (0..n).map(|i| turn_about_z(&rot[i], &rot[i + 1])).collect();
+    let mut target = Vec::with_capacity(n);
+    let mut angle = turn_about_z(&UnitQuaternion::identity(), &rot[0]);
+    for s in &step {
+        target.push(angle);
+        angle += s;
+    }
+    let fwd = law::drag(&step, &free.plus, &free.minus, true);
+    let rev = law::drag(&step, &free.plus, &free.minus, false);
+    let mut samples: Vec<Sample> = (0..n)
+        .map(|i| {
+            let play = (free.plus[i] + free.minus[i]).to_degrees();
+            Sample {
+                driver_deg: 360.0 * i as f64 / n as f64,
+                target_deg: target[i].to_degrees(),
+                forward_deg: (target[i] + fwd[i]).to_degrees(),
+                reverse_deg: (target[i] + rev[i]).to_degrees(),
+                free_plus_deg: free.plus[i].to_degrees(),
+                free_minus_deg: free.minus[i].to_degrees(),
+                play_deg: play,
+                drive_lost: play > DRIVE_LOST_DEG,
+                file_dist: 0.0,
+            }
+        })
+        .collect();
+    let worst = |f: &dyn Fn(&Sample) -> f64| {
+        samples.iter().fold(
+            Worst {
+                deg: 0.0,
+                driver_deg: 0.0,
+            },
+            |w, s| {
+                let v = f(s);
+                if v > w.deg {
+                    Worst {
+                        deg: v,
+                        driver_deg: s.driver_deg,
+                    }
+                } else {
+                    w
+                }
+            },
+        )
+    };
+    let worst_play = worst(&|s| s.play_deg);
+    let worst_deviation = worst(&|s| {
+        (s.forward_deg - s.target_deg)
+            .abs()
+            .max((s.reverse_deg - s.target_deg).abs())
+    });
+    let flags: Vec<bool> = samples.iter().map(|s| s.drive_lost).collect();
+    let drive_lost_windows = crate::build::check::windows(&flags)
+        .into_iter()
+        .map(|[a, b]| [a * 360.0, b * 360.0])
+        .collect();
+    let skip = built.without_pair.map(|k| k.saturating_sub(1));
+    let file = mech.closure_with(|k, _| Some(k) != skip);
+    let m = mech.samples;
+    let kept = mech.closure_with(|k, i| built.keeps(k, i as f64 / m as f64));
+    for (j, s) in samples.iter_mut().enumerate() {
+        s.file_dist = file.dist[(j * m + n / 2) / n % m];
+    }
+    let closure = ClosureAgreement::count(&file.dist, &samples);
+    let kept_closure = ClosureAgreement::count(&kept.dist, &samples);
+    Ok(Prediction {
+        class: mech.class.label().to_string(),
+        load: "drag".to_string(),
+        clearance_mm: built.clearance_mm,
+        without_pair: built.without_pair,
+        samples,
+        worst_play,
+        worst_deviation,
+        drive_lost_windows,
+        overlap_mm: free.overlap_mm,
+        overlap_driver_deg: free.overlap_t * 360.0,
+        vertices: [driver.vertex_count(), follower.vertex_count()],
+        queries: free.queries,
+        seconds,
+        closure,
+        kept_closure,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector3;
+
+    /// Guards the sign of the target's steps: a turn of +0.3 rad about +z reads +0.3, and
+    /// one about −z reads −0.3.
+    #[test]
+    fn turns_about_z_are_signed() {
+        let a = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 1.0);
+        let b = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 1.3);
+        assert!((turn_about_z(&a, &b) - 0.3).abs() < 1e-12);
+        assert!((turn_about_z(&b, &a) + 0.3).abs() < 1e-12);
+        assert_eq!(turn_about_z(&a, &a), 0.0);
+    }
+}

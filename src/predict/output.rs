@@ -1,0 +1,125 @@
+//! The files of a prediction: `prediction.json` and its charts.
+//!
+//! Owns [`write()`] and [`PREDICTION_FORMAT`]. It draws the predicted deviation from the
+//! target (forward and reverse) and the play over the driver angle, both with the limits
+//! that matter marked, and the predicted laws over the target. It computes nothing.
+
+use std::path::{Path, PathBuf};
+
+use serde_json::json;
+
+use super::{Prediction, DRIVE_LOST_DEG};
+use crate::plot::{Chart, PlotError, Series};
+
+/// The `format` of `prediction.json`.
+pub const PREDICTION_FORMAT: &str = "mpcmech-prediction/1";
+
+/// Error writing a prediction.
+#[derive(Debug, thiserror::Error)]
+pub enum OutputError {
+    /// A file could not be written.
+    #[error("cannot write {path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// A chart could not be drawn.
+    #[error(transparent)]
+    Plot(#[from] PlotError),
+}
+
+/// Write `prediction.json` and the charts into `out` (created if missing); returns the
+/// files written.
+pub fn write(
+    p: &Prediction,
+    mechanism: &Path,
+    parts: &Path,
+    out: &Path,
+) -> Result<Vec<PathBuf>, OutputError> {
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| OutputError::Io { path, source }
+    };
+    std::fs::create_dir_all(out).map_err(io(out))?;
+    let mut files = Vec::new();
+    let json_path = out.join("prediction.json");
+    let doc = json!({
+        "format": PREDICTION_FORMAT,
+        "mechanism": mechanism.display().to_string(),
+        "parts": parts.display().to_string(),
+        "drive_lost_play_deg": DRIVE_LOST_DEG,
+        "free_cap_deg": super::FREE_CAP_DEG,
+        "prediction": p,
+    });
+    let text = serde_json::to_string_pretty(&doc).expect("a prediction serializes");
+    std::fs::write(&json_path, text + "\n").map_err(io(&json_path))?;
+    files.push(json_path);
+
+    let x = |f: &dyn Fn(&super::Sample) -> f64| -> Vec<(f64, f64)> {
+        p.samples.iter().map(|s| (s.driver_deg, f(s))).collect()
+    };
+    let x_label = "driver angle within the period [deg]";
+    let mut law = Chart::new(
+        "Follower angle: target and predicted (drag load)",
+        x_label,
+        "follower angle [deg]",
+    )
+    .with(Series::dashed("target", x(&|s| s.target_deg), 0))
+    .with(Series::line("driven forward", x(&|s| s.forward_deg), 1))
+    .with(Series::line("driven in reverse", x(&|s| s.reverse_deg), 2));
+    law.x_range = Some((0.0, 360.0));
+    files.extend(law.write(&out.join("law"))?);
+
+    let mut dev = Chart::new(
+        format!(
+            "Predicted − target: worst {:.3}° at driver {:.1}°",
+            p.worst_deviation.deg, p.worst_deviation.driver_deg
+        ),
+        x_label,
+        "deviation [deg]",
+    )
+    .with(Series::line(
+        "driven forward",
+        x(&|s| s.forward_deg - s.target_deg),
+        1,
+    ))
+    .with(Series::line(
+        "driven in reverse",
+        x(&|s| s.reverse_deg - s.target_deg),
+        2,
+    ));
+    dev.x_range = Some((0.0, 360.0));
+    dev.h_lines = vec![(0.0, "target".to_string())];
+    files.extend(dev.write(&out.join("deviation"))?);
+
+    let lost = p.samples.iter().filter(|s| s.drive_lost).count();
+    let mut play = Chart::new(
+        format!(
+            "Play of the follower: worst {:.2}° at driver {:.1}°; drive lost at {lost} of {} angles",
+            p.worst_play.deg,
+            p.worst_play.driver_deg,
+            p.samples.len()
+        ),
+        x_label,
+        "free turn [deg]",
+    )
+    .with(Series::line("play (both ways)", x(&|s| s.play_deg), 0))
+    .with(Series::line("free turn +", x(&|s| s.free_plus_deg), 1))
+    .with(Series::line("free turn −", x(&|s| s.free_minus_deg), 2))
+    .with(Series::points(
+        "file: dist(t) > 0 (design contacts do not close)",
+        p.samples
+            .iter()
+            .filter(|s| s.file_dist > 0.0)
+            .map(|s| (s.driver_deg, 0.0))
+            .collect(),
+        3,
+        3,
+    ));
+    play.x_range = Some((0.0, 360.0));
+    play.h_lines = vec![(DRIVE_LOST_DEG, "drive lost above".to_string())];
+    files.extend(play.write(&out.join("play"))?);
+    Ok(files)
+}

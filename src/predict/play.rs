@@ -1,0 +1,751 @@
+//! How far the follower can turn, at one driver angle, before its mesh touches the driver's.
+//!
+//! Owns [`Solid`] (a part's mesh ready for distance queries, its vertices grouped in
+//! clusters) and [`free_turns`], which answers, for every sample time of a period and each
+//! sense of rotation, the largest turn δ ≤ a cap of the follower about its joint axis (R's
+//! z axis) from its design pose that leaves the two meshes apart. Both ways are tested:
+//! every follower vertex against the driver's mesh and every driver vertex against the
+//! follower's, so an edge of either part that would cut into a face of the other is seen.
+//!
+//! A vertex is *sphere-traced* along its arc: at a turn δ its distance d to the other mesh
+//! is a ball it cannot leave before turning d / r more (r its distance from the axis), so
+//! the turn advances by d / r until d falls below [`HIT_MM`]. The result is exact to
+//! `HIT_MM / r` and never overshoots a contact. What makes it affordable, each step safe
+//! because it only uses lower bounds on distances:
+//! - clusters of vertices (cells of [`CLUSTER_MM`]) are skipped while a lower bound on
+//!   their distance, carried from their last query by the parts' speed bound, shows they
+//!   cannot touch within the search limit;
+//! - each part carries a coarse distance grid ([`GRID_MM`]) whose lower bound answers for
+//!   points more than about a millimetre away without a mesh query;
+//! - the search limit starts at twice the last sample's free turn (the whole cap only when
+//!   nothing touches within it), and the vertex that touched first at the last sample is
+//!   traced first.
+//!
+//! A test holds these against a plain trace of every vertex.
+//!
+//! Exact distances are parry3d-f64's point–mesh projections with pseudo-normals (inside or
+//! outside), the same queries the build's check uses. The module does not know the target
+//! law, the load or the files; it does not look at the support.
+
+use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
+use parry3d_f64::math::Vector as PVec;
+use parry3d_f64::query::PointQuery;
+use parry3d_f64::shape::{TriMesh, TriMeshFlags};
+use rayon::prelude::*;
+
+use crate::geometry::mesh::{Aabb, Mesh};
+use crate::geometry::sdf::Vec3;
+use crate::geometry::voxel::{distance_transform, VoxelGrid};
+
+/// A vertex this near the other part's surface touches it, mm. 0.002 mm: a hundredth of
+/// the default clearance and far below the meshes' own error (≈ 0.05 mm), so the turn it
+/// stops short of a true touch is negligible (0.002 mm / 20 mm = 0.006°).
+pub const HIT_MM: f64 = 0.002;
+/// Edge of the cells that group vertices into clusters, mm. 2 mm: a few hundred vertices
+/// per cluster on the default meshes, small enough that a cluster near the contact does not
+/// drag many far vertices into the exact test.
+pub const CLUSTER_MM: f64 = 2.0;
+/// Largest number of steps along one vertex's arc. A step is at least `HIT_MM / r`, so a
+/// grazing vertex needs at most cap·r / `HIT_MM` steps (≈ 2 600 at a 10° cap and 30 mm);
+/// beyond this the vertex is taken to touch where it is (never to be free).
+const MAX_STEPS: usize = 20_000;
+/// Voxel of the coarse distance grid each part carries, mm. 0.5 mm: its lower bound is
+/// √3·h ≈ 0.87 mm loose, so a point farther than about a millimetre from a part is
+/// judged by a table lookup instead of a mesh query; one f32 per voxel, about 100 MB for
+/// the largest examples' driver.
+pub const GRID_MM: f64 = 0.5;
+/// Margin of the distance grid around the mesh's box, mm; beyond it the distance to the box
+/// is the bound.
+const GRID_MARGIN_MM: f64 = 4.0;
+/// Along a traced arc, a grid bound above this is stepped on without a mesh query, mm: a
+/// grid step is at most this much shorter than the exact one (the bound's slack), so a
+/// few wasted steps cost less than a query each.
+const FAR_MM: f64 = 1.0;
+/// Vertices nearer the axis than this do not move under a turn, mm.
+const ON_AXIS_MM: f64 = 1e-6;
+
+/// Error building a [`Solid`].
+#[derive(Debug, thiserror::Error)]
+pub enum SolidError {
+    /// The mesh has no triangles, or parry refused it.
+    #[error("the {part} mesh cannot be queried: {message}")]
+    Mesh {
+        /// Which part.
+        part: String,
+        /// parry's reason.
+        message: String,
+    },
+}
+
+/// One group of nearby vertices: a ball around them and their index range.
+#[derive(Clone, Debug)]
+struct Cluster {
+    center: Point3<f64>,
+    radius: f64,
+    start: usize,
+    end: usize,
+}
+
+/// A part's mesh ready for distance queries (parry's BVH with pseudo-normals), with its
+/// vertices sorted into clusters.
+pub struct Solid {
+    tri: TriMesh,
+    verts: Vec<Point3<f64>>,
+    clusters: Vec<Cluster>,
+    aabb: Aabb,
+    grid: VoxelGrid,
+    /// Distance from each voxel centre to the nearest voxel the surface passes through.
+    coarse: Vec<f32>,
+}
+
+impl Solid {
+    /// Prepare `mesh` (the part `part`, in its own frame, mm).
+    pub fn new(mesh: &Mesh, part: &str) -> Result<Solid, SolidError> {
+        let pv: Vec<PVec> = mesh
+            .vertices
+            .iter()
+            .map(|v| PVec::new(v[0], v[1], v[2]))
+            .collect();
+        let tri = TriMesh::with_flags(pv, mesh.triangles.clone(), TriMeshFlags::ORIENTED).map_err(
+            |e| SolidError::Mesh {
+                part: part.to_string(),
+                message: e.to_string(),
+            },
+        )?;
+        let cell =
+            |v: &[f64; 3]| -> [i64; 3] { [0, 1, 2].map(|k| (v[k] / CLUSTER_MM).floor() as i64) };
+        let mut order: Vec<usize> = (0..mesh.vertices.len()).collect();
+        order.sort_by_key(|&i| (cell(&mesh.vertices[i]), i));
+        let verts: Vec<Point3<f64>> = order
+            .iter()
+            .map(|&i| Point3::from(mesh.vertices[i]))
+            .collect();
+        let mut clusters = Vec::new();
+        let mut start = 0;
+        while start < order.len() {
+            let key = cell(&mesh.vertices[order[start]]);
+            let mut end = start + 1;
+            while end < order.len() && cell(&mesh.vertices[order[end]]) == key {
+                end += 1;
+            }
+            let sum = verts[start..end]
+                .iter()
+                .fold(Vector3::zeros(), |s, v| s + v.coords);
+            let center = Point3::from(sum / (end - start) as f64);
+            let radius = verts[start..end]
+                .iter()
+                .map(|v| (v - center).norm())
+                .fold(0.0, f64::max);
+            clusters.push(Cluster {
+                center,
+                radius,
+                start,
+                end,
+            });
+            start = end;
+        }
+        let aabb = mesh.aabb();
+        let grid = VoxelGrid::covering(aabb.inflate(GRID_MARGIN_MM), GRID_MM);
+        // Every voxel whose cell meets a triangle's box holds the surface points there.
+        let mut marks = vec![false; grid.len()];
+        let cell_of = |x: f64, k: usize| -> usize {
+            let o = [grid.origin.x, grid.origin.y, grid.origin.z][k];
+            (((x - o) / grid.h + 0.5).floor().max(0.0) as usize).min(grid.n[k] - 1)
+        };
+        for i in 0..mesh.triangles.len() {
+            let c = mesh.corners(i);
+            let lo = [0, 1, 2].map(|k| cell_of(c[0][k].min(c[1][k]).min(c[2][k]), k));
+            let hi = [0, 1, 2].map(|k| cell_of(c[0][k].max(c[1][k]).max(c[2][k]), k));
+            for a in lo[0]..=hi[0] {
+                for b in lo[1]..=hi[1] {
+                    for z in lo[2]..=hi[2] {
+                        marks[grid.index([a, b, z])] = true;
+                    }
+                }
+            }
+        }
+        let coarse = distance_transform(&grid, &marks);
+        Ok(Solid {
+            tri,
+            verts,
+            clusters,
+            aabb,
+            grid,
+            coarse,
+        })
+    }
+
+    /// A lower bound on the distance of `p` to the surface, mm, from the coarse grid: the
+    /// distance between voxel centres less the two half-diagonals (`p` and the surface
+    /// point each lie within one of their voxel's centre). Far from the grid, the
+    /// distance to the mesh's box.
+    pub fn lower_bound(&self, p: &Point3<f64>) -> f64 {
+        match self.grid.voxel_of(Vec3::new(p.x, p.y, p.z)) {
+            Some(v) => {
+                (f64::from(self.coarse[self.grid.index(v)]) - 3f64.sqrt() * self.grid.h).max(0.0)
+            }
+            None => self.aabb.distance([p.x, p.y, p.z]),
+        }
+    }
+
+    /// Signed distance of `p` (this part's frame) to the surface, mm, negative inside.
+    pub fn signed(&self, p: &Point3<f64>) -> f64 {
+        let pr = self
+            .tri
+            .project_local_point(PVec::new(p.x, p.y, p.z), false);
+        let d =
+            ((pr.point.x - p.x).powi(2) + (pr.point.y - p.y).powi(2) + (pr.point.z - p.z).powi(2))
+                .sqrt();
+        if pr.is_inside {
+            -d
+        } else {
+            d
+        }
+    }
+
+    /// Number of vertices.
+    pub fn vertex_count(&self) -> usize {
+        self.verts.len()
+    }
+}
+
+/// The parts' design motion, as [`free_turns`] needs it: poses of both frames in R (the
+/// follower's joint axis is R's z axis) and bounds on how fast a point of one part moves
+/// as seen from the other, and how far from the axis it can be.
+pub trait PartMotion: Sync {
+    /// Follower frame → R at time `t` (fraction of a period), at the design pose.
+    fn follower(&self, t: f64) -> Isometry3<f64>;
+    /// Driver frame → R at time `t`.
+    fn driver(&self, t: f64) -> Isometry3<f64>;
+    /// Bound on the speed of follower point `q` (F frame) seen from the driver, mm per
+    /// period.
+    fn follower_speed(&self, q: &Point3<f64>) -> f64;
+    /// Bound on the speed of driver point `p` (D frame) seen from the follower, mm per
+    /// period.
+    fn driver_speed(&self, p: &Point3<f64>) -> f64;
+    /// Bound on the distance from R's z axis of follower point `q` over the period, mm.
+    fn follower_reach(&self, q: &Point3<f64>) -> f64;
+    /// Bound on the distance from R's z axis of driver point `p` over the period, mm.
+    fn driver_reach(&self, p: &Point3<f64>) -> f64;
+}
+
+/// The free turns of the follower over one period.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FreeTurns {
+    /// Sample times, fractions of a period (`i / n`).
+    pub t: Vec<f64>,
+    /// Largest free turn in the positive sense (counter-clockwise about +z), rad, ≤ cap.
+    pub plus: Vec<f64>,
+    /// Largest free turn in the negative sense, rad (a magnitude), ≤ cap.
+    pub minus: Vec<f64>,
+    /// Deepest vertex of one part inside the other at the design pose, mm, over the
+    /// period (0 when they never overlap), and its time. Such vertices are not traced:
+    /// they would lock the follower where the meshes already overlap.
+    pub overlap_mm: f64,
+    /// Time of `overlap_mm`.
+    pub overlap_t: f64,
+    /// Distance queries made (a cost figure).
+    pub queries: u64,
+}
+
+/// Which way the moving part of a test is turned relative to the fixed one, and which
+/// part is which.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Side {
+    /// Follower vertices against the driver's mesh.
+    FollowerIntoDriver,
+    /// Driver vertices against the follower's mesh.
+    DriverIntoFollower,
+}
+
+/// Per-sample results of one (side, sense) sweep.
+struct Sweep {
+    free: Vec<f64>,
+    overlap: (f64, f64),
+    queries: u64,
+}
+
+/// Free turns of the follower about R's z axis at `n` times per period, each capped at
+/// `cap` rad.
+pub fn free_turns(
+    motion: &dyn PartMotion,
+    driver: &Solid,
+    follower: &Solid,
+    n: usize,
+    cap: f64,
+) -> FreeTurns {
+    let jobs = [
+        (Side::FollowerIntoDriver, 1.0),
+        (Side::FollowerIntoDriver, -1.0),
+        (Side::DriverIntoFollower, 1.0),
+        (Side::DriverIntoFollower, -1.0),
+    ];
+    let sweeps: Vec<Sweep> = jobs
+        .par_iter()
+        .map(|&(side, sense)| sweep(motion, driver, follower, side, sense, n, cap))
+        .collect();
+    let t: Vec<f64> = (0..n).map(|i| i as f64 / n as f64).collect();
+    let plus = (0..n)
+        .map(|i| sweeps[0].free[i].min(sweeps[2].free[i]))
+        .collect();
+    let minus = (0..n)
+        .map(|i| sweeps[1].free[i].min(sweeps[3].free[i]))
+        .collect();
+    let overlap = sweeps
+        .iter()
+        .map(|s| s.overlap)
+        .fold((0.0, 0.0), |a, b| if b.0 > a.0 { b } else { a });
+    FreeTurns {
+        t,
+        plus,
+        minus,
+        overlap_mm: overlap.0,
+        overlap_t: overlap.1,
+        queries: sweeps.iter().map(|s| s.queries).sum(),
+    }
+}
+
+/// One side and sense over the period, in time order so each cluster's last distance
+/// bounds its next.
+fn sweep(
+    motion: &dyn PartMotion,
+    driver: &Solid,
+    follower: &Solid,
+    side: Side,
+    sense: f64,
+    n: usize,
+    cap: f64,
+) -> Sweep {
+    let (moving, fixed) = match side {
+        Side::FollowerIntoDriver => (follower, driver),
+        Side::DriverIntoFollower => (driver, follower),
+    };
+    // The follower turning by +δ is, seen from the follower, the driver turning by −δ.
+    let turn_sense = match side {
+        Side::FollowerIntoDriver => sense,
+        Side::DriverIntoFollower => -sense,
+    };
+    let speed: Vec<f64> = moving
+        .clusters
+        .iter()
+        .map(|c| match side {
+            Side::FollowerIntoDriver => motion.follower_speed(&c.center),
+            Side::DriverIntoFollower => motion.driver_speed(&c.center),
+        })
+        .collect();
+    let reach: Vec<f64> = moving
+        .clusters
+        .iter()
+        .map(|c| {
+            c.radius
+                + match side {
+                    Side::FollowerIntoDriver => motion.follower_reach(&c.center),
+                    Side::DriverIntoFollower => motion.driver_reach(&c.center),
+                }
+        })
+        .collect();
+    // Each cluster's last measured distance to the fixed part and when: with the speed
+    // bound, a lower bound on its distance at any later time.
+    let mut last = vec![(f64::NEG_INFINITY, 0.0f64); moving.clusters.len()];
+    let mut free = Vec::with_capacity(n);
+    let mut overlap = (0.0f64, 0.0f64);
+    let mut queries = 0u64;
+    let mut witness: Option<usize> = None;
+    let mut previous = cap;
+    for i in 0..n {
+        let t = i as f64 / n as f64;
+        let (to_r, r_to_fixed) = match side {
+            Side::FollowerIntoDriver => (motion.follower(t), motion.driver(t).inverse()),
+            Side::DriverIntoFollower => (motion.driver(t), motion.follower(t).inverse()),
+        };
+        let mut at = Instant {
+            moving,
+            fixed,
+            to_r: &to_r,
+            r_to_fixed: &r_to_fixed,
+            turn_sense,
+            t,
+            speed: &speed,
+            reach: &reach,
+            last: &mut last,
+            witness,
+            queries: 0,
+            overlap: (0.0, t),
+        };
+        // Free turns change little from one sample to the next: search first within
+        // twice the last one, and the whole cap only when nothing touches within that.
+        let limit = (2.0 * previous + SEARCH_FLOOR).min(cap);
+        let mut best = at.free_within(limit);
+        if best >= limit && limit < cap {
+            best = at.free_within(cap);
+        }
+        queries += at.queries;
+        if at.overlap.0 > overlap.0 {
+            overlap = at.overlap;
+        }
+        witness = at.witness;
+        previous = best;
+        free.push(best);
+    }
+    Sweep {
+        free,
+        overlap,
+        queries,
+    }
+}
+
+/// Smallest search limit, rad (0.5°): a free turn near zero (parts nearly touching)
+/// still searches a useful span at the next sample.
+const SEARCH_FLOOR: f64 = 0.5 * std::f64::consts::PI / 180.0;
+
+/// One (side, sense) test at one time.
+struct Instant<'a> {
+    moving: &'a Solid,
+    fixed: &'a Solid,
+    to_r: &'a Isometry3<f64>,
+    r_to_fixed: &'a Isometry3<f64>,
+    turn_sense: f64,
+    t: f64,
+    speed: &'a [f64],
+    reach: &'a [f64],
+    last: &'a mut [(f64, f64)],
+    witness: Option<usize>,
+    queries: u64,
+    overlap: (f64, f64),
+}
+
+impl Instant<'_> {
+    /// Largest free turn up to `limit` (returns `limit` when nothing touches within it).
+    fn free_within(&mut self, limit: f64) -> f64 {
+        let moving = self.moving;
+        // Clusters that may touch within the limit, nearest first, with the largest
+        // distance of their vertices from the axis now.
+        let mut active: Vec<(f64, f64, f64, usize)> = Vec::new();
+        for (ci, c) in moving.clusters.iter().enumerate() {
+            let (d_last, t_last) = self.last[ci];
+            let lower = d_last - self.speed[ci] * (self.t - t_last) - c.radius;
+            if lower > self.reach[ci] * limit {
+                continue;
+            }
+            let w = self.to_r * c.center;
+            let r_max = w.coords.xy().norm() + c.radius;
+            let q = self.r_to_fixed * w;
+            // The grid's bound first; the mesh only for clusters it cannot rule out.
+            let mut d = self.fixed.lower_bound(&q);
+            if d - c.radius <= r_max * limit {
+                d = self.fixed.signed(&q).max(0.0);
+                self.queries += 1;
+            }
+            self.last[ci] = (d, self.t);
+            if d - c.radius <= r_max * limit {
+                active.push((d - c.radius, r_max, d, ci));
+            }
+        }
+        active.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut best = limit;
+        let mut touch = None;
+        // The vertex that touched first at the last sample most likely does again: its
+        // turn, traced first, lets the bound below skip most of the others.
+        if let Some(vi) = self.witness {
+            self.try_vertex(vi, 0.0, &mut best, &mut touch);
+        }
+        for &(lower, r_max, d, ci) in &active {
+            if lower > r_max * best {
+                continue;
+            }
+            let c = &moving.clusters[ci];
+            for vi in c.start..c.end {
+                // The distance is 1-Lipschitz: the centre's bounds each vertex's.
+                let bound = d - (moving.verts[vi] - c.center).norm();
+                self.try_vertex(vi, bound, &mut best, &mut touch);
+            }
+        }
+        self.witness = touch.or(self.witness);
+        best
+    }
+
+    /// Trace vertex `vi`, whose distance to the fixed part is at least `bound`; lower
+    /// `best` (and note the vertex) if it touches sooner.
+    fn try_vertex(&mut self, vi: usize, bound: f64, best: &mut f64, touch: &mut Option<usize>) {
+        let w = self.to_r * self.moving.verts[vi];
+        let r = w.coords.xy().norm();
+        if r < ON_AXIS_MM || bound > r * *best {
+            return;
+        }
+        if self.fixed.lower_bound(&(self.r_to_fixed * w)) > r * *best {
+            return;
+        }
+        let (hit, q, deep) = trace(self.fixed, self.r_to_fixed, &w, r, self.turn_sense, *best);
+        self.queries += q;
+        if let Some(depth) = deep {
+            if depth > self.overlap.0 {
+                self.overlap = (depth, self.t);
+            }
+            return;
+        }
+        if hit < *best {
+            *best = hit;
+            *touch = Some(vi);
+        }
+    }
+}
+
+/// Sphere-trace one vertex (at `w` in R, distance `r` from the axis) turning about z in
+/// `sense` against `fixed` (R → its frame by `r_to_fixed`), up to `limit` rad. Returns the
+/// turn where it touches (or `limit`), the queries made, and the depth if it starts
+/// inside the fixed part.
+fn trace(
+    fixed: &Solid,
+    r_to_fixed: &Isometry3<f64>,
+    w: &Point3<f64>,
+    r: f64,
+    sense: f64,
+    limit: f64,
+) -> (f64, u64, Option<f64>) {
+    let mut delta = 0.0;
+    for step in 0..MAX_STEPS {
+        let turn = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), sense * delta);
+        let p = r_to_fixed * (turn * w);
+        // Far from the part the grid's bound is a safe step and costs no mesh query.
+        let far = fixed.lower_bound(&p);
+        if step > 0 && far > FAR_MM {
+            delta += far / r;
+            if delta >= limit {
+                return (limit, step as u64, None);
+            }
+            continue;
+        }
+        let d = fixed.signed(&p);
+        let queries = step as u64 + 1;
+        if step == 0 && d < 0.0 {
+            return (limit, queries, Some(-d));
+        }
+        if d < HIT_MM {
+            return (delta, queries, None);
+        }
+        delta += d / r;
+        if delta >= limit {
+            return (limit, queries, None);
+        }
+    }
+    (delta, MAX_STEPS as u64, None)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::primitive_meshes::cuboid;
+
+    /// A fixed driver (identity pose) and a follower turning about z; speeds and reach
+    /// from the boxes' sizes.
+    struct Still;
+
+    impl PartMotion for Still {
+        fn follower(&self, _: f64) -> Isometry3<f64> {
+            Isometry3::identity()
+        }
+        fn driver(&self, _: f64) -> Isometry3<f64> {
+            Isometry3::identity()
+        }
+        fn follower_speed(&self, _: &Point3<f64>) -> f64 {
+            0.0
+        }
+        fn driver_speed(&self, _: &Point3<f64>) -> f64 {
+            0.0
+        }
+        fn follower_reach(&self, q: &Point3<f64>) -> f64 {
+            q.coords.norm()
+        }
+        fn driver_reach(&self, p: &Point3<f64>) -> f64 {
+            p.coords.norm()
+        }
+    }
+
+    /// Guards the traced turn against a case with a closed form: a thin bar along +x
+    /// (tip at 20 mm, faces at y = ±0.5) turning between two posts whose near faces are
+    /// at y = +1.5 (beyond x = 10) and y = −2.5. Turning +δ, the bar's top corner at
+    /// (20, 0.5) meets the upper post's face first: 20 sin δ + 0.5 cos δ = 1.5; turning
+    /// −δ, its lower corner meets y = −2.5. The posts' own corners never lead, as they
+    /// face the bar's flat sides.
+    #[test]
+    fn a_bar_between_two_posts_turns_to_the_closed_form_angle() {
+        let bar = cuboid([0.0, -0.5, -1.0], [20.0, 0.5, 1.0]);
+        let mut posts = cuboid([10.0, 1.5, -3.0], [30.0, 6.0, 3.0]);
+        let low = cuboid([10.0, -8.0, -3.0], [30.0, -2.5, 3.0]);
+        let off = posts.vertices.len() as u32;
+        posts.vertices.extend(low.vertices);
+        posts
+            .triangles
+            .extend(low.triangles.iter().map(|t| t.map(|i| i + off)));
+        let driver = Solid::new(&posts, "driver").unwrap();
+        let follower = Solid::new(&bar, "follower").unwrap();
+        let cap = 0.5;
+        let f = free_turns(&Still, &driver, &follower, 4, cap);
+        // a sin δ + b cos δ = c, with R = √(a² + b²): δ = asin(c/R) − atan2(b, a).
+        let solve = |a: f64, b: f64, c: f64| (c / a.hypot(b)).asin() - b.atan2(a);
+        let plus = solve(20.0, 0.5, 1.5);
+        let minus = solve(20.0, 0.5, 2.5);
+        for i in 0..4 {
+            assert!(
+                (f.plus[i] - plus).abs() < 2.0 * HIT_MM / 20.0,
+                "{}",
+                f.plus[i]
+            );
+            assert!(
+                (f.minus[i] - minus).abs() < 2.0 * HIT_MM / 20.0,
+                "{}",
+                f.minus[i]
+            );
+        }
+        assert_eq!(f.overlap_mm, 0.0);
+    }
+
+    /// Guards the cap and the driver-side test: a bar with nothing to hit one way turns the
+    /// whole cap that way; a pin of the driver that sits in a notch-free path of the bar's
+    /// far face is caught by the driver-vertex test even though no bar vertex enters it
+    /// (the pin is narrower than the bar's face and between its corners).
+    #[test]
+    fn a_driver_pin_against_a_flat_face_stops_the_turn() {
+        let bar = cuboid([0.0, -0.5, -5.0], [20.0, 0.5, 5.0]);
+        // A thin pin standing on y > 1, its tip 1 mm from the bar's face at x = 15.
+        let pin = cuboid([14.9, 1.5, -0.1], [15.1, 8.0, 0.1]);
+        let driver = Solid::new(&pin, "driver").unwrap();
+        let follower = Solid::new(&bar, "follower").unwrap();
+        let cap = 0.5;
+        let f = free_turns(&Still, &driver, &follower, 2, cap);
+        assert_eq!(f.minus[0], cap);
+        // A tip corner (x, 1.5) of the pin meets the face y = 0.5 of the turned bar when
+        // 1.5 cos δ − x sin δ = 0.5; the corner at x = 15.1 has the longer lever and
+        // arrives first.
+        let mut lo = 0.0;
+        let mut hi = cap;
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if 1.5 * f64::cos(mid) - 15.1 * f64::sin(mid) > 0.5 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        assert!(
+            (f.plus[0] - lo).abs() < 2.0 * HIT_MM / 15.0,
+            "{} vs {lo}",
+            f.plus[0]
+        );
+    }
+
+    /// Two parts in motion: a driver turning about a vertical axis at (18, 12, 0) carrying
+    /// two balls (r 1.5) on a 7.5 mm radius, and a follower swinging ±0.05 rad whose 18 mm
+    /// arm along x ends in a ball (r 1.5). Each driver ball passes over the arm's end once
+    /// per turn, its lowest point 4.5 mm above it, so they come within about 0.6 mm
+    /// without touching.
+    struct Swing;
+
+    impl PartMotion for Swing {
+        fn follower(&self, t: f64) -> Isometry3<f64> {
+            let a = 0.05 * (std::f64::consts::TAU * t).sin();
+            Isometry3::rotation(Vector3::z() * a)
+        }
+        fn driver(&self, t: f64) -> Isometry3<f64> {
+            Isometry3::new(
+                Vector3::new(18.0, 12.0, 0.0),
+                Vector3::z() * std::f64::consts::TAU * t,
+            )
+        }
+        // |ω_f|·|q| + 2π·(|q| + |axis|): the follower point's speed seen from the driver.
+        fn follower_speed(&self, q: &Point3<f64>) -> f64 {
+            0.05 * std::f64::consts::TAU * q.coords.norm()
+                + std::f64::consts::TAU * (q.coords.norm() + 21.7)
+        }
+        fn driver_speed(&self, p: &Point3<f64>) -> f64 {
+            let x = 21.7 + p.coords.norm();
+            std::f64::consts::TAU * p.coords.norm() + 0.05 * std::f64::consts::TAU * x
+        }
+        fn follower_reach(&self, q: &Point3<f64>) -> f64 {
+            q.coords.norm()
+        }
+        fn driver_reach(&self, p: &Point3<f64>) -> f64 {
+            21.7 + p.coords.norm()
+        }
+    }
+
+    fn joined(parts: &[Mesh]) -> Mesh {
+        let mut out = Mesh::default();
+        for m in parts {
+            let off = out.vertices.len() as u32;
+            out.vertices.extend(&m.vertices);
+            out.triangles
+                .extend(m.triangles.iter().map(|t| t.map(|i| i + off)));
+        }
+        out
+    }
+
+    /// Guards the shortcuts (clusters skipped by the speed bound, the grid's lower bound,
+    /// the search limit carried from the last sample, the last touching vertex first): on
+    /// parts in motion, the free turns equal those of a plain trace of every vertex of both
+    /// parts with mesh queries only, within the trace's own tolerance.
+    #[test]
+    fn the_shortcuts_find_the_same_free_turns_as_tracing_every_vertex() {
+        use crate::geometry::primitive_meshes::uv_sphere;
+        let follower_mesh = joined(&[
+            cuboid([0.0, -0.6, -0.6], [18.0, 0.6, 0.6]),
+            uv_sphere([18.0, 0.0, 0.0], 1.5, 48, 24),
+        ]);
+        let driver_mesh = joined(&[
+            uv_sphere([-7.5, 0.0, 0.0], 1.5, 48, 24),
+            uv_sphere([0.0, 7.5, 0.0], 1.5, 48, 24),
+        ]);
+        let driver = Solid::new(&driver_mesh, "driver").unwrap();
+        let follower = Solid::new(&follower_mesh, "follower").unwrap();
+        let (n, cap) = (720, 0.3);
+        let fast = free_turns(&Swing, &driver, &follower, n, cap);
+        assert_eq!(
+            fast.overlap_mm, 0.0,
+            "the parts never overlap at the design pose"
+        );
+        // The plain trace: every vertex, exact queries, the whole cap.
+        let plain = |moving: &Solid, fixed: &Solid, driver_moves: bool, sense: f64, t: f64| {
+            let (to_r, r_to_fixed) = if driver_moves {
+                (Swing.driver(t), Swing.follower(t).inverse())
+            } else {
+                (Swing.follower(t), Swing.driver(t).inverse())
+            };
+            let turn_sense = if driver_moves { -sense } else { sense };
+            let mut best = cap;
+            for v in &moving.verts {
+                let w = to_r * v;
+                let r = w.coords.xy().norm();
+                let mut delta = 0.0;
+                while delta < best {
+                    let turn =
+                        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), turn_sense * delta);
+                    let d = fixed.signed(&(r_to_fixed * (turn * w)));
+                    if d < HIT_MM {
+                        best = best.min(delta);
+                        break;
+                    }
+                    delta += d / r;
+                }
+            }
+            best
+        };
+        let mut touching = 0;
+        for i in 0..n {
+            let t = i as f64 / n as f64;
+            for (sense, got) in [(1.0, fast.plus[i]), (-1.0, fast.minus[i])] {
+                let want = plain(&follower, &driver, false, sense, t)
+                    .min(plain(&driver, &follower, true, sense, t));
+                assert!(
+                    (got - want).abs() < 2.0 * HIT_MM / 5.0,
+                    "t = {t}, sense {sense}: {got} vs {want}"
+                );
+                if want < cap {
+                    touching += 1;
+                }
+            }
+        }
+        // The case exercises contacts, not only free turns.
+        assert!(touching > 20, "{touching}");
+        assert!(touching < 2 * n - 20, "{touching}");
+    }
+}
