@@ -58,3 +58,43 @@ fn plant_backlash_and_lag_are_recovered_from_a_simulated_session() {
     let r = s.timing.as_ref().unwrap().ratios[0];
     assert!((r.measured - 2.0).abs() < 0.05, "{r:?}");
 }
+
+/// Guards the geometry plant end to end (`sim-device … --prediction`): a follower the
+/// built parts leave 1° of free turn each way, dragged, lags 1° driven forward and leads
+/// 1° in reverse, so a session measured both ways shows an RMS error of 1° (±0.2°), which
+/// no offset fit removes (the plain target plant gives about 0.02°), and no error much
+/// beyond the play.
+#[test]
+fn the_geometry_plant_shows_the_parts_play_in_a_measurement() {
+    use mpc_rig::predict::table::PlayTable;
+    let _serial = serial_group::lock();
+    let motion_path = repo("data/motions/half-turn-2to1.toml");
+    let motion = Motion::from_file(&motion_path).unwrap();
+    let mut opts = SimDynamixelOptions::new(Arc::new(MotionTarget::new(motion).unwrap()));
+    let one = 1f64.to_radians();
+    opts.plant.play = Some(Arc::new(PlayTable::new(vec![one; 1440], vec![one; 1440])));
+    let sim = spawn(opts).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let rec = tmp.path().join("rec");
+    let mut m = MeasureOptions {
+        rig_path: repo("rigs/sim-dynamixel.toml"),
+        ports: vec![sim.path().display().to_string()],
+        target: TargetSpec::Motion(motion_path),
+        speed_rpm: 30.0,
+        cycles: 2,
+        settle_cycles: 1,
+        reverse: true,
+        out_dir: Some(rec.clone()),
+        replace: false,
+        cancel: Arc::new(AtomicBool::new(false)),
+        progress: None,
+    };
+    let outcome = measure(&mut m).unwrap();
+    drop(sim);
+    assert!(outcome.complete, "{}", outcome.end);
+    let s = analyze_and_report(&rec, &ReportOptions::default()).unwrap();
+    let rms = s.headline.rms_error_deg.unwrap();
+    assert!((rms - 1.0).abs() < 0.2, "RMS {rms}");
+    let max = s.headline.max_error_deg.unwrap();
+    assert!(max < 1.5, "max {max}");
+}

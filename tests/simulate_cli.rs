@@ -50,3 +50,36 @@ fn too_few_driver_angles_are_refused() {
         "stderr:\n{stderr}"
     );
 }
+
+/// Guards the geometry plant's refusal of a prediction it cannot read: what it was
+/// reading for, the file and why, exit 1, before any device is served.
+#[test]
+fn a_bench_with_a_missing_prediction_is_refused_before_it_starts() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("prediction.json");
+    let assert = Command::cargo_bin("mpc-rig")
+        .unwrap()
+        .args([
+            "sim-device",
+            "stepper",
+            "--mechanism",
+            TEST_MECHANISM,
+            "--prediction",
+            missing.to_str().unwrap(),
+        ])
+        .assert()
+        .code(1);
+    let stderr = String::from_utf8_lossy(&assert.get_output().stderr).to_string();
+    assert_eq!(
+        stderr,
+        format!(
+            "error: reading the prediction for the geometry plant\n  caused by: {}: No such \
+             file or directory (os error 2)\n",
+            missing.display()
+        )
+    );
+    assert!(
+        assert.get_output().stdout.is_empty(),
+        "no device path printed"
+    );
+}

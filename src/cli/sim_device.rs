@@ -16,6 +16,7 @@ use anyhow::Context;
 use clap::{Args, Subcommand};
 
 use crate::motion::Motion;
+use crate::predict::table::PlayTable;
 use crate::rig::config::RigConfig;
 use crate::rig::sim::dynamixel::{
     self, BusConfig, HardwareFault, MotionTarget, ServerEnd, SimDynamixelOptions,
@@ -68,6 +69,19 @@ pub struct SimMixedArgs {
         "Plant imperfection or link fault, repeatable; link faults apply to both pseudo-terminals."
     ))]
     pub faults: Vec<String>,
+    /// The geometry plant.
+    #[command(flatten)]
+    pub geometry: GeometryArgs,
+}
+
+/// The geometry plant (docs/simulate.md).
+#[derive(Debug, Args)]
+pub struct GeometryArgs {
+    /// Move the follower as the built parts would: the free turn over the driver angle
+    /// from `mpc-rig simulate` (its prediction.json), under a drag, instead of exactly on
+    /// the target law (1R).
+    #[arg(long, value_name = "FILE")]
+    pub prediction: Option<PathBuf>,
 }
 
 /// The target law: a mechanism or a motion file.
@@ -94,6 +108,9 @@ pub struct SimDynamixelArgs {
         "Plant imperfection or link fault, repeatable (e.g. backlash=0.5, drop_prob=0.001, echo=1)."
     ))]
     pub faults: Vec<String>,
+    /// The geometry plant.
+    #[command(flatten)]
+    pub geometry: GeometryArgs,
     /// ID of the driver servo.
     #[arg(long, default_value_t = 1)]
     pub driver_id: u8,
@@ -127,6 +144,9 @@ pub struct SimStepperArgs {
         "Plant imperfection or link fault, repeatable (e.g. backlash=0.5, missed_step_prob=0.001)."
     ))]
     pub faults: Vec<String>,
+    /// The geometry plant.
+    #[command(flatten)]
+    pub geometry: GeometryArgs,
     /// Take the bench's mechanics (steps/rev, microsteps, gear, direction, fitted sensors)
     /// from this rig file; default: those of rigs/sim-stepper.toml.
     #[arg(long, value_name = "FILE")]
@@ -150,7 +170,7 @@ pub fn run(args: SimDeviceArgs) -> anyhow::Result<ExitCode> {
 fn run_mixed(a: SimMixedArgs) -> anyhow::Result<ExitCode> {
     let rig = RigConfig::load(&a.rig)?;
     let motion = load_target(&a.target, Some(&rig))?;
-    let plant = plant_from(&a.faults)?;
+    let plant = geometry_plant(&a.faults, &a.geometry, &motion)?;
     let sim = mixed::spawn(&rig, motion, plant).context("starting the simulated mixed bench")?;
     {
         let mut out = std::io::stdout().lock();
@@ -190,10 +210,33 @@ pub(super) fn plant_from(faults: &[String]) -> anyhow::Result<PlantConfig> {
     })
 }
 
+/// The plant of `faults`, moved by the built parts when `geometry` names a prediction
+/// (refused unless the target is 1R).
+pub(super) fn geometry_plant(
+    faults: &[String],
+    geometry: &GeometryArgs,
+    motion: &Motion,
+) -> anyhow::Result<PlantConfig> {
+    let mut plant = plant_from(faults)?;
+    if let Some(path) = &geometry.prediction {
+        if motion.class() != crate::motion::MotionClass::R1 {
+            anyhow::bail!(
+                "--prediction {}: the geometry plant handles 1R mechanisms; this target is {}",
+                path.display(),
+                motion.class()
+            );
+        }
+        let table =
+            PlayTable::load(path).context("reading the prediction for the geometry plant")?;
+        plant.play = Some(std::sync::Arc::new(table));
+    }
+    Ok(plant)
+}
+
 fn run_stepper(a: SimStepperArgs) -> anyhow::Result<ExitCode> {
     let rig = a.rig.as_deref().map(RigConfig::load).transpose()?;
     let motion = load_target(&a.target, rig.as_ref())?;
-    let plant = plant_from(&a.faults)?;
+    let plant = geometry_plant(&a.faults, &a.geometry, &motion)?;
     let mechanics = match &rig {
         Some(r) => Mechanics::from_rig(r)?,
         None => Mechanics::default(),
@@ -252,8 +295,8 @@ pub(super) fn load_target(t: &TargetArgs, rig: Option<&RigConfig>) -> anyhow::Re
 
 fn run_dynamixel(a: SimDynamixelArgs) -> anyhow::Result<ExitCode> {
     let motion = load_target(&a.target, None)?;
+    let plant = geometry_plant(&a.faults, &a.geometry, &motion)?;
     let target = MotionTarget::new(motion)?;
-    let plant = plant_from(&a.faults)?;
     let mut opts = SimDynamixelOptions::new(Arc::new(target));
     opts.plant = plant;
     opts.bus = BusConfig {

@@ -12,7 +12,9 @@ use std::process::ExitCode;
 use anyhow::Context;
 use clap::Args;
 
-use super::sim_device::{load_target, plant_from, serve_until_ctrl_c, TargetArgs};
+use super::sim_device::{
+    geometry_plant, load_target, serve_until_ctrl_c, GeometryArgs, TargetArgs,
+};
 use crate::rig::config::RigConfig;
 use crate::rig::sim::pico::{self, BoardFiles, SimPicoOptions, DEFAULT_FLASH_ID};
 use crate::rig::sim::stepper::Mechanics;
@@ -29,6 +31,9 @@ pub struct SimPicoArgs {
         "Plant imperfection or byte fault, repeatable. Unplug, drop-out, stall, reboot and protocol faults are refused here."
     ))]
     pub faults: Vec<String>,
+    /// The geometry plant.
+    #[command(flatten)]
+    pub geometry: GeometryArgs,
     /// Take the bench's mechanics (steps/rev, microsteps, gear, direction, fitted sensors)
     /// from this rig file; default: those of rigs/sim-stepper.toml.
     #[arg(long, value_name = "FILE")]
@@ -69,7 +74,7 @@ fn parse_flash_id(s: &str) -> Result<u64, String> {
 /// Run `sim-device pico`.
 pub fn run(a: SimPicoArgs) -> anyhow::Result<ExitCode> {
     let motion = load_target(&a.target, None)?;
-    let plant = plant_from(&a.faults)?;
+    let plant = geometry_plant(&a.faults, &a.geometry, &motion)?;
     let mechanics = match &a.rig {
         Some(r) => Mechanics::from_rig(&RigConfig::load(r)?)?,
         None => Mechanics::default(),

@@ -16,6 +16,7 @@
 pub mod law;
 pub mod output;
 pub mod play;
+pub mod table;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;

@@ -18,12 +18,12 @@ pub const PREDICTION_FORMAT: &str = "mpcmech-prediction/1";
 #[derive(Debug, thiserror::Error)]
 pub enum OutputError {
     /// A file could not be written.
-    #[error("cannot write {path}: {source}")]
+    #[error("cannot write {path}: {error}")]
     Io {
         /// The file.
         path: PathBuf,
         /// Why.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// A chart could not be drawn.
     #[error(transparent)]
@@ -40,7 +40,7 @@ pub fn write(
 ) -> Result<Vec<PathBuf>, OutputError> {
     let io = |path: &Path| {
         let path = path.to_path_buf();
-        move |source| OutputError::Io { path, source }
+        move |error| OutputError::Io { path, error }
     };
     std::fs::create_dir_all(out).map_err(io(out))?;
     let mut files = Vec::new();

@@ -35,6 +35,7 @@ use rand_chacha::ChaCha8Rng;
 pub const DEFAULT_SEED: u64 = 0x6d70_6372_6967;
 
 use crate::motion::DEFAULT_SCALE_MM;
+use crate::predict::table::PlayTable;
 
 /// Axis of the simulated IMU bias rotation: fixed (not random) and tilted off every
 /// coordinate axis so a bias shows up in all three angles.
@@ -133,6 +134,10 @@ pub struct PlantConfig {
     pub events: BenchFaults,
     /// Seed of all randomness.
     pub seed: u64,
+    /// The geometry plant: the built parts' free turn over the driver angle (from
+    /// `mpc-rig simulate`). With it a 1R follower is not on the target law but where a
+    /// drag leaves it inside that free interval, as the printed parts would move it.
+    pub play: Option<std::sync::Arc<PlayTable>>,
 }
 
 /// Faults of the driver and the mechanism at a time (s since the simulator started).
@@ -166,6 +171,7 @@ impl Default for PlantConfig {
             link: LinkFaults::default(),
             events: BenchFaults::default(),
             seed: DEFAULT_SEED,
+            play: None,
         }
     }
 }
@@ -389,6 +395,9 @@ pub struct Plant {
     jammed: Option<FollowerState>,
     /// The last state returned.
     last: Option<FollowerState>,
+    /// Geometry plant: the target angle at the last call and the follower's deviation
+    /// from it (rad).
+    drag: Option<(f64, f64)>,
     sensor_rng: ChaCha8Rng,
     link_rng: ChaCha8Rng,
     step_rng: ChaCha8Rng,
@@ -409,6 +418,7 @@ impl Plant {
             input: None,
             jammed: None,
             last: None,
+            drag: None,
             sensor_rng: stream(1),
             link_rng: stream(2),
             step_rng: stream(3),
@@ -462,7 +472,21 @@ impl Plant {
         };
         self.input = Some(input);
         let effective = input - self.cfg.phase_lag_deg.to_radians();
-        self.target.follower_at(effective / TAU)
+        let mut state = self.target.follower_at(effective / TAU);
+        if let Some(table) = &self.cfg.play {
+            // A dragged follower stays where it was unless the parts push it: its
+            // deviation from the target is clamped into the free interval at this angle.
+            let e = self
+                .drag
+                .map_or(0.0, |(target, e)| e + target - state.angle_z);
+            let (plus, minus) = table.at(effective);
+            let e = e.clamp(-minus, plus);
+            self.drag = Some((state.angle_z, e));
+            state.angle_z += e;
+            state.rotation =
+                UnitQuaternion::from_axis_angle(&Vector3::z_axis(), e) * state.rotation;
+        }
+        state
     }
 
     /// Whether the next step pulse is lost (missed-step fault).
@@ -703,5 +727,35 @@ mod tests {
         let mut p = Plant::new(LAW, cfg);
         let n = (0..100_000).filter(|_| p.step_missed()).count();
         assert!((800..1200).contains(&n), "{n}");
+    }
+
+    /// Guards the geometry plant: with the same free interval everywhere, a follower
+    /// driven forward lags the target by the free turn behind it and, driven back, leads
+    /// by the one ahead, as the built parts would leave it under a drag; backlash-free
+    /// otherwise (the target law itself where the interval is zero).
+    #[test]
+    fn the_geometry_plant_leaves_a_dragged_follower_at_the_edge_of_its_play() {
+        let table = PlayTable::new(vec![0.02; 8], vec![0.03; 8]);
+        let cfg = PlantConfig {
+            play: Some(std::sync::Arc::new(table)),
+            ..PlantConfig::default()
+        };
+        let mut plant = Plant::new(LAW, cfg);
+        let mut phi = 0.0;
+        for _ in 0..2000 {
+            phi += 0.005;
+            plant.follower(phi);
+        }
+        let lag = plant.follower(phi).angle_z - plant.ideal(phi).angle_z;
+        assert!((lag + 0.03).abs() < 1e-9, "forward: {lag}");
+        for _ in 0..2000 {
+            phi -= 0.005;
+            plant.follower(phi);
+        }
+        let lead = plant.follower(phi).angle_z - plant.ideal(phi).angle_z;
+        assert!((lead - 0.02).abs() < 1e-9, "reverse: {lead}");
+        let r = plant.follower(phi).rotation;
+        let z = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), plant.follower(phi).angle_z);
+        assert!(r.angle_to(&z) < 1e-9, "the rotation turns with the angle");
     }
 }

@@ -1,0 +1,182 @@
+//! A prediction read back as a table of free intervals over the driver angle, for the
+//! simulated benches' geometry plant (`sim-device … --prediction FILE`).
+//!
+//! Owns [`PlayTable`]: the follower's free turn each way at each predicted driver angle,
+//! interpolated linearly between them (periodic), loaded from `prediction.json` with its
+//! format and class checked. A bench at 1 kHz looks up two numbers per reading instead of
+//! tracing meshes. It does not decide where the follower is: the plant applies the load.
+
+use std::f64::consts::TAU;
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use super::output::PREDICTION_FORMAT;
+
+/// Error loading a [`PlayTable`].
+#[derive(Debug, thiserror::Error)]
+pub enum TableError {
+    /// The file could not be read.
+    #[error("{path}: {error}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        error: std::io::Error,
+    },
+    /// Not a prediction, or not one the plant can use.
+    #[error("{path}: {message}")]
+    Format {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+#[derive(Deserialize)]
+struct File {
+    format: String,
+    prediction: Body,
+}
+
+#[derive(Deserialize)]
+struct Body {
+    class: String,
+    samples: Vec<Row>,
+}
+
+#[derive(Deserialize)]
+struct Row {
+    driver_deg: f64,
+    free_plus_deg: f64,
+    free_minus_deg: f64,
+}
+
+/// The free turn of the follower each way, over one period of the driver, rad.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlayTable {
+    /// At driver angle 2π·i/n, the positive-sense free turn.
+    plus: Vec<f64>,
+    /// At driver angle 2π·i/n, the negative-sense free turn (a magnitude).
+    minus: Vec<f64>,
+}
+
+impl PlayTable {
+    /// A table from free turns at n evenly spaced driver angles from 0 (rad).
+    pub fn new(plus: Vec<f64>, minus: Vec<f64>) -> PlayTable {
+        assert!(
+            plus.len() == minus.len() && !plus.is_empty(),
+            "one free interval per angle, at least one"
+        );
+        PlayTable { plus, minus }
+    }
+
+    /// Read `prediction.json` (format [`PREDICTION_FORMAT`], a 1R prediction with evenly
+    /// spaced driver angles from 0).
+    pub fn load(path: &Path) -> Result<PlayTable, TableError> {
+        let text = std::fs::read_to_string(path).map_err(|error| TableError::Io {
+            path: path.to_path_buf(),
+            error,
+        })?;
+        let bad = |message: String| TableError::Format {
+            path: path.to_path_buf(),
+            message,
+        };
+        let file: File = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
+        if file.format != PREDICTION_FORMAT {
+            return Err(bad(format!(
+                "format {:?}, expected {PREDICTION_FORMAT:?} (the output of mpc-rig simulate)",
+                file.format
+            )));
+        }
+        if file.prediction.class != "1R" {
+            return Err(bad(format!(
+                "a {} prediction; the geometry plant handles 1R",
+                file.prediction.class
+            )));
+        }
+        let rows = &file.prediction.samples;
+        let n = rows.len();
+        if n == 0 {
+            return Err(bad("no samples".to_string()));
+        }
+        for (i, r) in rows.iter().enumerate() {
+            let expected = 360.0 * i as f64 / n as f64;
+            if (r.driver_deg - expected).abs() > 1e-6 {
+                return Err(bad(format!(
+                    "samples[{i}].driver_deg is {}, expected {expected} (evenly spaced from 0)",
+                    r.driver_deg
+                )));
+            }
+            if !(r.free_plus_deg >= 0.0 && r.free_minus_deg >= 0.0) {
+                return Err(bad(format!(
+                    "samples[{i}]: free turns must be ≥ 0, got {} and {}",
+                    r.free_plus_deg, r.free_minus_deg
+                )));
+            }
+        }
+        Ok(PlayTable::new(
+            rows.iter().map(|r| r.free_plus_deg.to_radians()).collect(),
+            rows.iter().map(|r| r.free_minus_deg.to_radians()).collect(),
+        ))
+    }
+
+    /// Free turns (plus, minus) at driver angle `phi` (rad, any real), linear between
+    /// the table's angles.
+    pub fn at(&self, phi: f64) -> (f64, f64) {
+        let n = self.plus.len();
+        let x = phi.rem_euclid(TAU) / TAU * n as f64;
+        let i = (x.floor() as usize).min(n - 1);
+        let j = (i + 1) % n;
+        let f = x - i as f64;
+        (
+            self.plus[i] + f * (self.plus[j] - self.plus[i]),
+            self.minus[i] + f * (self.minus[j] - self.minus[i]),
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Guards the lookup: exact at the table's angles, linear between, periodic across 2π
+    /// and for negative angles.
+    #[test]
+    fn free_turns_interpolate_around_the_period() {
+        let t = PlayTable::new(vec![0.0, 0.4, 0.8, 0.4], vec![1.0, 1.0, 2.0, 2.0]);
+        let q = TAU / 4.0;
+        assert_eq!(t.at(0.0), (0.0, 1.0));
+        assert_eq!(t.at(q), (0.4, 1.0));
+        let (p, m) = t.at(1.5 * q);
+        assert!((p - 0.6).abs() < 1e-12 && (m - 1.5).abs() < 1e-12);
+        let (p, _) = t.at(3.5 * q);
+        assert!((p - 0.2).abs() < 1e-12, "wraps to the first angle: {p}");
+        let (p, _) = t.at(-0.5 * q + 3.0 * TAU);
+        assert!((p - 0.2).abs() < 1e-12, "{p}");
+    }
+
+    /// Guards what a wrong file gets: a prediction of another class is refused with the
+    /// file and the reason.
+    #[test]
+    fn a_prediction_of_another_class_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("prediction.json");
+        std::fs::write(
+            &path,
+            format!(
+                r#"{{"format": "{PREDICTION_FORMAT}", "prediction": {{"class": "3R", "samples": []}}}}"#
+            ),
+        )
+        .unwrap();
+        let e = PlayTable::load(&path).unwrap_err().to_string();
+        assert_eq!(
+            e,
+            format!(
+                "{}: a 3R prediction; the geometry plant handles 1R",
+                path.display()
+            )
+        );
+    }
+}
