@@ -59,22 +59,50 @@ fn plant_backlash_and_lag_are_recovered_from_a_simulated_session() {
     assert!((r.measured - 2.0).abs() < 0.05, "{r:?}");
 }
 
-/// Guards the geometry plant end to end (`sim-device … --prediction`): a follower the
-/// built parts leave 1° of free turn each way, dragged, lags 1° driven forward and leads
-/// 1° in reverse, so a session measured both ways shows an RMS error of 1° (±0.2°), which
-/// no offset fit removes (the plain target plant gives about 0.02°), and no error much
-/// beyond the play.
+/// A `prediction.json` with the same free turn each way everywhere (`free` degrees) and
+/// the laws a drag gives with it: forward lags by `free`, reverse leads by `free`.
+fn uniform_prediction(path: &Path, free: f64) {
+    let n = 1440;
+    let samples: Vec<serde_json::Value> = (0..n)
+        .map(|i| {
+            serde_json::json!({
+                "driver_deg": 360.0 * i as f64 / n as f64,
+                "target_deg": 0.0,
+                "forward_deg": -free,
+                "reverse_deg": free,
+                "free_plus_deg": free,
+                "free_minus_deg": free,
+                "play_deg": 2.0 * free,
+                "drive_lost": false,
+                "file_dist": -1.0,
+            })
+        })
+        .collect();
+    let doc = serde_json::json!({
+        "format": mpc_rig::predict::output::PREDICTION_FORMAT,
+        "prediction": {"class": "1R", "samples": samples},
+    });
+    std::fs::write(path, doc.to_string()).unwrap();
+}
+
+/// Guards the geometry plant and the comparison with a prediction end to end
+/// (`sim-device … --prediction`, `analyze --prediction`): a follower the built parts leave
+/// 1° of free turn each way, dragged, lags 1° driven forward and leads 1° in reverse, so
+/// a session measured both ways shows an RMS error of 1° (±0.2°) against the target, which
+/// no offset fit removes (the plain target plant gives about 0.02°), and under 0.2°
+/// against the prediction that says so.
 #[test]
 fn the_geometry_plant_shows_the_parts_play_in_a_measurement() {
     use mpc_rig::predict::table::PlayTable;
     let _serial = serial_group::lock();
+    let tmp = tempfile::tempdir().unwrap();
+    let prediction = tmp.path().join("prediction.json");
+    uniform_prediction(&prediction, 1.0);
     let motion_path = repo("data/motions/half-turn-2to1.toml");
     let motion = Motion::from_file(&motion_path).unwrap();
     let mut opts = SimDynamixelOptions::new(Arc::new(MotionTarget::new(motion).unwrap()));
-    let one = 1f64.to_radians();
-    opts.plant.play = Some(Arc::new(PlayTable::new(vec![one; 1440], vec![one; 1440])));
+    opts.plant.play = Some(Arc::new(PlayTable::load(&prediction).unwrap()));
     let sim = spawn(opts).unwrap();
-    let tmp = tempfile::tempdir().unwrap();
     let rec = tmp.path().join("rec");
     let mut m = MeasureOptions {
         rig_path: repo("rigs/sim-dynamixel.toml"),
@@ -92,9 +120,16 @@ fn the_geometry_plant_shows_the_parts_play_in_a_measurement() {
     let outcome = measure(&mut m).unwrap();
     drop(sim);
     assert!(outcome.complete, "{}", outcome.end);
-    let s = analyze_and_report(&rec, &ReportOptions::default()).unwrap();
+    let report = ReportOptions {
+        prediction: Some(prediction),
+        ..ReportOptions::default()
+    };
+    let s = analyze_and_report(&rec, &report).unwrap();
     let rms = s.headline.rms_error_deg.unwrap();
     assert!((rms - 1.0).abs() < 0.2, "RMS {rms}");
     let max = s.headline.max_error_deg.unwrap();
     assert!(max < 1.5, "max {max}");
+    let p = s.prediction.expect("compared with the prediction");
+    assert!(p.rms_deg < 0.2, "against the prediction: {p:?}");
+    assert!((p.rms_vs_target_deg - rms).abs() < 0.1, "{p:?}");
 }

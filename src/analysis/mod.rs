@@ -22,6 +22,7 @@ pub mod align;
 mod error;
 pub mod load;
 pub mod metrics;
+pub mod prediction;
 pub mod report;
 pub mod run;
 pub mod sampling;

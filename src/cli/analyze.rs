@@ -42,6 +42,10 @@ pub struct AnalyzeArgs {
     /// Tolerance on |measured − target| of every timing ratio.
     #[arg(long, value_parser = positive)]
     pub tol_ratio: Option<f64>,
+    /// Also compare with the law `mpc-rig simulate` predicted for the built parts (its
+    /// prediction.json; 1R).
+    #[arg(long, value_name = "FILE")]
+    pub prediction: Option<PathBuf>,
 }
 
 /// clap value parser: a positive finite number.
@@ -63,6 +67,7 @@ impl AnalyzeArgs {
             tol_deg: self.tol_deg,
             tol_mm: self.tol_mm,
             tol_ratio: self.tol_ratio,
+            prediction: self.prediction.clone(),
         })
     }
 }
@@ -121,6 +126,12 @@ pub fn print_summary(s: &Summary, report_dir: &Path) {
         println!(
             "error:    RMS {r:.3}°, max {:.3}° (after removing the offsets below)",
             h.max_error_deg.unwrap_or(f64::NAN)
+        );
+    }
+    if let Some(p) = &s.prediction {
+        println!(
+            "predict:  RMS {:.3}°, max {:.3}° from the parts' predicted law (vs {:.3}° from the target)",
+            p.rms_deg, p.max_deg, p.rms_vs_target_deg
         );
     }
     if let Some(r) = h.rms_error_mm {

@@ -49,8 +49,97 @@ struct Body {
 #[derive(Deserialize)]
 struct Row {
     driver_deg: f64,
+    target_deg: f64,
+    forward_deg: f64,
+    reverse_deg: f64,
     free_plus_deg: f64,
     free_minus_deg: f64,
+}
+
+/// The rows of a prediction file, checked.
+fn read(path: &Path) -> Result<Vec<Row>, TableError> {
+    let text = std::fs::read_to_string(path).map_err(|error| TableError::Io {
+        path: path.to_path_buf(),
+        error,
+    })?;
+    let bad = |message: String| TableError::Format {
+        path: path.to_path_buf(),
+        message,
+    };
+    let file: File = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
+    if file.format != PREDICTION_FORMAT {
+        return Err(bad(format!(
+            "format {:?}, expected {PREDICTION_FORMAT:?} (the output of mpc-rig simulate)",
+            file.format
+        )));
+    }
+    if file.prediction.class != "1R" {
+        return Err(bad(format!(
+            "a {} prediction; predictions are of 1R mechanisms so far",
+            file.prediction.class
+        )));
+    }
+    let rows = file.prediction.samples;
+    let n = rows.len();
+    if n == 0 {
+        return Err(bad("no samples".to_string()));
+    }
+    for (i, r) in rows.iter().enumerate() {
+        let expected = 360.0 * i as f64 / n as f64;
+        if (r.driver_deg - expected).abs() > 1e-6 {
+            return Err(bad(format!(
+                "samples[{i}].driver_deg is {}, expected {expected} (evenly spaced from 0)",
+                r.driver_deg
+            )));
+        }
+        if !(r.free_plus_deg >= 0.0 && r.free_minus_deg >= 0.0) {
+            return Err(bad(format!(
+                "samples[{i}]: free turns must be ≥ 0, got {} and {}",
+                r.free_plus_deg, r.free_minus_deg
+            )));
+        }
+    }
+    Ok(rows)
+}
+
+/// Linear interpolation in a periodic table of n values at driver angles 2π·i/n.
+fn periodic(values: &[f64], phi: f64) -> f64 {
+    let n = values.len();
+    let x = phi.rem_euclid(TAU) / TAU * n as f64;
+    let i = (x.floor() as usize).min(n - 1);
+    let j = (i + 1) % n;
+    values[i] + (x - i as f64) * (values[j] - values[i])
+}
+
+/// The predicted deviation of the follower from its target, driven forward and in
+/// reverse, over the driver angle: what `analyze --prediction` compares a measurement
+/// with.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PredictedDeviation {
+    forward: Vec<f64>,
+    reverse: Vec<f64>,
+}
+
+impl PredictedDeviation {
+    /// Read `prediction.json` (as [`PlayTable::load`]).
+    pub fn load(path: &Path) -> Result<PredictedDeviation, TableError> {
+        let rows = read(path)?;
+        Ok(PredictedDeviation {
+            forward: rows.iter().map(|r| r.forward_deg - r.target_deg).collect(),
+            reverse: rows.iter().map(|r| r.reverse_deg - r.target_deg).collect(),
+        })
+    }
+
+    /// Predicted − target (degrees) at driver angle `phi_deg` (any real), driven forward
+    /// (`forward`) or in reverse.
+    pub fn at(&self, phi_deg: f64, forward: bool) -> f64 {
+        let v = if forward {
+            &self.forward
+        } else {
+            &self.reverse
+        };
+        periodic(v, phi_deg.to_radians())
+    }
 }
 
 /// The free turn of the follower each way, over one period of the driver, rad.
@@ -75,47 +164,7 @@ impl PlayTable {
     /// Read `prediction.json` (format [`PREDICTION_FORMAT`], a 1R prediction with evenly
     /// spaced driver angles from 0).
     pub fn load(path: &Path) -> Result<PlayTable, TableError> {
-        let text = std::fs::read_to_string(path).map_err(|error| TableError::Io {
-            path: path.to_path_buf(),
-            error,
-        })?;
-        let bad = |message: String| TableError::Format {
-            path: path.to_path_buf(),
-            message,
-        };
-        let file: File = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
-        if file.format != PREDICTION_FORMAT {
-            return Err(bad(format!(
-                "format {:?}, expected {PREDICTION_FORMAT:?} (the output of mpc-rig simulate)",
-                file.format
-            )));
-        }
-        if file.prediction.class != "1R" {
-            return Err(bad(format!(
-                "a {} prediction; the geometry plant handles 1R",
-                file.prediction.class
-            )));
-        }
-        let rows = &file.prediction.samples;
-        let n = rows.len();
-        if n == 0 {
-            return Err(bad("no samples".to_string()));
-        }
-        for (i, r) in rows.iter().enumerate() {
-            let expected = 360.0 * i as f64 / n as f64;
-            if (r.driver_deg - expected).abs() > 1e-6 {
-                return Err(bad(format!(
-                    "samples[{i}].driver_deg is {}, expected {expected} (evenly spaced from 0)",
-                    r.driver_deg
-                )));
-            }
-            if !(r.free_plus_deg >= 0.0 && r.free_minus_deg >= 0.0) {
-                return Err(bad(format!(
-                    "samples[{i}]: free turns must be ≥ 0, got {} and {}",
-                    r.free_plus_deg, r.free_minus_deg
-                )));
-            }
-        }
+        let rows = read(path)?;
         Ok(PlayTable::new(
             rows.iter().map(|r| r.free_plus_deg.to_radians()).collect(),
             rows.iter().map(|r| r.free_minus_deg.to_radians()).collect(),
@@ -125,15 +174,7 @@ impl PlayTable {
     /// Free turns (plus, minus) at driver angle `phi` (rad, any real), linear between
     /// the table's angles.
     pub fn at(&self, phi: f64) -> (f64, f64) {
-        let n = self.plus.len();
-        let x = phi.rem_euclid(TAU) / TAU * n as f64;
-        let i = (x.floor() as usize).min(n - 1);
-        let j = (i + 1) % n;
-        let f = x - i as f64;
-        (
-            self.plus[i] + f * (self.plus[j] - self.plus[i]),
-            self.minus[i] + f * (self.minus[j] - self.minus[i]),
-        )
+        (periodic(&self.plus, phi), periodic(&self.minus, phi))
     }
 }
 
@@ -174,7 +215,7 @@ mod tests {
         assert_eq!(
             e,
             format!(
-                "{}: a 3R prediction; the geometry plant handles 1R",
+                "{}: a 3R prediction; predictions are of 1R mechanisms so far",
                 path.display()
             )
         );

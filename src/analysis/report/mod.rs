@@ -47,6 +47,8 @@ pub struct ReportOptions {
     pub tol_mm: Option<f64>,
     /// Tolerance on |measured − target| of every timing ratio.
     pub tol_ratio: Option<f64>,
+    /// Also compare with this prediction of `mpc-rig simulate` (prediction.json).
+    pub prediction: Option<PathBuf>,
 }
 
 /// One pass/fail check against a tolerance.
@@ -209,6 +211,8 @@ pub struct Summary {
     pub sampling: SamplingStats,
     /// Data sources.
     pub source: SourceInfo,
+    /// The measurement against the parts' predicted law (`--prediction`).
+    pub prediction: Option<super::prediction::PredictionComparison>,
     /// Files written (relative to the report directory).
     pub files: Vec<String>,
 }
@@ -372,6 +376,7 @@ pub fn summarize(
         key_poses: a.key_poses.clone(),
         sampling: a.sampling.clone(),
         source,
+        prediction: None,
         files: Vec::new(),
     }
 }
@@ -436,6 +441,16 @@ fn blocks(s: &Summary, a: &Analysis, pictures: &[plots::Picture]) -> Vec<Block> 
         lines.push(format!(
             "Rotation error after alignment: RMS **{r:.3}°**, max {:.3}°.",
             h.max_error_deg.unwrap_or(f64::NAN)
+        ));
+    }
+    if let Some(p) = &s.prediction {
+        lines.push(format!(
+            "Against the law predicted for the built parts (`{}`): RMS **{:.3}°**, max {:.3}° \
+             (against the target on the same samples: RMS {:.3}°).",
+            p.file.display(),
+            p.rms_deg,
+            p.max_deg,
+            p.rms_vs_target_deg
         ));
     }
     if let Some(r) = h.rms_error_mm {
@@ -811,6 +826,15 @@ pub fn write_report(
 ) -> Result<Summary, AnalysisError> {
     std::fs::create_dir_all(out_dir).map_err(|e| AnalysisError::io(out_dir, e))?;
     let mut s = summarize(a, law, source, opts);
+    if let Some(path) = &opts.prediction {
+        let predicted = crate::predict::table::PredictedDeviation::load(path).map_err(|e| {
+            AnalysisError::BadOption {
+                option: "--prediction".into(),
+                message: e.to_string(),
+            }
+        })?;
+        s.prediction = super::prediction::compare(a, run, &predicted, path.clone());
+    }
     let mut pics: Vec<plots::Picture> = Vec::new();
     if let Some(t) = &a.timing {
         if !t.ratios.is_empty() {
