@@ -83,3 +83,71 @@ fn a_bench_with_a_missing_prediction_is_refused_before_it_starts() {
         "no device path printed"
     );
 }
+
+/// Guards the whole command on parts that never meet (a small block on each part's axis,
+/// 60 mm apart): the follower is free both ways at every driver angle up to the 10° cap,
+/// so the drive is lost at all 1 440 angles, in one window; every file is written and
+/// `prediction.json` has the documented shape.
+#[test]
+fn parts_that_never_meet_lose_the_drive_everywhere() {
+    use mpc_rig::geometry::io::stl::write_stl;
+    use mpc_rig::geometry::primitive_meshes::cuboid;
+    let dir = tempfile::tempdir().unwrap();
+    let parts = dir.path().join("parts");
+    std::fs::create_dir_all(&parts).unwrap();
+    let block = cuboid([-2.0, -2.0, -2.0], [2.0, 2.0, 2.0]);
+    write_stl(&parts.join("driver.stl"), &block, "driver").unwrap();
+    write_stl(&parts.join("follower.stl"), &block, "follower").unwrap();
+    std::fs::write(
+        parts.join("build.json"),
+        r#"{"scale_mm": 10.0, "clearance_mm": 0.2, "cell_mm": 0.4, "without_pair": null,
+            "check": {"gaps": []}}"#,
+    )
+    .unwrap();
+    let out = dir.path().join("prediction");
+    let assert = Command::cargo_bin("mpc-rig")
+        .unwrap()
+        .args([
+            "simulate",
+            TEST_MECHANISM,
+            "--parts",
+            parts.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ])
+        .assert()
+        .success();
+    let stdout = String::from_utf8_lossy(&assert.get_output().stdout).to_string();
+    assert!(
+        stdout.contains("drive lost at 1440 of 1440 angles (play > 5°): driver 0.00–359.75°"),
+        "stdout:\n{stdout}"
+    );
+    for f in [
+        "prediction.json",
+        "law.png",
+        "law.svg",
+        "deviation.png",
+        "deviation.svg",
+        "play.png",
+        "play.svg",
+    ] {
+        assert!(out.join(f).is_file(), "{f} written");
+    }
+    let doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("prediction.json")).unwrap())
+            .unwrap();
+    assert_eq!(doc["format"], "mpcmech-prediction/1");
+    let p = &doc["prediction"];
+    let samples = p["samples"].as_array().unwrap();
+    assert_eq!(samples.len(), 1440);
+    for s in samples {
+        assert_eq!(s["free_plus_deg"].as_f64().unwrap(), 10.0);
+        assert_eq!(s["free_minus_deg"].as_f64().unwrap(), 10.0);
+        assert_eq!(s["drive_lost"], true);
+    }
+    assert_eq!(p["worst_play"]["deg"].as_f64().unwrap(), 20.0);
+    assert_eq!(p["drive_lost_windows"].as_array().unwrap().len(), 1);
+    // The file's contacts hold the follower at each of its 90 samples; the parts nowhere.
+    assert_eq!(p["closure"]["lost_by_parts_only"], 90);
+    assert_eq!(p["closure"]["held_both"], 0);
+}
