@@ -130,6 +130,7 @@ fn parts_that_never_meet_lose_the_drive_everywhere() {
         "deviation.svg",
         "play.png",
         "play.svg",
+        "prediction.md",
     ] {
         assert!(out.join(f).is_file(), "{f} written");
     }

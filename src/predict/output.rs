@@ -1,6 +1,7 @@
 //! The files of a prediction: `prediction.json` and its charts.
 //!
-//! Owns [`write()`] and [`PREDICTION_FORMAT`]. It draws the predicted deviation from the
+//! Owns [`write()`] and [`PREDICTION_FORMAT`]: `prediction.json`, the charts and
+//! `prediction.md` (the figures and charts for a person). It draws the predicted deviation from the
 //! target (forward and reverse) and the play over the driver angle, both with the limits
 //! that matter marked, and the predicted laws over the target. It computes nothing.
 
@@ -121,5 +122,72 @@ pub fn write(
     play.x_range = Some((0.0, 360.0));
     play.h_lines = vec![(DRIVE_LOST_DEG, "drive lost above".to_string())];
     files.extend(play.write(&out.join("play"))?);
+
+    let md_path = out.join("prediction.md");
+    std::fs::write(&md_path, markdown(p, mechanism, parts)).map_err(io(&md_path))?;
+    files.push(md_path);
     Ok(files)
+}
+
+/// `prediction.md`: the figures and charts for a person.
+fn markdown(p: &Prediction, mechanism: &Path, parts: &Path) -> String {
+    let lost = p.samples.iter().filter(|s| s.drive_lost).count();
+    let n = p.samples.len();
+    let mut md = format!(
+        "# Predicted motion of the built parts\n\n\
+         Mechanism `{}`, parts `{}` (clearance {:.2} mm{}), {n} driver angles, {} load \
+         (docs/simulate.md).\n\n",
+        mechanism.display(),
+        parts.display(),
+        p.clearance_mm,
+        p.without_pair
+            .map_or(String::new(), |k| format!(", without curve pair {k}")),
+        p.load
+    );
+    if lost == 0 {
+        md += &format!(
+            "**The driver holds the follower at every angle** (play ≤ {DRIVE_LOST_DEG}°).\n\n"
+        );
+    } else {
+        let windows: Vec<String> = p
+            .drive_lost_windows
+            .iter()
+            .map(|[a, b]| format!("{a:.2}–{b:.2}°"))
+            .collect();
+        md += &format!(
+            "**The drive is lost at {lost} of {n} angles** (play > {DRIVE_LOST_DEG}°): driver \
+             {}.\n\n",
+            windows.join(", ")
+        );
+    }
+    md += &format!(
+        "| figure | value | at driver |\n|---|---|---|\n\
+         | worst play | {:.3}° | {:.2}° |\n\
+         | worst deviation from the target | {:.3}° | {:.2}° |\n\
+         | deepest overlap of the meshes at the design pose | {:.3} mm | {:.2}° |\n\n",
+        p.worst_play.deg,
+        p.worst_play.driver_deg,
+        p.worst_deviation.deg,
+        p.worst_deviation.driver_deg,
+        p.overlap_mm,
+        p.overlap_driver_deg
+    );
+    md += "At the mechanism file's samples, the parts' drive against the paper's closure:\n\n\
+           | closure from | lost by both | lost by it only | lost by the parts only | held by both |\n\
+           |---|---|---|---|---|\n";
+    for (what, c) in [
+        ("the file's contacts", &p.closure),
+        ("the contacts the build kept", &p.kept_closure),
+    ] {
+        md += &format!(
+            "| {what} | {} | {} | {} | {} |\n",
+            c.lost_both, c.lost_by_file_only, c.lost_by_parts_only, c.held_both
+        );
+    }
+    md += "\n![deviation](deviation.svg)\n\n![play](play.svg)\n\n![law](law.svg)\n\n";
+    md += &format!(
+        "{} + {} vertices (driver + follower), {} mesh distance queries, {:.1} s.\n",
+        p.vertices[0], p.vertices[1], p.queries, p.seconds
+    );
+    md
 }

@@ -503,6 +503,7 @@ fn trace(
     limit: f64,
 ) -> (f64, u64, Option<f64>) {
     let mut delta = 0.0;
+    let mut queries = 0;
     for step in 0..MAX_STEPS {
         let turn = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), sense * delta);
         let p = r_to_fixed * (turn * w);
@@ -511,12 +512,12 @@ fn trace(
         if step > 0 && far > FAR_MM {
             delta += far / r;
             if delta >= limit {
-                return (limit, step as u64, None);
+                return (limit, queries, None);
             }
             continue;
         }
         let d = fixed.signed(&p);
-        let queries = step as u64 + 1;
+        queries += 1;
         if step == 0 && d < 0.0 {
             return (limit, queries, Some(-d));
         }
@@ -528,7 +529,7 @@ fn trace(
             return (limit, queries, None);
         }
     }
-    (delta, MAX_STEPS as u64, None)
+    (delta, queries, None)
 }
 
 #[cfg(test)]
