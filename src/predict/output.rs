@@ -15,6 +15,10 @@ use crate::plot::{Chart, PlotError, Series};
 /// The `format` of `prediction.json`.
 pub const PREDICTION_FORMAT: &str = "mpcmech-prediction/1";
 
+/// The y axis of a chart reaches this multiple of the data's span, so the legend in the
+/// upper right corner does not hide the largest values.
+const LEGEND_HEADROOM: f64 = 1.45;
+
 /// Error writing a prediction.
 #[derive(Debug, thiserror::Error)]
 pub enum OutputError {
@@ -92,6 +96,18 @@ pub fn write(
         2,
     ));
     dev.x_range = Some((0.0, 360.0));
+    let low = p
+        .samples
+        .iter()
+        .map(|s| s.forward_deg - s.target_deg)
+        .fold(0.0, f64::min);
+    let high = p
+        .samples
+        .iter()
+        .map(|s| s.reverse_deg - s.target_deg)
+        .fold(0.0, f64::max);
+    let span = (high - low).max(0.1);
+    dev.y_range = Some((low - 0.05 * span, low + LEGEND_HEADROOM * span));
     dev.h_lines = vec![(0.0, "target".to_string())];
     files.extend(dev.write(&out.join("deviation"))?);
 
@@ -120,6 +136,9 @@ pub fn write(
         3,
     ));
     play.x_range = Some((0.0, 360.0));
+    // Headroom above the data for the legend (drawn in the upper right corner).
+    let top = p.worst_play.deg.max(DRIVE_LOST_DEG);
+    play.y_range = Some((-0.05 * top, LEGEND_HEADROOM * top));
     play.h_lines = vec![(DRIVE_LOST_DEG, "drive lost above".to_string())];
     files.extend(play.write(&out.join("play"))?);
 
