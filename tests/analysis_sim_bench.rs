@@ -17,6 +17,28 @@ fn repo(p: &str) -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(p)
 }
 
+/// Serve `opts` on the simulated Dynamixel bench and record two cycles each way at 30 rpm
+/// (after one settle cycle) into `rec`; the run must complete.
+fn measure_both_ways(opts: SimDynamixelOptions, motion_path: std::path::PathBuf, rec: &Path) {
+    let sim = spawn(opts).unwrap();
+    let mut m = MeasureOptions {
+        rig_path: repo("rigs/sim-dynamixel.toml"),
+        ports: vec![sim.path().display().to_string()],
+        target: TargetSpec::Motion(motion_path),
+        speed_rpm: 30.0,
+        cycles: 2,
+        settle_cycles: 1,
+        reverse: true,
+        out_dir: Some(rec.to_path_buf()),
+        replace: false,
+        cancel: Arc::new(AtomicBool::new(false)),
+        progress: None,
+    };
+    let outcome = measure(&mut m).unwrap();
+    drop(sim);
+    assert!(outcome.complete, "{}", outcome.end);
+}
+
 /// Guards the plant ↔ analysis contract: `--fault backlash_deg=2 --fault phase_lag_deg=1.5` on the
 /// simulated Dynamixel bench (100 Hz, 4096-count follower) measured forward and reverse
 /// shows as a 2° driver-side backlash (±0.4°) and a 1.5° phase lag (±0.4°), and the
@@ -28,25 +50,9 @@ fn plant_backlash_and_lag_are_recovered_from_a_simulated_session() {
     let motion = Motion::from_file(&motion_path).unwrap();
     let mut opts = SimDynamixelOptions::new(Arc::new(MotionTarget::new(motion).unwrap()));
     opts.plant = PlantConfig::from_faults(&["backlash_deg=2", "phase_lag_deg=1.5"]).unwrap();
-    let sim = spawn(opts).unwrap();
     let tmp = tempfile::tempdir().unwrap();
     let rec = tmp.path().join("rec");
-    let mut m = MeasureOptions {
-        rig_path: repo("rigs/sim-dynamixel.toml"),
-        ports: vec![sim.path().display().to_string()],
-        target: TargetSpec::Motion(motion_path),
-        speed_rpm: 30.0,
-        cycles: 2,
-        settle_cycles: 1,
-        reverse: true,
-        out_dir: Some(rec.clone()),
-        replace: false,
-        cancel: Arc::new(AtomicBool::new(false)),
-        progress: None,
-    };
-    let outcome = measure(&mut m).unwrap();
-    drop(sim);
-    assert!(outcome.complete, "{}", outcome.end);
+    measure_both_ways(opts, motion_path, &rec);
     let s = analyze_and_report(&rec, &ReportOptions::default()).unwrap();
     let b = s.headline.backlash_driver_deg.unwrap();
     assert!((b - 2.0).abs() < 0.4, "backlash {b}: {:?}", s.lag);
@@ -102,24 +108,8 @@ fn the_geometry_plant_shows_the_parts_play_in_a_measurement() {
     let motion = Motion::from_file(&motion_path).unwrap();
     let mut opts = SimDynamixelOptions::new(Arc::new(MotionTarget::new(motion).unwrap()));
     opts.plant.play = Some(Arc::new(PlayTable::load(&prediction).unwrap()));
-    let sim = spawn(opts).unwrap();
     let rec = tmp.path().join("rec");
-    let mut m = MeasureOptions {
-        rig_path: repo("rigs/sim-dynamixel.toml"),
-        ports: vec![sim.path().display().to_string()],
-        target: TargetSpec::Motion(motion_path),
-        speed_rpm: 30.0,
-        cycles: 2,
-        settle_cycles: 1,
-        reverse: true,
-        out_dir: Some(rec.clone()),
-        replace: false,
-        cancel: Arc::new(AtomicBool::new(false)),
-        progress: None,
-    };
-    let outcome = measure(&mut m).unwrap();
-    drop(sim);
-    assert!(outcome.complete, "{}", outcome.end);
+    measure_both_ways(opts, motion_path, &rec);
     let report = ReportOptions {
         prediction: Some(prediction),
         ..ReportOptions::default()

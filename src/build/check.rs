@@ -20,12 +20,10 @@
 //! occupancy grid per part skips vertices far outside it. It does not build anything.
 
 use nalgebra::Point3;
-use parry3d_f64::math::Vector as PVec;
-use parry3d_f64::query::PointQuery;
-use parry3d_f64::shape::{TriMesh, TriMeshFlags};
 use rayon::prelude::*;
 
 use crate::geometry::mesh::Mesh;
+use crate::geometry::query::MeshQuery;
 use crate::geometry::sdf::Vec3;
 use crate::geometry::voxel::{distance_transform, VoxelGrid};
 use crate::synth::mechanism::Mechanism;
@@ -213,20 +211,14 @@ pub fn windows(flags: &[bool]) -> Vec<[f64; 2]> {
 /// A mesh ready for queries: parry's BVH with pseudo-normals and a coarse occupancy grid
 /// (0 far outside, 1 near the surface, 2 inside).
 struct Queryable {
-    tri: TriMesh,
+    tri: MeshQuery,
     grid: VoxelGrid,
     occ: Vec<u8>,
 }
 
 impl Queryable {
     fn new(m: &Mesh) -> Queryable {
-        let verts: Vec<PVec> = m
-            .vertices
-            .iter()
-            .map(|v| PVec::new(v[0], v[1], v[2]))
-            .collect();
-        let tri = TriMesh::with_flags(verts, m.triangles.clone(), TriMeshFlags::ORIENTED)
-            .expect("a checked, non-empty mesh");
+        let tri = MeshQuery::new(m).expect("a checked, non-empty mesh");
         let b = m.aabb().inflate(NEAR_MM + 2.0 * OCCUPANCY_VOXEL_MM);
         let grid = VoxelGrid::covering(b, OCCUPANCY_VOXEL_MM);
         // Near: within NEAR_MM of a vertex (vertices are < 1 mm apart on these meshes, so
@@ -300,17 +292,7 @@ impl Queryable {
     }
 
     fn signed(&self, p: Vec3) -> f64 {
-        let pr = self
-            .tri
-            .project_local_point(PVec::new(p.x, p.y, p.z), false);
-        let d =
-            ((pr.point.x - p.x).powi(2) + (pr.point.y - p.y).powi(2) + (pr.point.z - p.z).powi(2))
-                .sqrt();
-        if pr.is_inside {
-            -d
-        } else {
-            d
-        }
+        self.tri.signed([p.x, p.y, p.z])
     }
 }
 

@@ -72,15 +72,10 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<ExitCode> {
     if lost == 0 {
         println!("the driver holds the follower at every angle (play ≤ {DRIVE_LOST_DEG}°)");
     } else {
-        let windows: Vec<String> = p
-            .drive_lost_windows
-            .iter()
-            .map(|[a, b]| format!("{a:.2}–{b:.2}°"))
-            .collect();
         println!(
             "drive lost at {lost} of {} angles (play > {DRIVE_LOST_DEG}°): driver {}",
             p.samples.len(),
-            windows.join(", ")
+            p.lost_windows_text()
         );
     }
     for (what, c) in [

@@ -9,6 +9,7 @@
 //! | [`sweep`] | sections swept along closed curves, the segment BVH |
 //! | [`voxel`] | voxel grids, exact distance transforms, shortest free paths |
 //! | [`mesher`] | implicit solid → closed 2-manifold mesh (marching tetrahedra, sparse blocks) |
+//! | [`query`] | signed point–mesh distance (parry3d-f64, pseudo-normals) |
 //! | [`primitive_meshes`] | closed meshes of boxes, UV spheres and tori, built directly |
 //! | [`shading`] | crease-split vertex normals, as the GLB and the renders shade a mesh |
 //! | [`io`] | files: binary STL, 3MF packages laid out on a bed, the animated GLB |
@@ -21,6 +22,7 @@ pub mod io;
 pub mod mesh;
 pub mod mesher;
 pub mod primitive_meshes;
+pub mod query;
 pub mod render;
 pub mod scene;
 pub mod sdf;

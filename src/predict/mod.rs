@@ -257,6 +257,15 @@ pub struct ClosureAgreement {
 }
 
 impl Prediction {
+    /// The drive-lost windows as a person reads them: `a–b°, c–d°` (driver degrees).
+    pub fn lost_windows_text(&self) -> String {
+        self.drive_lost_windows
+            .iter()
+            .map(|[a, b]| format!("{a:.2}–{b:.2}°"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+
     /// Share of the period where the drive is lost.
     pub fn lost_fraction(&self) -> f64 {
         let n = self.samples.len().max(1);

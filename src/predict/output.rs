@@ -168,15 +168,10 @@ fn markdown(p: &Prediction, mechanism: &Path, parts: &Path) -> String {
             "**The driver holds the follower at every angle** (play ≤ {DRIVE_LOST_DEG}°).\n\n"
         );
     } else {
-        let windows: Vec<String> = p
-            .drive_lost_windows
-            .iter()
-            .map(|[a, b]| format!("{a:.2}–{b:.2}°"))
-            .collect();
         md += &format!(
             "**The drive is lost at {lost} of {n} angles** (play > {DRIVE_LOST_DEG}°): driver \
              {}.\n\n",
-            windows.join(", ")
+            p.lost_windows_text()
         );
     }
     md += &format!(

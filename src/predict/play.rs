@@ -28,12 +28,10 @@
 //! law, the load or the files; it does not look at the support.
 
 use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
-use parry3d_f64::math::Vector as PVec;
-use parry3d_f64::query::PointQuery;
-use parry3d_f64::shape::{TriMesh, TriMeshFlags};
 use rayon::prelude::*;
 
 use crate::geometry::mesh::{Aabb, Mesh};
+use crate::geometry::query::MeshQuery;
 use crate::geometry::sdf::Vec3;
 use crate::geometry::voxel::{distance_transform, VoxelGrid};
 
@@ -89,7 +87,7 @@ struct Cluster {
 /// A part's mesh ready for distance queries (parry's BVH with pseudo-normals), with its
 /// vertices sorted into clusters.
 pub struct Solid {
-    tri: TriMesh,
+    tri: MeshQuery,
     verts: Vec<Point3<f64>>,
     clusters: Vec<Cluster>,
     aabb: Aabb,
@@ -101,17 +99,10 @@ pub struct Solid {
 impl Solid {
     /// Prepare `mesh` (the part `part`, in its own frame, mm).
     pub fn new(mesh: &Mesh, part: &str) -> Result<Solid, SolidError> {
-        let pv: Vec<PVec> = mesh
-            .vertices
-            .iter()
-            .map(|v| PVec::new(v[0], v[1], v[2]))
-            .collect();
-        let tri = TriMesh::with_flags(pv, mesh.triangles.clone(), TriMeshFlags::ORIENTED).map_err(
-            |e| SolidError::Mesh {
-                part: part.to_string(),
-                message: e.to_string(),
-            },
-        )?;
+        let tri = MeshQuery::new(mesh).map_err(|message| SolidError::Mesh {
+            part: part.to_string(),
+            message,
+        })?;
         let cell =
             |v: &[f64; 3]| -> [i64; 3] { [0, 1, 2].map(|k| (v[k] / CLUSTER_MM).floor() as i64) };
         let mut order: Vec<usize> = (0..mesh.vertices.len()).collect();
@@ -190,17 +181,7 @@ impl Solid {
 
     /// Signed distance of `p` (this part's frame) to the surface, mm, negative inside.
     pub fn signed(&self, p: &Point3<f64>) -> f64 {
-        let pr = self
-            .tri
-            .project_local_point(PVec::new(p.x, p.y, p.z), false);
-        let d =
-            ((pr.point.x - p.x).powi(2) + (pr.point.y - p.y).powi(2) + (pr.point.z - p.z).powi(2))
-                .sqrt();
-        if pr.is_inside {
-            -d
-        } else {
-            d
-        }
+        self.tri.signed([p.x, p.y, p.z])
     }
 
     /// Number of vertices.
