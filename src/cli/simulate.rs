@@ -7,6 +7,7 @@ use anyhow::Context;
 use clap::Args;
 
 use crate::motion::MECHANISM_FILE;
+use crate::predict::law::Load;
 use crate::predict::{self, output, PredictOptions, DEFAULT_SAMPLES, DRIVE_LOST_DEG};
 use crate::synth::mechanism::Mechanism;
 
@@ -28,6 +29,11 @@ pub struct SimulateArgs {
     /// Driver angles per period.
     #[arg(long, default_value_t = DEFAULT_SAMPLES)]
     pub samples: usize,
+    /// The load on the follower: drag (friction opposing motion), torque+ / torque- (a
+    /// constant torque larger than the friction, counter-clockwise or clockwise about
+    /// +z), or spring:DEG (a spring towards that follower angle).
+    #[arg(long, default_value = "drag", value_parser = Load::parse)]
+    pub load: Load,
 }
 
 /// Run `mpc-rig simulate`.
@@ -52,6 +58,7 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<ExitCode> {
         .unwrap_or_else(|| dir.join(DEFAULT_OUT_DIR));
     let opts = PredictOptions {
         samples: args.samples,
+        load: args.load,
     };
     let p = predict::predict(&mech, &parts, &opts)
         .with_context(|| format!("simulating the parts in {}", parts.display()))?;

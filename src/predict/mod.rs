@@ -8,9 +8,9 @@
 //! follower: the instant is reported as `drive_lost`, the paper's dynamic form closure
 //! failing on the parts as printed.
 //!
-//! So far it handles 1R mechanisms under a drag load (friction that opposes motion); the
-//! cylindrical and spherical joints, a constant torque and a spring are issue 15's next
-//! steps, and [`predict`] says so instead of guessing. It reads no serial port and does not
+//! So far it handles 1R mechanisms, under a drag (friction that opposes motion, the
+//! default), a constant torque or a spring ([`law::Load`]); the cylindrical and spherical
+//! joints are issue 15's next steps, and [`predict`] says so instead of guessing. It reads no serial port and does not
 //! build parts; `cli::simulate` writes its files.
 
 pub mod law;
@@ -157,12 +157,15 @@ impl BuiltParts {
 pub struct PredictOptions {
     /// Driver angles per period.
     pub samples: usize,
+    /// The load on the follower.
+    pub load: law::Load,
 }
 
 impl Default for PredictOptions {
     fn default() -> Self {
         PredictOptions {
             samples: DEFAULT_SAMPLES,
+            load: law::Load::Drag,
         }
     }
 }
@@ -367,8 +370,8 @@ pub fn predict(
         target.push(angle);
         angle += s;
     }
-    let fwd = law::drag(&step, &free.plus, &free.minus, true);
-    let rev = law::drag(&step, &free.plus, &free.minus, false);
+    let fwd = law::under(opts.load, &target, &step, &free.plus, &free.minus, true);
+    let rev = law::under(opts.load, &target, &step, &free.plus, &free.minus, false);
     let mut samples: Vec<Sample> = (0..n)
         .map(|i| {
             let play = (free.plus[i] + free.minus[i]).to_degrees();
@@ -426,7 +429,7 @@ pub fn predict(
     let kept_closure = ClosureAgreement::count(&kept.dist, &samples);
     Ok(Prediction {
         class: mech.class.label().to_string(),
-        load: "drag".to_string(),
+        load: opts.load.label(),
         clearance_mm: built.clearance_mm,
         without_pair: built.without_pair,
         samples,
