@@ -339,7 +339,7 @@ fn sweep(
             Side::FollowerIntoDriver => (motion.follower(t), motion.driver(t).inverse()),
             Side::DriverIntoFollower => (motion.driver(t), motion.follower(t).inverse()),
         };
-        let mut at = Instant {
+        let mut at = AtTime {
             moving,
             fixed,
             to_r: &to_r,
@@ -380,7 +380,7 @@ fn sweep(
 const SEARCH_FLOOR: f64 = 0.5 * std::f64::consts::PI / 180.0;
 
 /// One (side, sense) test at one time.
-struct Instant<'a> {
+struct AtTime<'a> {
     moving: &'a Solid,
     fixed: &'a Solid,
     to_r: &'a Isometry3<f64>,
@@ -395,7 +395,7 @@ struct Instant<'a> {
     overlap: (f64, f64),
 }
 
-impl Instant<'_> {
+impl AtTime<'_> {
     /// Largest free turn up to `limit` (returns `limit` when nothing touches within it).
     fn free_within(&mut self, limit: f64) -> f64 {
         let moving = self.moving;
