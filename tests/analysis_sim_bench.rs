@@ -3,37 +3,31 @@
 //! backlash and phase lag of the plant come out of the analysis with the plant's meaning.
 
 use std::path::Path;
-use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
-use crate::support::serial_group;
+use crate::support::{bench, serial_group};
 use mpc_rig::analysis::{analyze_and_report, ReportOptions};
-use mpc_rig::motion::Motion;
-use mpc_rig::rig::session::{measure, MeasureOptions, TargetSpec};
+use mpc_rig::rig::session::measure;
 use mpc_rig::rig::sim::dynamixel::{spawn, MotionTarget, SimDynamixelOptions};
 use mpc_rig::rig::sim::plant::PlantConfig;
 
-fn repo(p: &str) -> std::path::PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join(p)
+/// The motion both tests measure, `data/motions/<MOTION>.toml`.
+const MOTION: &str = "half-turn-2to1";
+
+/// A simulated Dynamixel bench following [`MOTION`] on the target plant.
+fn dxl_options() -> SimDynamixelOptions {
+    SimDynamixelOptions::new(Arc::new(MotionTarget::new(bench::motion(MOTION)).unwrap()))
 }
 
 /// Serve `opts` on the simulated Dynamixel bench and record two cycles each way at 30 rpm
 /// (after one settle cycle) into `rec`; the run must complete.
-fn measure_both_ways(opts: SimDynamixelOptions, motion_path: std::path::PathBuf, rec: &Path) {
+fn measure_both_ways(opts: SimDynamixelOptions, rec: &Path) {
     let sim = spawn(opts).unwrap();
-    let mut m = MeasureOptions {
-        rig_path: repo("rigs/sim-dynamixel.toml"),
-        ports: vec![sim.path().display().to_string()],
-        target: TargetSpec::Motion(motion_path),
-        speed_rpm: 30.0,
-        cycles: 2,
-        settle_cycles: 1,
-        reverse: true,
-        out_dir: Some(rec.to_path_buf()),
-        replace: false,
-        cancel: Arc::new(AtomicBool::new(false)),
-        progress: None,
-    };
+    let ports = vec![sim.path().display().to_string()];
+    let mut m = bench::options("rigs/sim-dynamixel.toml", ports, MOTION, rec);
+    m.speed_rpm = 30.0;
+    m.cycles = 2;
+    m.reverse = true;
     let outcome = measure(&mut m).unwrap();
     drop(sim);
     assert!(outcome.complete, "{}", outcome.end);
@@ -46,13 +40,11 @@ fn measure_both_ways(opts: SimDynamixelOptions, motion_path: std::path::PathBuf,
 #[test]
 fn plant_backlash_and_lag_are_recovered_from_a_simulated_session() {
     let _serial = serial_group::lock();
-    let motion_path = repo("data/motions/half-turn-2to1.toml");
-    let motion = Motion::from_file(&motion_path).unwrap();
-    let mut opts = SimDynamixelOptions::new(Arc::new(MotionTarget::new(motion).unwrap()));
+    let mut opts = dxl_options();
     opts.plant = PlantConfig::from_faults(&["backlash_deg=2", "phase_lag_deg=1.5"]).unwrap();
     let tmp = tempfile::tempdir().unwrap();
     let rec = tmp.path().join("rec");
-    measure_both_ways(opts, motion_path, &rec);
+    measure_both_ways(opts, &rec);
     let s = analyze_and_report(&rec, &ReportOptions::default()).unwrap();
     let b = s.headline.backlash_driver_deg.unwrap();
     assert!((b - 2.0).abs() < 0.4, "backlash {b}: {:?}", s.lag);
@@ -104,12 +96,10 @@ fn the_geometry_plant_shows_the_parts_play_in_a_measurement() {
     let tmp = tempfile::tempdir().unwrap();
     let prediction = tmp.path().join("prediction.json");
     uniform_prediction(&prediction, 1.0);
-    let motion_path = repo("data/motions/half-turn-2to1.toml");
-    let motion = Motion::from_file(&motion_path).unwrap();
-    let mut opts = SimDynamixelOptions::new(Arc::new(MotionTarget::new(motion).unwrap()));
+    let mut opts = dxl_options();
     opts.plant.play = Some(Arc::new(PlayTable::load(&prediction).unwrap()));
     let rec = tmp.path().join("rec");
-    measure_both_ways(opts, motion_path, &rec);
+    measure_both_ways(opts, &rec);
     let report = ReportOptions {
         prediction: Some(prediction),
         ..ReportOptions::default()

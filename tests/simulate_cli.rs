@@ -4,6 +4,20 @@ use assert_cmd::Command;
 
 const TEST_MECHANISM: &str = "tests/data/mechanism/half-turn-2to1";
 
+/// Run `mpc-rig ARGS`, which must exit 1; its (stdout, stderr).
+fn refused(args: &[&str]) -> (String, String) {
+    let assert = Command::cargo_bin("mpc-rig")
+        .unwrap()
+        .args(args)
+        .assert()
+        .code(1);
+    let out = assert.get_output();
+    (
+        String::from_utf8_lossy(&out.stdout).to_string(),
+        String::from_utf8_lossy(&out.stderr).to_string(),
+    )
+}
+
 /// Guards what a user who has not built the parts yet sees: the file that is missing, and
 /// the command that makes it, exit 1, nothing written.
 #[test]
@@ -11,19 +25,14 @@ fn simulating_without_built_parts_says_to_build_them() {
     let dir = tempfile::tempdir().unwrap();
     let parts = dir.path().join("no-parts");
     let out = dir.path().join("prediction");
-    let assert = Command::cargo_bin("mpc-rig")
-        .unwrap()
-        .args([
-            "simulate",
-            TEST_MECHANISM,
-            "--parts",
-            parts.to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-        ])
-        .assert()
-        .code(1);
-    let stderr = String::from_utf8_lossy(&assert.get_output().stderr).to_string();
+    let (_, stderr) = refused(&[
+        "simulate",
+        TEST_MECHANISM,
+        "--parts",
+        parts.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
     assert_eq!(
         stderr,
         format!(
@@ -39,12 +48,7 @@ fn simulating_without_built_parts_says_to_build_them() {
 /// the option as typed.
 #[test]
 fn too_few_driver_angles_are_refused() {
-    let assert = Command::cargo_bin("mpc-rig")
-        .unwrap()
-        .args(["simulate", TEST_MECHANISM, "--samples", "100"])
-        .assert()
-        .code(1);
-    let stderr = String::from_utf8_lossy(&assert.get_output().stderr).to_string();
+    let (_, stderr) = refused(&["simulate", TEST_MECHANISM, "--samples", "100"]);
     assert!(
         stderr.ends_with("  caused by: --samples 100: at least 360 driver angles per period\n"),
         "stderr:\n{stderr}"
@@ -57,19 +61,14 @@ fn too_few_driver_angles_are_refused() {
 fn a_bench_with_a_missing_prediction_is_refused_before_it_starts() {
     let dir = tempfile::tempdir().unwrap();
     let missing = dir.path().join("prediction.json");
-    let assert = Command::cargo_bin("mpc-rig")
-        .unwrap()
-        .args([
-            "sim-device",
-            "stepper",
-            "--mechanism",
-            TEST_MECHANISM,
-            "--prediction",
-            missing.to_str().unwrap(),
-        ])
-        .assert()
-        .code(1);
-    let stderr = String::from_utf8_lossy(&assert.get_output().stderr).to_string();
+    let (stdout, stderr) = refused(&[
+        "sim-device",
+        "stepper",
+        "--mechanism",
+        TEST_MECHANISM,
+        "--prediction",
+        missing.to_str().unwrap(),
+    ]);
     assert_eq!(
         stderr,
         format!(
@@ -78,10 +77,7 @@ fn a_bench_with_a_missing_prediction_is_refused_before_it_starts() {
             missing.display()
         )
     );
-    assert!(
-        assert.get_output().stdout.is_empty(),
-        "no device path printed"
-    );
+    assert!(stdout.is_empty(), "no device path printed");
 }
 
 /// Guards the whole command on parts that never meet (a small block on each part's axis,

@@ -95,8 +95,6 @@ pub struct BuiltParts {
     /// Curve pair left out (1-based), for an experiment.
     #[serde(default)]
     pub without_pair: Option<usize>,
-    /// Mesher cell, mm.
-    pub cell_mm: f64,
     /// The build's check: which design contacts the parts keep.
     pub check: BuiltCheck,
 }
@@ -267,12 +265,6 @@ impl Prediction {
             .map(|[a, b]| format!("{a:.2}–{b:.2}°"))
             .collect::<Vec<_>>()
             .join(", ")
-    }
-
-    /// Share of the period where the drive is lost.
-    pub fn lost_fraction(&self) -> f64 {
-        let n = self.samples.len().max(1);
-        self.samples.iter().filter(|s| s.drive_lost).count() as f64 / n as f64
     }
 }
 

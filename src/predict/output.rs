@@ -96,16 +96,11 @@ pub fn write(
         2,
     ));
     dev.x_range = Some((0.0, 360.0));
-    let low = p
+    let deviations = p
         .samples
         .iter()
-        .map(|s| s.forward_deg - s.target_deg)
-        .fold(0.0, f64::min);
-    let high = p
-        .samples
-        .iter()
-        .map(|s| s.reverse_deg - s.target_deg)
-        .fold(0.0, f64::max);
+        .flat_map(|s| [s.forward_deg - s.target_deg, s.reverse_deg - s.target_deg]);
+    let (low, high) = deviations.fold((0.0f64, 0.0f64), |(lo, hi), d| (lo.min(d), hi.max(d)));
     let span = (high - low).max(0.1);
     dev.y_range = Some((low - 0.05 * span, low + LEGEND_HEADROOM * span));
     dev.h_lines = vec![(0.0, "target".to_string())];

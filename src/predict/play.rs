@@ -210,11 +210,9 @@ pub trait PartMotion: Sync {
     fn driver_reach(&self, p: &Point3<f64>) -> f64;
 }
 
-/// The free turns of the follower over one period.
+/// The free turns of the follower over one period, at times `i / n`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FreeTurns {
-    /// Sample times, fractions of a period (`i / n`).
-    pub t: Vec<f64>,
     /// Largest free turn in the positive sense (counter-clockwise about +z), rad, ≤ cap.
     pub plus: Vec<f64>,
     /// Largest free turn in the negative sense, rad (a magnitude), ≤ cap.
@@ -265,7 +263,6 @@ pub fn free_turns(
         .par_iter()
         .map(|&(side, sense)| sweep(motion, driver, follower, side, sense, n, cap))
         .collect();
-    let t: Vec<f64> = (0..n).map(|i| i as f64 / n as f64).collect();
     let plus = (0..n)
         .map(|i| sweeps[0].free[i].min(sweeps[2].free[i]))
         .collect();
@@ -277,7 +274,6 @@ pub fn free_turns(
         .map(|s| s.overlap)
         .fold((0.0, 0.0), |a, b| if b.0 > a.0 { b } else { a });
     FreeTurns {
-        t,
         plus,
         minus,
         overlap_mm: overlap.0,
