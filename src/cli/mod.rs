@@ -4,6 +4,7 @@
 //! synthesis, geometry, bench or analysis logic lives here. This is the only place (with
 //! `main.rs`) where `anyhow` is used: library errors are typed and converted at this edge.
 
+use std::io::IsTerminal;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
@@ -44,6 +45,7 @@ macro_rules! fault_keys_help {
 
 pub mod analyze;
 pub mod build;
+pub mod completions;
 pub mod demo;
 pub mod measure;
 pub mod motion;
@@ -93,6 +95,8 @@ pub enum Command {
     Simulate(simulate::SimulateArgs),
     /// Print a captured byte stream of the bench link frame by frame, to debug a link.
     WireDump(wire_dump::WireDumpArgs),
+    /// Print a shell completion script (bash, zsh, fish, elvish, powershell).
+    Completions(completions::CompletionsArgs),
 }
 
 /// Set by `-q`: commands leave out the lists of files they wrote (issue 20: `-q` still
@@ -123,8 +127,19 @@ pub fn init_logging(verbose: u8, quiet: bool) {
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        .with_ansi(colour_on(
+            std::io::stderr().is_terminal(),
+            std::env::var_os("NO_COLOR").as_deref(),
+        ))
         .with_target(false)
         .try_init();
+}
+
+/// Whether to colour a stream: only a terminal, and only without `NO_COLOR` set to
+/// something (no-color.org); a pipe or a file gets plain text (issue 20: escape codes in
+/// captured logs).
+fn colour_on(terminal: bool, no_color: Option<&std::ffi::OsStr>) -> bool {
+    terminal && no_color.is_none_or(|v| v.is_empty())
 }
 
 /// Run a parsed command line.
@@ -140,6 +155,7 @@ pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
         Command::Measure(args) => measure::run(args),
         Command::Simulate(args) => simulate::run(args),
         Command::WireDump(args) => wire_dump::run(args),
+        Command::Completions(args) => completions::run(args),
     }
 }
 
@@ -159,6 +175,24 @@ pub struct ExitStatusError {
     pub code: u8,
     /// What went wrong, for the user.
     pub message: String,
+}
+
+#[cfg(test)]
+mod colour_tests {
+    use std::ffi::OsStr;
+
+    use super::colour_on;
+
+    /// Guards colour only on a terminal: never into a pipe or file, never with `NO_COLOR`
+    /// set to a value, and an empty `NO_COLOR` counts as unset (no-color.org).
+    #[test]
+    fn colour_only_on_a_terminal_without_no_color() {
+        assert!(colour_on(true, None));
+        assert!(!colour_on(false, None));
+        assert!(!colour_on(true, Some(OsStr::new("1"))));
+        assert!(colour_on(true, Some(OsStr::new(""))));
+        assert!(!colour_on(false, Some(OsStr::new(""))));
+    }
 }
 
 #[cfg(test)]
