@@ -24,6 +24,8 @@
 //!   their checks over the period.
 //! - [`geometry`]: triangle meshes in mm, the watertightness check, scenes of moving parts.
 //! - [`predict`]: the virtual prototype: how the built parts move the follower.
+//! - [`live`]: the live view of a run in a browser (`measure --live`): an HTTP server on
+//!   the session's live feed and its page.
 //! - [`plot`]: PNG/SVG charts with an embedded font, shared by every report.
 //! - [`cli`]: one file per subcommand; calls into the modules above.
 //!
@@ -33,6 +35,7 @@ pub mod analysis;
 pub mod build;
 pub mod cli;
 pub mod geometry;
+pub mod live;
 pub mod motion;
 pub mod plot;
 pub mod predict;

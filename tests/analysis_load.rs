@@ -195,3 +195,34 @@ fn analyzes_imu_recording() {
     assert!(!s.key_poses.is_empty());
     assert!(rec.join("report/axis_path.png").exists());
 }
+
+/// Guards `analyze --json` for scripts: standard output is exactly the summary.json the
+/// command wrote (no file list, no text), and the exit code is unchanged by it.
+#[test]
+fn analyze_json_prints_the_summary_alone() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rec = half_turn_recording(tmp.path(), &bench());
+    for (tol, code) in [("5", 0), ("0.0001", 3)] {
+        let report = tmp.path().join(format!("report-{code}"));
+        let out = assert_cmd::Command::cargo_bin("mpc-rig")
+            .unwrap()
+            .args([
+                "analyze",
+                rec.to_str().unwrap(),
+                "--json",
+                "--tol-deg",
+                tol,
+                "-o",
+            ])
+            .arg(&report)
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(code));
+        let printed: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let written: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(report.join("summary.json")).unwrap())
+                .unwrap();
+        assert_eq!(printed, written);
+        assert_eq!(printed["pass"], code == 0);
+    }
+}

@@ -132,6 +132,7 @@ fn session_with_link_faults_survives_and_stops_the_motor() {
         replace: false,
         cancel: Arc::new(AtomicBool::new(false)),
         progress: None,
+        live: None,
     };
     // Setup retries damaged replies as the stream does: no second attempt needed.
     let outcome = session::measure(&mut mopts).expect("setup survives the link faults");
@@ -175,6 +176,7 @@ fn brief_dropout_rearms_the_watchdog_and_finishes() {
         replace: false,
         cancel: Arc::new(AtomicBool::new(false)),
         progress: None,
+        live: None,
     };
     let outcome = session::measure(&mut mopts).expect("session runs");
     assert_eq!(outcome.end, EndReason::Finished);

@@ -31,6 +31,7 @@ mod rig_cli;
 mod rig_config;
 mod rig_counts;
 mod rig_link;
+mod rig_live;
 mod rig_mixed;
 mod rig_recording_integrity;
 mod rig_safety_stops;

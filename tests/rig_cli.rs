@@ -152,3 +152,58 @@ fn host_crash_leaves_valid_recording_and_watchdog_stops_motor() {
     assert!(!r.meta.complete);
     assert!(r.len() > 500, "{} rows survived", r.len());
 }
+
+/// Guards `measure --json` for scripts: standard output is one JSON object and nothing else
+/// (no progress, no file list), with the recording, how the run ended, its counts, the
+/// analysis (the summary.json the run wrote) and the exit code the program ends with; and
+/// the same object when the run fails a tolerance (exit 3).
+#[test]
+fn measure_json_is_one_object_with_the_outcome_and_the_summary() {
+    let _serial = serial_group::lock();
+    let sim = start_sim(&[]);
+    let dir = tempfile::tempdir().unwrap();
+    for (tol, code) in [("5", 0), ("0.000001", 3)] {
+        let rec = dir.path().join(format!("rec-{code}"));
+        let out = Command::new(bin())
+            .arg("measure")
+            .arg("--rig")
+            .arg(root().join("rigs/sim-stepper.toml"))
+            .args(["--port", &sim.first_line])
+            .arg("--motion")
+            .arg(root().join("data/motions/half-turn-2to1.toml"))
+            .args([
+                "--speed",
+                "90",
+                "--cycles",
+                "1",
+                "--json",
+                "--tol-deg",
+                tol,
+                "-o",
+            ])
+            .arg(&rec)
+            .stdin(Stdio::null())
+            .output()
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(code), "{stdout}{stderr}");
+        let json: serde_json::Value = serde_json::from_str(&stdout)
+            .unwrap_or_else(|e| panic!("stdout is not one JSON object ({e}): {stdout}"));
+        assert_eq!(json["recording"], rec.to_str().unwrap());
+        assert_eq!(json["end_reason"], "finished");
+        assert_eq!(json["complete"], true);
+        assert_eq!(json["degraded"], serde_json::Value::Null);
+        assert_eq!(json["exit_code"], code);
+        assert!(json["counts"]["samples"].as_u64().unwrap() > 500, "{json}");
+        let written: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(rec.join("report/summary.json")).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(
+            json["summary"], written,
+            "the summary is summary.json's content"
+        );
+        assert_eq!(json["summary"]["pass"], code == 0);
+    }
+}

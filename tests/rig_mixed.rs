@@ -65,6 +65,7 @@ fn run_session_with(
         replace: false,
         cancel: Arc::new(AtomicBool::new(false)),
         progress: None,
+        live: None,
     };
     let outcome = measure(&mut m).unwrap();
     Run {

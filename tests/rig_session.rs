@@ -200,6 +200,7 @@ fn options(dir: &Path, reverse: bool) -> MeasureOptions {
         replace: false,
         cancel: Arc::new(AtomicBool::new(false)),
         progress: None,
+        live: None,
     }
 }
 

@@ -49,6 +49,7 @@ fn session(sim: &SimHandle, out: &Path, cycles: u32, reverse: bool) -> MeasureOu
         replace: false,
         cancel: Arc::new(AtomicBool::new(false)),
         progress: None,
+        live: None,
     };
     measure(&mut opts).unwrap()
 }
@@ -239,6 +240,7 @@ fn imu_bench_records_follower_orientation() {
         replace: false,
         cancel: Arc::new(AtomicBool::new(false)),
         progress: None,
+        live: None,
     };
     let out = measure(&mut opts).unwrap();
     let status = sim.stop().unwrap();

@@ -118,6 +118,26 @@ fn synth_end_to_end_then_check_and_reject_tampering() {
     bad["curve_pairs"][0]["samples"]["p"][5][0] = serde_json::json!(9.0);
     let bad_file = dir.path().join("bad.json");
     std::fs::write(&bad_file, serde_json::to_string(&bad).unwrap()).unwrap();
+    // The same verdicts as JSON for scripts: the file, the verdict, every check.
+    for (file, passed, code) in [(&out, true, 0), (&bad_file, false, 2)] {
+        let run = Command::cargo_bin("mpc-rig")
+            .unwrap()
+            .args(["synth", "--check", file.to_str().unwrap(), "--json"])
+            .output()
+            .unwrap();
+        assert_eq!(run.status.code(), Some(code));
+        let v: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+        assert_eq!(v["file"], file.to_str().unwrap());
+        assert_eq!(v["passed"], passed);
+        let items = v["items"].as_array().unwrap();
+        assert!(items.len() >= 5, "{v}");
+        assert_eq!(items[0]["name"], "coincident points");
+        assert_eq!(items[0]["passed"], passed);
+        assert!(
+            items[0]["detail"].as_str().unwrap().contains("max |R2"),
+            "{v}"
+        );
+    }
     Command::cargo_bin("mpc-rig")
         .unwrap()
         .args(["synth", "--check", bad_file.to_str().unwrap()])

@@ -290,6 +290,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         out_dir: Some(run_dir.clone()),
         replace: false,
         cancel,
+        live: None,
         progress: Some(Box::new(move |p: &Progress| {
             // Every second, and the end of each measured direction.
             let end_of_direction = p.phase != Phase::Settle && p.cycle >= f64::from(p.cycles);
@@ -324,7 +325,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
     );
     println!("recording: {}", outcome.dir.display());
     crate::cli::analyze::print_summary(&summary, &outcome.dir.join("report"));
-    Ok(crate::cli::analyze::exit_code(&summary))
+    Ok(ExitCode::from(crate::cli::analyze::exit_status(&summary)))
 }
 
 /// A running simulated bench of any kind (stopped when dropped).

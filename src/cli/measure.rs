@@ -10,7 +10,9 @@ use anyhow::Context;
 use clap::Args;
 
 use crate::cli::ExitStatusError;
+use crate::live::LiveServer;
 use crate::rig::recording::Phase;
+use crate::rig::session::live::LiveFeed;
 use crate::rig::session::{self, EndReason, MeasureOptions, Progress, TargetSpec};
 
 /// Exit code when the device disconnected during the run (recording kept, incomplete).
@@ -96,7 +98,27 @@ pub struct MeasureArgs {
     /// Tolerance on every timing ratio for the analysis at the end.
     #[arg(long, value_parser = crate::cli::analyze::positive)]
     pub tol_ratio: Option<f64>,
+    /// Serve a live view of the run for a browser: follower against target, error, rate,
+    /// gaps, phase, and a Stop button that stops the motor as Ctrl-C does. ADDR is HOST or
+    /// HOST:PORT (default 127.0.0.1 on a free port; the page's address is printed). Any
+    /// other host than the loopback opens the page and its Stop button to the network.
+    #[arg(
+        long,
+        value_name = "ADDR",
+        num_args = 0..=1,
+        default_missing_value = crate::live::DEFAULT_ADDR
+    )]
+    pub live: Option<String>,
+    /// Print one JSON object on standard output instead of the text (for scripts): the
+    /// recording, how the run ended, its counts, the analysis (summary.json's content) and
+    /// the exit code. Progress and errors stay on standard error.
+    #[arg(long)]
+    pub json: bool,
 }
+
+/// After the run, the live view answers this much longer, so an open page (asking ten
+/// times a second) shows how the run ended before the program exits.
+const LIVE_LINGER: std::time::Duration = std::time::Duration::from_millis(400);
 
 /// Run the session; print where the recording is and how it ended.
 pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
@@ -107,6 +129,23 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
     };
     let cancel = Arc::new(AtomicBool::new(false));
     let signal = stop_on_signals(&cancel)?;
+    let feed = args.live.as_ref().map(|_| LiveFeed::new(cancel.clone()));
+    // Serves until the end of this function (the analysis included).
+    let _server = match (&args.live, &feed) {
+        (Some(addr), Some(feed)) => {
+            let server = LiveServer::start(addr, feed.clone())?;
+            eprintln!("live view: {} (open it in a browser)", server.url());
+            if !server.is_loopback() {
+                eprintln!(
+                    "warning: the live view listens on {}: anyone who can reach it sees the \
+                     run and can stop it",
+                    server.addr()
+                );
+            }
+            Some(server)
+        }
+        _ => None,
+    };
     let tty = std::io::stderr().is_terminal();
     let mut last_line = std::time::Instant::now();
     let mut opts = MeasureOptions {
@@ -120,6 +159,7 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
         out_dir: args.output.clone(),
         replace: args.replace,
         cancel,
+        live: feed.clone(),
         progress: Some(Box::new(move |p: &Progress| {
             if tty {
                 eprint!("\r{}   ", progress_line(p));
@@ -130,19 +170,30 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
             }
         })),
     };
-    let outcome = session::measure(&mut opts)
-        .with_context(|| format!("measurement with rig {}", args.rig.display()))?;
+    let outcome = session::measure(&mut opts);
+    if let Some(feed) = &feed {
+        feed.end(&match &outcome {
+            Ok(o) => format!("{} (recording {})", o.end, o.dir.display()),
+            Err(e) => format!("error: {e}"),
+        });
+        std::thread::sleep(LIVE_LINGER);
+    }
+    let outcome =
+        outcome.with_context(|| format!("measurement with rig {}", args.rig.display()))?;
     if tty {
         eprintln!();
     }
     let c = outcome.meta.counts;
-    println!("recording: {}", outcome.dir.display());
-    println!(
-        "samples {}  gaps {} ({} samples missing)  crc errors {}  reconnects {}",
-        c.samples, c.gaps, c.missing_samples, c.crc_errors, c.reconnects
-    );
+    if !args.json {
+        println!("recording: {}", outcome.dir.display());
+        println!(
+            "samples {}  gaps {} ({} samples missing)  crc errors {}  reconnects {}",
+            c.samples, c.gaps, c.missing_samples, c.crc_errors, c.reconnects
+        );
+    }
     // Analyse whatever was recorded (an incomplete recording is still valid).
-    let mut analysis_code = ExitCode::SUCCESS;
+    let mut analysis_code = 0;
+    let mut summary = None;
     if !args.no_analysis && c.samples > 0 {
         let opts = crate::analysis::ReportOptions {
             tol_deg: args.tol_deg,
@@ -150,9 +201,12 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
             ..Default::default()
         };
         match crate::analysis::analyze_and_report(&outcome.dir, &opts) {
-            Ok(summary) => {
-                crate::cli::analyze::print_summary(&summary, &outcome.dir.join("report"));
-                analysis_code = crate::cli::analyze::exit_code(&summary);
+            Ok(s) => {
+                if !args.json {
+                    crate::cli::analyze::print_summary(&s, &outcome.dir.join("report"));
+                }
+                analysis_code = crate::cli::analyze::exit_status(&s);
+                summary = Some(s);
             }
             Err(e) => eprintln!(
                 "warning: analysis failed: {e}; the recording is kept, retry with `mpc-rig analyze {}`",
@@ -167,38 +221,67 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
             format!("{what}; the recording in {dir} is kept and marked incomplete"),
         )
     };
-    let (code, message) = match &outcome.end {
-        EndReason::Finished => match &outcome.meta.degraded {
-            None => return Ok(analysis_code),
-            Some(why) => (
+    let ended = match &outcome.end {
+        EndReason::Finished => outcome.meta.degraded.as_ref().map(|why| {
+            (
                 EXIT_DEGRADED,
                 format!(
                     "run degraded: {why}; the recording in {dir} is kept (complete, marked \
                      degraded)"
                 ),
-            ),
-        },
+            )
+        }),
         EndReason::Cancelled => {
             let number = signal.load(Ordering::SeqCst);
-            match STOP_SIGNALS.iter().find(|s| s.0 as usize == number) {
+            Some(match STOP_SIGNALS.iter().find(|s| s.0 as usize == number) {
                 Some((n, name)) => incomplete(128 + *n as u8, format!("cancelled by {name}")),
                 None => incomplete(EXIT_CANCELLED, "cancelled".into()),
-            }
+            })
         }
         // The end reason's own text starts with "disconnected": give its message once.
-        EndReason::Disconnected(m) => {
-            incomplete(EXIT_DISCONNECTED, format!("device disconnected ({m})"))
-        }
+        EndReason::Disconnected(m) => Some(incomplete(
+            EXIT_DISCONNECTED,
+            format!("device disconnected ({m})"),
+        )),
         EndReason::MaxRunTime
         | EndReason::DiskFull(_)
         | EndReason::DriverStalled(_)
         | EndReason::Jammed { .. }
-        | EndReason::Error(_) => incomplete(
+        | EndReason::Error(_) => Some(incomplete(
             EXIT_INCOMPLETE,
             format!("run stopped early ({})", outcome.end),
-        ),
+        )),
     };
-    Err(ExitStatusError { code, message }.into())
+    let code = ended.as_ref().map_or(analysis_code, |e| e.0);
+    if args.json {
+        let out = MeasureJson {
+            recording: &outcome.dir,
+            end_reason: outcome.end.to_string(),
+            complete: outcome.complete,
+            degraded: outcome.meta.degraded.as_deref(),
+            counts: &c,
+            summary: summary.as_ref(),
+            exit_code: code,
+        };
+        println!("{}", serde_json::to_string_pretty(&out)?);
+    }
+    match ended {
+        None => Ok(ExitCode::from(code)),
+        Some((code, message)) => Err(ExitStatusError { code, message }.into()),
+    }
+}
+
+/// What `measure --json` prints on standard output: how the run ended, its counts, the
+/// analysis (the `summary.json` it wrote) and the exit code the program ends with.
+#[derive(serde::Serialize)]
+struct MeasureJson<'a> {
+    recording: &'a std::path::Path,
+    end_reason: String,
+    complete: bool,
+    degraded: Option<&'a str>,
+    counts: &'a crate::rig::recording::Counts,
+    summary: Option<&'a crate::analysis::Summary>,
+    exit_code: u8,
 }
 
 /// The live status line: in the settle phase how far the settle has come (of the settle

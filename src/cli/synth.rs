@@ -34,6 +34,10 @@ pub struct SynthArgs {
     /// Re-verify a mechanism.json (file or directory) from its samples alone.
     #[arg(long, conflicts_with_all = ["motion", "output"])]
     pub check: Option<PathBuf>,
+    /// With --check: print the verdict as JSON on standard output (the file, whether it
+    /// passed, and each check's name, verdict and figures), for scripts.
+    #[arg(long, requires = "check")]
+    pub json: bool,
     /// Random seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -243,7 +247,16 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
     if let Some(file) = &args.check {
         let m = Mechanism::load(file)?;
         let report = m.check();
-        println!("{report}");
+        if args.json {
+            let out = serde_json::json!({
+                "file": file,
+                "passed": report.passed(),
+                "items": report.items,
+            });
+            println!("{}", serde_json::to_string_pretty(&out)?);
+        } else {
+            println!("{report}");
+        }
         if report.passed() {
             return Ok(ExitCode::SUCCESS);
         }

@@ -279,7 +279,7 @@ pub struct Mechanism {
 }
 
 /// One line of a check report.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct CheckItem {
     /// What was checked.
     pub name: String,

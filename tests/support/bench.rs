@@ -57,5 +57,6 @@ pub fn options(rig: &str, ports: Vec<String>, motion_name: &str, out: &Path) -> 
         replace: false,
         cancel: Arc::new(AtomicBool::new(false)),
         progress: None,
+        live: None,
     }
 }

@@ -18,6 +18,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime};
 
+pub mod live;
 pub mod watch;
 
 use crate::rig::backend::{Bench, Sample};
@@ -135,6 +136,9 @@ pub struct MeasureOptions {
     pub cancel: Arc<AtomicBool>,
     /// Called with live progress about every [`PROGRESS_INTERVAL`].
     pub progress: Option<ProgressFn>,
+    /// A live view's feed: the session writes its status at every poll and a thinned copy
+    /// of its samples ([`live::LiveFeed`]); `None` without a viewer.
+    pub live: Option<Arc<live::LiveFeed>>,
 }
 
 /// How a session ended.
@@ -502,6 +506,9 @@ fn drive(
         bench.stop_stream().ok();
         return Ok(EndReason::Cancelled);
     }
+    if let Some(feed) = &opts.live {
+        feed.begin(target.motion.name(), &target.motion.class().to_string());
+    }
     bench.run_at(opts.speed_rpm)?;
     let mut stall = StallWatch::new(rig.driver_accel_deg_s2());
     stall.commanded(opts.speed_rpm);
@@ -521,6 +528,8 @@ fn drive(
     let mut last_sample_at = Instant::now();
     let mut last_progress = Instant::now();
     let mut rows_at_last_progress = 0u64;
+    // The sample rate over the last progress interval, Hz.
+    let mut rate_hz = 0.0;
     let mut phase = Phase::Settle;
     let mut cycle = 0.0;
     let mut error_deg = None;
@@ -584,6 +593,9 @@ fn drive(
                 }
             }
             let error = probe.as_mut().and_then(|p| p.error(&target.motion, s));
+            if let Some(feed) = &opts.live {
+                feed.sample(phase, s.driver_angle_deg, error);
+            }
             error_deg = error.map(|e| e.deg).or(error_deg);
             // Only an error against the aligned target can tell a jam.
             let error = error.filter(|e| e.aligned).map(|e| e.deg);
@@ -609,9 +621,23 @@ fn drive(
             set_link_counts(writer, bench);
             writer.flush()?;
         }
+        if let (Some(feed), Some(s)) = (&opts.live, batch.last()) {
+            feed.status(live::LiveStatus {
+                phase: phase.as_str(),
+                cycle,
+                cycles: opts.cycles,
+                samples: writer.rows_pushed(),
+                sample_rate_hz: rate_hz,
+                gaps: writer.meta().counts.gaps,
+                error_deg,
+                driver_deg: s.driver_angle_deg,
+                elapsed_s: start.elapsed().as_secs_f64(),
+            });
+        }
         if last_progress.elapsed() >= PROGRESS_INTERVAL {
             let rows = writer.rows_pushed();
             let dt = last_progress.elapsed().as_secs_f64();
+            rate_hz = (rows - rows_at_last_progress) as f64 / dt;
             if let Some(cb) = opts.progress.as_mut() {
                 cb(&Progress {
                     phase,
@@ -619,7 +645,7 @@ fn drive(
                     cycles: opts.cycles,
                     settle_cycles: opts.settle_cycles,
                     samples: rows,
-                    sample_rate_hz: (rows - rows_at_last_progress) as f64 / dt,
+                    sample_rate_hz: rate_hz,
                     gaps: writer.meta().counts.gaps,
                     error_deg,
                     elapsed_s: start.elapsed().as_secs_f64(),

@@ -102,6 +102,9 @@ pub struct FollowerError {
     pub deg: f64,
     /// The target has been aligned with the follower: a jam can be judged by it.
     pub aligned: bool,
+    /// The target's angle about z at this sample under the alignment, within one period of
+    /// the law, deg (a reading about z only; the measured angle is this plus `deg`).
+    pub target_deg: Option<f64>,
 }
 
 impl ErrorProbe {
@@ -181,9 +184,17 @@ impl ErrorProbe {
                 .first
                 .get_or_insert_with(|| offsets(motion, &[(phi, value)], 0.0).0),
         };
+        // Within one period, so that every cycle draws over the first.
+        let target_deg = match value {
+            Value::Rz(_) => motion
+                .angle_z(((phi + alignment.driver_deg) / 360.0).rem_euclid(1.0))
+                .map(|v| v[0].to_degrees() + alignment.rz_deg),
+            Value::Rotation(_) => None,
+        };
         Some(FollowerError {
             deg: error_deg(motion, phi, value, &alignment),
             aligned: self.aligned.is_some(),
+            target_deg,
         })
     }
 }
