@@ -30,6 +30,7 @@ mod pico_board;
 mod rig_cli;
 mod rig_config;
 mod rig_counts;
+mod rig_identify;
 mod rig_link;
 mod rig_live;
 mod rig_mixed;

@@ -113,16 +113,16 @@ impl Bench {
             missing: what.to_string(),
         };
         let reading = match class {
-            Class::R3 if reading != Some(Reading::Imu) => return Err(refuse("an IMU")),
+            Class::R3 if reading != Some(Reading::Imu) => return Err(refuse("IMU")),
             Class::R1 | Class::R1T1 if reading.is_none() || reading == Some(Reading::Imu) => {
                 return Err(refuse(
-                    "a rotation encoder about z (AS5600 or a follower servo)",
+                    "rotation encoder about z (AS5600 or a follower servo)",
                 ))
             }
             _ => reading.expect("checked above"),
         };
         if class == Class::R1T1 && !linear {
-            return Err(refuse("a linear encoder along z"));
+            return Err(refuse("linear encoder along z"));
         }
         Ok(Bench {
             name: rig.name.clone(),

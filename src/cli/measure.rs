@@ -11,6 +11,7 @@ use clap::Args;
 
 use crate::cli::ExitStatusError;
 use crate::live::LiveServer;
+use crate::rig::identify;
 use crate::rig::recording::Phase;
 use crate::rig::session::live::LiveFeed;
 use crate::rig::session::{self, EndReason, MeasureOptions, Progress, TargetSpec};
@@ -52,20 +53,24 @@ fn stop_on_signals(cancel: &Arc<AtomicBool>) -> anyhow::Result<Arc<AtomicUsize>>
 
 /// Arguments of `mpc-rig measure`.
 #[derive(Debug, Args)]
+#[command(group = clap::ArgGroup::new("bench").args(["rig", "port"]).required(true).multiple(true))]
+#[command(group = clap::ArgGroup::new("target").args(["mechanism", "motion"]).required(true))]
 pub struct MeasureArgs {
-    /// Rig configuration (rigs/*.toml).
+    /// Rig configuration (rigs/*.toml). Without it, the one --port is probed (our
+    /// firmware's handshake, then a Dynamixel ping scan) and the shipped rig that fits what
+    /// answered is used; the choice is printed.
     #[arg(long, value_name = "FILE")]
-    pub rig: PathBuf,
-    /// Serial port override: PATH (single-port rigs) or NAME=PATH; repeatable.
+    pub rig: Option<PathBuf>,
+    /// Serial port: PATH (single-port rigs) or NAME=PATH, repeatable; without --rig, the
+    /// bench's one port as a PATH or a USB serial number (`mpc-rig ports` lists them).
     #[arg(long, value_name = "PORT")]
     pub port: Vec<String>,
+    /// Without --rig: also write the rig chosen for the port to FILE (the shipped rig file
+    /// with the port set), to edit and pass with --rig next time.
+    #[arg(long, value_name = "FILE", conflicts_with = "rig")]
+    pub save_rig: Option<PathBuf>,
     /// Target: a mechanism.json or the directory holding it.
-    #[arg(
-        long,
-        value_name = "PATH",
-        conflicts_with = "motion",
-        required_unless_present = "motion"
-    )]
+    #[arg(long, value_name = "PATH")]
     pub mechanism: Option<PathBuf>,
     /// Target: a motion file (.toml or .csv).
     #[arg(long, value_name = "FILE")]
@@ -127,6 +132,13 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
         (None, Some(m)) => TargetSpec::Motion(m.clone()),
         (None, None) => anyhow::bail!("give the target with --mechanism PATH or --motion FILE"),
     };
+    let (rig_path, detected) = match &args.rig {
+        Some(path) => (path.clone(), None),
+        None => {
+            let (name, rig) = detect_rig(&args, &target)?;
+            (identify::shipped_path(name), Some(rig))
+        }
+    };
     let cancel = Arc::new(AtomicBool::new(false));
     let signal = stop_on_signals(&cancel)?;
     let feed = args.live.as_ref().map(|_| LiveFeed::new(cancel.clone()));
@@ -149,8 +161,13 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
     let tty = std::io::stderr().is_terminal();
     let mut last_line = std::time::Instant::now();
     let mut opts = MeasureOptions {
-        rig_path: args.rig.clone(),
-        ports: args.port.clone(),
+        rig_path: rig_path.clone(),
+        // A detected rig has its port already.
+        ports: if detected.is_some() {
+            Vec::new()
+        } else {
+            args.port.clone()
+        },
         target,
         speed_rpm: args.speed,
         cycles: args.cycles,
@@ -170,7 +187,10 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
             }
         })),
     };
-    let outcome = session::measure(&mut opts);
+    let outcome = match detected {
+        Some(rig) => session::measure_with(rig, &mut opts),
+        None => session::measure(&mut opts),
+    };
     if let Some(feed) = &feed {
         feed.end(&match &outcome {
             Ok(o) => format!("{} (recording {})", o.end, o.dir.display()),
@@ -179,7 +199,7 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
         std::thread::sleep(LIVE_LINGER);
     }
     let outcome =
-        outcome.with_context(|| format!("measurement with rig {}", args.rig.display()))?;
+        outcome.with_context(|| format!("measurement with rig {}", rig_path.display()))?;
     if tty {
         eprintln!();
     }
@@ -282,6 +302,54 @@ struct MeasureJson<'a> {
     counts: &'a crate::rig::recording::Counts,
     summary: Option<&'a crate::analysis::Summary>,
     exit_code: u8,
+}
+
+/// Without `--rig`: find what is on the one `--port`, choose the shipped rig for it and the
+/// target's class, say so, and save it when `--save-rig` asks.
+fn detect_rig(
+    args: &MeasureArgs,
+    target: &TargetSpec,
+) -> anyhow::Result<(&'static str, crate::rig::config::RigConfig)> {
+    let given = match args.port.as_slice() {
+        [one] if !one.contains('=') => one,
+        _ => anyhow::bail!(
+            "without --rig, give the one port the bench is on: --port PATH or --port \
+             USB_SERIAL (`mpc-rig ports` lists them); a bench on several ports needs a rig \
+             file (rigs/README.md)"
+        ),
+    };
+    let path = crate::rig::link::port_by_path_or_serial(given)?;
+    let class = target.load()?.motion.class();
+    eprintln!("no --rig: identifying what is on {} …", path.display());
+    let found = identify::identify(&path)?;
+    let (name, rig) = identify::default_rig(&found, &path, class)?;
+    eprintln!("found {found}");
+    eprintln!(
+        "using the shipped rig `{name}` ({}{}) on {}",
+        identify::shipped_path(name).display(),
+        rig.description
+            .as_deref()
+            .map_or(String::new(), |d| format!(": {d}")),
+        path.display()
+    );
+    match &args.save_rig {
+        Some(file) => {
+            let text = identify::rig_file_text(name, &path)
+                .with_context(|| format!("no shipped rig named {name}"))?;
+            std::fs::write(file, text)
+                .with_context(|| format!("cannot write the rig file {}", file.display()))?;
+            eprintln!(
+                "saved it as {}: edit it (rigs/README.md) and pass it with --rig {} next time",
+                file.display(),
+                file.display()
+            );
+        }
+        None => eprintln!(
+            "to change anything (calibration, speed limits), save it with --save-rig FILE, \
+             edit it and pass it with --rig FILE"
+        ),
+    }
+    Ok((name, rig))
 }
 
 /// The live status line: in the settle phase how far the settle has come (of the settle

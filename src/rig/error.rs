@@ -14,6 +14,9 @@ use crate::rig::sim::plant::PlantError;
 pub const NOT_OUR_FIRMWARE: &str =
     "does not speak the mpc-rig firmware protocol (is it a Dynamixel bus or another device?)";
 
+/// [`RigError::WrongDevice`] on a port probed without a rig (`rig::identify`).
+pub const NEITHER_KNOWN_DEVICE: &str = "answers neither as our firmware nor as a Dynamixel bus";
+
 /// [`RigError::WrongDevice`] on a port where the rig's Dynamixel servos were expected.
 pub const NOT_THE_SERVOS: &str =
     "is not the Dynamixel bus the rig describes (is it our firmware board or another device?)";

@@ -16,6 +16,7 @@
 pub mod backend;
 pub mod config;
 pub mod error;
+pub mod identify;
 pub mod link;
 pub mod recording;
 pub mod session;

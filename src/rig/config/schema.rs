@@ -525,15 +525,15 @@ impl RigConfig {
         let mut missing = Vec::new();
         match class {
             MotionClass::R3 if !has_imu => {
-                missing.push("an orientation sensor (`kind = \"imu\"`) on the follower")
+                missing.push("orientation sensor (`kind = \"imu\"`) on the follower")
             }
             MotionClass::R3 => {}
             MotionClass::R1 | MotionClass::R1T1 => {
                 if !has(Dof::Rz) {
-                    missing.push("a rotary sensor (`dof = \"rz\"` or a follower servo)");
+                    missing.push("rotary sensor (`dof = \"rz\"` or a follower servo)");
                 }
                 if class == MotionClass::R1T1 && !has(Dof::Tz) {
-                    missing.push("a linear sensor (`dof = \"tz\"`) for the height");
+                    missing.push("linear sensor (`dof = \"tz\"`) for the height");
                 }
             }
         }

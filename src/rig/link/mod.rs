@@ -5,4 +5,4 @@
 
 mod ports;
 
-pub use ports::{list_ports, resolve_port, PortInfo};
+pub use ports::{list_ports, port_by_path_or_serial, resolve_port, PortInfo};

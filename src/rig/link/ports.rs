@@ -1,6 +1,6 @@
 //! Listing serial ports and resolving a rig port to a path.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use serialport::SerialPortType;
 
@@ -85,6 +85,20 @@ pub fn resolve_port(port: &PortConfig) -> Result<PathBuf, RigError> {
                 ports.len()
             ))
         })
+}
+
+/// The device path of a `--port` given alone: a path as it is, or else the USB serial
+/// number of a plugged-in port.
+pub fn port_by_path_or_serial(given: &str) -> Result<PathBuf, RigError> {
+    if given.contains('/') || Path::new(given).exists() {
+        return Ok(PathBuf::from(given));
+    }
+    resolve_port(&PortConfig {
+        name: format!("--port {given}"),
+        path: None,
+        usb_serial: Some(given.to_string()),
+        baud: 115_200,
+    })
 }
 
 #[cfg(test)]

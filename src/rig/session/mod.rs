@@ -208,7 +208,16 @@ impl std::fmt::Display for EndReason {
 
 /// Run a whole session: load the rig and target, open the backend, measure, record.
 pub fn measure(opts: &mut MeasureOptions) -> Result<MeasureOutcome, RigError> {
-    let mut rig = RigConfig::load(&opts.rig_path)?;
+    let rig = RigConfig::load(&opts.rig_path)?;
+    measure_with(rig, opts)
+}
+
+/// [`measure`] with a rig already loaded (a shipped one chosen for what answered on a port,
+/// `rig::identify`); `opts.rig_path` only names it.
+pub fn measure_with(
+    mut rig: RigConfig,
+    opts: &mut MeasureOptions,
+) -> Result<MeasureOutcome, RigError> {
     rig.apply_port_overrides(&opts.ports)?;
     let target = opts.target.load()?;
     check_plan(&rig, opts)?;
