@@ -47,6 +47,8 @@ fn child(dir: &Path) {
         end_reason: loaded.meta.end_reason.clone(),
         rows: loaded.rows,
         stale_rows: loaded.stale_rows,
+        held_rows: loaded.held_rows,
+        late_rows: loaded.late_rows,
         truncated_last_line: loaded.truncated_last_line,
         degraded: None,
         device_counts: serde_json::json!({}),

@@ -226,3 +226,61 @@ fn analyze_json_prints_the_summary_alone() {
         assert_eq!(printed["pass"], code == 0);
     }
 }
+
+/// Guards rows whose driver angle was held (issue 20: a loaded mixed bench showed spike
+/// columns in the error while the report said "0 gaps"): a stretch of rows flagged
+/// `DRIVER_HELD`, their driver angle frozen as the merge leaves it, is left out of the
+/// figures, counted, and said in the report and the summary line.
+#[test]
+fn rows_with_a_held_driver_angle_are_left_out_and_said() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rec = half_turn_recording(tmp.path(), &bench());
+    let clean = analyze_and_report(&rec, &ReportOptions::default()).unwrap();
+    let csv = rec.join("recording.csv");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    // 0.2 s at 500 Hz in the middle of the run: the driver angle frozen at the first
+    // row's, as a bus that fell behind leaves it (tens of degrees stale by the end).
+    let from = lines.len() / 2;
+    let to = from + 100;
+    let frozen = lines[from].split(',').nth(3).unwrap().to_string();
+    for line in &mut lines[from..to] {
+        let mut cells: Vec<String> = line.split(',').map(str::to_string).collect();
+        cells[3] = frozen.clone();
+        let last = cells.len() - 1;
+        let flags: u32 = cells[last].parse().unwrap();
+        cells[last] = (flags | mpc_rig::rig::recording::flags::DRIVER_HELD).to_string();
+        *line = cells.join(",");
+    }
+    std::fs::write(&csv, lines.join("\n") + "\n").unwrap();
+    // The sidecar's fingerprint of the CSV is for the rows as written; drop it, as a
+    // sidecar from before fingerprints has none.
+    let sidecar = rec.join("recording.json");
+    let mut meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&sidecar).unwrap()).unwrap();
+    meta["csv"] = serde_json::Value::Null;
+    std::fs::write(&sidecar, meta.to_string()).unwrap();
+    let held = analyze_and_report(&rec, &ReportOptions::default()).unwrap();
+    assert_eq!(held.source.held_rows, to - from);
+    assert_eq!(clean.source.held_rows, 0);
+    let (a, b) = (
+        clean.headline.max_error_deg.unwrap(),
+        held.headline.max_error_deg.unwrap(),
+    );
+    assert!(
+        b <= a + 0.05,
+        "held rows entered the figures: max {b}° against {a}°"
+    );
+    let report = std::fs::read_to_string(rec.join("report/report.md")).unwrap();
+    assert!(
+        report.contains(
+            "100 rows left out whose driver angle was held (the Dynamixel bus fell behind \
+             the board)."
+        ),
+        "{report}"
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(rec.join("report/summary.json")).unwrap())
+            .unwrap();
+    assert_eq!(summary["source"]["held_rows"], 100);
+}

@@ -12,6 +12,8 @@ fn source() -> SourceInfo {
         end_reason: None,
         rows: 0,
         stale_rows: 0,
+        held_rows: 0,
+        late_rows: 0,
         truncated_last_line: false,
         degraded: None,
         device_counts: serde_json::json!({}),

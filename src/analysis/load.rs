@@ -5,7 +5,9 @@
 //! per-row allocation), raw sensor values are converted with the rig's own calibration
 //! ([`crate::rig::config::SensorConfig::to_physical`], IMU mounting), rotary encoders are
 //! unwrapped as they arrive, and samples whose sensor value the device marked as repeated
-//! (stale IMU, failed read) are left out and counted. It does not compute any figure.
+//! (stale IMU, failed read) or whose driver angle was held rather than measured at their
+//! instant (`DRIVER_HELD`, a mixed bench's bus behind its board) are left out and counted,
+//! as are rows the device sampled late (kept). It does not compute any figure.
 
 use std::path::{Path, PathBuf};
 
@@ -34,6 +36,12 @@ pub struct LoadedRecording {
     pub rows: usize,
     /// Rows left out because the device flagged their follower value as repeated or failed.
     pub stale_rows: usize,
+    /// Rows left out because their driver angle was held, not measured at their instant
+    /// (flag `DRIVER_HELD`: on a mixed bench the Dynamixel bus fell behind the board).
+    pub held_rows: usize,
+    /// Rows the device sampled late (flag `LATE`: it missed sampling ticks before them);
+    /// kept, since their time stamps are their own.
+    pub late_rows: usize,
     /// The CSV ended in a partial line (crash, unplug or Ctrl-C) that was dropped.
     pub truncated_last_line: bool,
     /// Names of the sensors used: (rz, tz, imu).
@@ -109,7 +117,7 @@ pub fn load_run(dir: &Path) -> Result<LoadedRecording, AnalysisError> {
         },
     };
     let mut row = RowBuf::default();
-    let (mut rows, mut stale) = (0usize, 0usize);
+    let (mut rows, mut stale, mut held, mut late) = (0usize, 0usize, 0usize, 0usize);
     // Incremental unwrap of the rotary encoder.
     let mut rz_prev_raw: Option<f64> = None;
     let mut rz_turns = 0.0;
@@ -129,6 +137,13 @@ pub fn load_run(dir: &Path) -> Result<LoadedRecording, AnalysisError> {
         if row.flags & mask != 0 {
             stale += 1;
             continue;
+        }
+        if row.flags & flags::DRIVER_HELD != 0 {
+            held += 1;
+            continue;
+        }
+        if row.flags & flags::LATE != 0 {
+            late += 1;
         }
         let bad = |what: String| AnalysisError::Recording {
             path: dir.join(crate::rig::recording::CSV_FILE),
@@ -219,6 +234,8 @@ pub fn load_run(dir: &Path) -> Result<LoadedRecording, AnalysisError> {
         run,
         rows,
         stale_rows: stale,
+        held_rows: held,
+        late_rows: late,
         sensors_used,
     })
 }
@@ -348,6 +365,8 @@ pub fn analyze_and_report(
         end_reason: loaded.meta.end_reason.clone(),
         rows: loaded.rows,
         stale_rows: loaded.stale_rows,
+        held_rows: loaded.held_rows,
+        late_rows: loaded.late_rows,
         truncated_last_line: loaded.truncated_last_line,
         degraded: loaded.meta.degraded.clone(),
         device_counts: serde_json::to_value(loaded.meta.counts).unwrap_or_default(),

@@ -160,8 +160,12 @@ pub fn print_summary(s: &Summary, report_dir: &Path) {
         println!("backlash: {b:.3}° of driver angle (forward vs reverse)");
     }
     println!(
-        "samples:  {} at {:.1} Hz, {} gaps, {} cycles",
-        s.sampling.samples, s.sampling.mean_rate_hz, s.sampling.gaps, h.cycles
+        "samples:  {} at {:.1} Hz, {} gaps, {} cycles{}",
+        s.sampling.samples,
+        s.sampling.mean_rate_hz,
+        s.sampling.gaps,
+        h.cycles,
+        crate::analysis::report::behind(&s.source)
     );
     if let Some(why) = &s.source.degraded {
         println!("degraded: {why}");

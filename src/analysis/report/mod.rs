@@ -79,6 +79,11 @@ pub struct SourceInfo {
     pub rows: usize,
     /// Rows left out as stale (device-flagged repeated values).
     pub stale_rows: usize,
+    /// Rows left out because their driver angle was held rather than measured at their
+    /// instant (a mixed bench whose Dynamixel bus fell behind the board).
+    pub held_rows: usize,
+    /// Rows the device sampled late (missed sampling ticks before them); kept.
+    pub late_rows: usize,
     /// The CSV ended in a cut-off line that was dropped.
     pub truncated_last_line: bool,
     /// Why the session marked the recording degraded (sidecar `degraded`), if it did.
@@ -381,6 +386,24 @@ pub fn summarize(
     }
 }
 
+/// What the sample counts leave unsaid about a side falling behind, for the headline and
+/// the command's summary line: rows whose driver angle was held (left out) and rows the
+/// device sampled late; empty when there are none.
+pub fn behind(src: &SourceInfo) -> String {
+    let mut out = String::new();
+    if src.held_rows > 0 {
+        out += &format!(
+            ", {} rows left out whose driver angle was held (the Dynamixel bus fell behind \
+             the board)",
+            src.held_rows
+        );
+    }
+    if src.late_rows > 0 {
+        out += &format!(", {} samples taken late by the device", src.late_rows);
+    }
+    out
+}
+
 fn f3(v: f64) -> String {
     format!("{v:.3}")
 }
@@ -468,8 +491,12 @@ fn blocks(s: &Summary, a: &Analysis, pictures: &[plots::Picture]) -> Vec<Block> 
             })
     ));
     lines.push(format!(
-        "{} complete cycles, {} samples at {:.1} Hz, {} gaps.",
-        h.cycles, s.sampling.samples, s.sampling.mean_rate_hz, s.sampling.gaps
+        "{} complete cycles, {} samples at {:.1} Hz, {} gaps{}.",
+        h.cycles,
+        s.sampling.samples,
+        s.sampling.mean_rate_hz,
+        s.sampling.gaps,
+        behind(&s.source)
     ));
     if let Some(why) = &s.source.degraded {
         lines.push(format!(
@@ -794,9 +821,10 @@ fn blocks(s: &Summary, a: &Analysis, pictures: &[plots::Picture]) -> Vec<Block> 
                 src.degraded.clone().unwrap_or_else(|| "no".into()),
             ],
             vec![
-                "rows / stale rows left out".into(),
-                format!("{} / {}", src.rows, src.stale_rows),
+                "rows / left out: stale / driver held".into(),
+                format!("{} / {} / {}", src.rows, src.stale_rows, src.held_rows),
             ],
+            vec!["rows sampled late".into(), src.late_rows.to_string()],
             vec![
                 "truncated last line".into(),
                 if src.truncated_last_line {
