@@ -903,10 +903,49 @@ fn retryable(e: &dynamixel2::TransferError) -> bool {
     }
 }
 
-/// Run `f` up to [`COMMAND_ATTEMPTS`] times while it fails retryably, waiting `pause`
-/// before each new attempt so late replies (of this transaction or of a sync read just
-/// before it) arrive and are discarded rather than read as its answer; returns the last
-/// result and the number of attempts made.
+/// Longest a failed command waits for the line to go quiet before its next attempt: 1 s.
+/// A bus stall leaves a backlog of late replies to the sync reads sent during it (a 0.4 s
+/// stall at 57 600 baud: about a quarter of a second of them); read as the next attempt's
+/// answer, each failed it ("invalid parameter count") until the attempts ran out.
+pub const DRAIN_LIMIT: Duration = Duration::from_secs(1);
+
+/// A failed command's line counts as quiet after this many retry pauses without a reply:
+/// 3. A backlog's replies answer queued instructions one by one, each gap an
+/// instruction's wire time plus the replies' (7 ms for one servo at 57 600 baud), which
+/// one pause (the replies' latency plus 2 ms, 6.3 ms there) does not cover; two do for any
+/// number of servos, and the third is for a simulator or adapter that hiccups mid-backlog.
+pub const DRAIN_QUIET_PAUSES: u32 = 3;
+
+/// Read and drop status replies until none arrives for `quiet` (at most [`DRAIN_LIMIT`]):
+/// late answers to earlier instructions, which the next attempt would otherwise take for
+/// its own. Returns how many were dropped.
+fn drain(bus: &mut DxlBus, quiet: Duration) -> usize {
+    let end = Instant::now() + DRAIN_LIMIT;
+    let mut dropped = 0;
+    while Instant::now() < end {
+        let read = worker::transaction(|| {
+            bus.read_status_response_deadline(Instant::now() + quiet)
+                .map(|_| ())
+                .map_err(dynamixel2::TransferError::ReadError)
+        });
+        match read {
+            Err(dynamixel2::TransferError::ReadError(dynamixel2::ReadError::Io(io)))
+                if io.kind() == std::io::ErrorKind::TimedOut =>
+            {
+                break
+            }
+            // A late reply, or a damaged one: either way not the next attempt's.
+            _ => dropped += 1,
+        }
+    }
+    dropped
+}
+
+/// Run `f` up to [`COMMAND_ATTEMPTS`] times while it fails retryably, draining the line
+/// until it has been quiet for [`DRAIN_QUIET_PAUSES`] × `pause` before each new attempt
+/// ([`drain`]) so late replies
+/// (of this transaction or of sync reads before it) are discarded rather than read as its
+/// answer; returns the last result and the number of attempts made.
 fn with_retries<T>(
     bus: &mut DxlBus,
     pause: Duration,
@@ -917,7 +956,10 @@ fn with_retries<T>(
         match worker::transaction(|| f(bus)) {
             Err(e) if retryable(&e) && attempt < COMMAND_ATTEMPTS => {
                 attempt += 1;
-                std::thread::sleep(pause);
+                let dropped = drain(bus, pause * DRAIN_QUIET_PAUSES);
+                if dropped > 0 {
+                    tracing::debug!("dropped {dropped} late replies before attempt {attempt}");
+                }
             }
             r => return (r, attempt),
         }
