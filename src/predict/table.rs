@@ -3,14 +3,17 @@
 //!
 //! Owns [`PlayTable`]: the follower's free turn each way at each predicted driver angle,
 //! interpolated linearly between them (periodic), loaded from `prediction.json` with its
-//! format and class checked. A bench at 1 kHz looks up two numbers per reading instead of
-//! tracing meshes. It does not decide where the follower is: the plant applies the load.
+//! format and class checked, with the load the prediction was made under. A bench at
+//! 1 kHz looks up two numbers per reading instead of tracing meshes. It does not decide
+//! where the follower is: the plant applies the load (`predict::law` says how each one
+//! leaves it).
 
 use std::f64::consts::TAU;
 use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
+use super::law::Load;
 use super::output::PREDICTION_FORMAT;
 
 /// Error loading a [`PlayTable`].
@@ -43,7 +46,14 @@ struct File {
 #[derive(Deserialize)]
 struct Body {
     class: String,
+    /// Absent in a file that names none: the default, a drag.
+    #[serde(default = "drag_label")]
+    load: String,
     samples: Vec<Row>,
+}
+
+fn drag_label() -> String {
+    Load::Drag.label()
 }
 
 #[derive(Deserialize)]
@@ -57,7 +67,7 @@ struct Row {
 }
 
 /// The rows of a prediction file, checked.
-fn read(path: &Path) -> Result<Vec<Row>, TableError> {
+fn read(path: &Path) -> Result<(Load, Vec<Row>), TableError> {
     let text = std::fs::read_to_string(path).map_err(|error| TableError::Io {
         path: path.to_path_buf(),
         error,
@@ -79,6 +89,8 @@ fn read(path: &Path) -> Result<Vec<Row>, TableError> {
             file.prediction.class
         )));
     }
+    let load =
+        Load::parse(&file.prediction.load).map_err(|e| bad(format!("prediction.load: {e}")))?;
     let rows = file.prediction.samples;
     let n = rows.len();
     if n == 0 {
@@ -99,7 +111,7 @@ fn read(path: &Path) -> Result<Vec<Row>, TableError> {
             )));
         }
     }
-    Ok(rows)
+    Ok((load, rows))
 }
 
 /// Linear interpolation in a periodic table of n values at driver angles 2π·i/n.
@@ -123,7 +135,7 @@ pub struct PredictedDeviation {
 impl PredictedDeviation {
     /// Read `prediction.json` (as [`PlayTable::load`]).
     pub fn load(path: &Path) -> Result<PredictedDeviation, TableError> {
-        let rows = read(path)?;
+        let (_, rows) = read(path)?;
         Ok(PredictedDeviation {
             forward: rows.iter().map(|r| r.forward_deg - r.target_deg).collect(),
             reverse: rows.iter().map(|r| r.reverse_deg - r.target_deg).collect(),
@@ -149,25 +161,34 @@ pub struct PlayTable {
     plus: Vec<f64>,
     /// At driver angle 2π·i/n, the negative-sense free turn (a magnitude).
     minus: Vec<f64>,
+    /// The load the prediction was made under, for the plant to apply the same.
+    load: Load,
 }
 
 impl PlayTable {
-    /// A table from free turns at n evenly spaced driver angles from 0 (rad).
-    pub fn new(plus: Vec<f64>, minus: Vec<f64>) -> PlayTable {
+    /// A table from free turns at n evenly spaced driver angles from 0 (rad), under
+    /// `load`.
+    pub fn new(plus: Vec<f64>, minus: Vec<f64>, load: Load) -> PlayTable {
         assert!(
             plus.len() == minus.len() && !plus.is_empty(),
             "one free interval per angle, at least one"
         );
-        PlayTable { plus, minus }
+        PlayTable { plus, minus, load }
+    }
+
+    /// The load the prediction was made under.
+    pub fn load_applied(&self) -> Load {
+        self.load
     }
 
     /// Read `prediction.json` (format [`PREDICTION_FORMAT`], a 1R prediction with evenly
     /// spaced driver angles from 0).
     pub fn load(path: &Path) -> Result<PlayTable, TableError> {
-        let rows = read(path)?;
+        let (load, rows) = read(path)?;
         Ok(PlayTable::new(
             rows.iter().map(|r| r.free_plus_deg.to_radians()).collect(),
             rows.iter().map(|r| r.free_minus_deg.to_radians()).collect(),
+            load,
         ))
     }
 
@@ -186,7 +207,11 @@ mod tests {
     /// and for negative angles.
     #[test]
     fn free_turns_interpolate_around_the_period() {
-        let t = PlayTable::new(vec![0.0, 0.4, 0.8, 0.4], vec![1.0, 1.0, 2.0, 2.0]);
+        let t = PlayTable::new(
+            vec![0.0, 0.4, 0.8, 0.4],
+            vec![1.0, 1.0, 2.0, 2.0],
+            Load::Drag,
+        );
         let q = TAU / 4.0;
         assert_eq!(t.at(0.0), (0.0, 1.0));
         assert_eq!(t.at(q), (0.4, 1.0));

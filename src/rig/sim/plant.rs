@@ -35,6 +35,7 @@ use rand_chacha::ChaCha8Rng;
 pub const DEFAULT_SEED: u64 = 0x6d70_6372_6967;
 
 use crate::motion::DEFAULT_SCALE_MM;
+use crate::predict::law::Load;
 use crate::predict::table::PlayTable;
 
 /// Axis of the simulated IMU bias rotation: fixed (not random) and tilted off every
@@ -135,8 +136,9 @@ pub struct PlantConfig {
     /// Seed of all randomness.
     pub seed: u64,
     /// The geometry plant: the built parts' free turn over the driver angle (from
-    /// `mpc-rig simulate`). With it a 1R follower is not on the target law but where a
-    /// drag leaves it inside that free interval, as the printed parts would move it.
+    /// `mpc-rig simulate`). With it a 1R follower is not on the target law but where the
+    /// prediction's load (a drag, a torque, a spring) leaves it inside that free interval,
+    /// as the printed parts would move it.
     pub play: Option<std::sync::Arc<PlayTable>>,
 }
 
@@ -474,13 +476,28 @@ impl Plant {
         let effective = input - self.cfg.phase_lag_deg.to_radians();
         let mut state = self.target.follower_at(effective / TAU);
         if let Some(table) = &self.cfg.play {
-            // A dragged follower stays where it was unless the parts push it: its
-            // deviation from the target is clamped into the free interval at this angle.
-            let e = self
-                .drag
-                .map_or(0.0, |(target, e)| e + target - state.angle_z);
+            // The follower's deviation from the target, within the free interval at this
+            // angle, where the prediction's load leaves it (`predict::law`).
             let (plus, minus) = table.at(effective);
-            let e = e.clamp(-minus, plus);
+            let e = match table.load_applied() {
+                // A dragged follower stays where it was unless the parts push it.
+                Load::Drag => self
+                    .drag
+                    .map_or(0.0, |(target, e)| e + target - state.angle_z)
+                    .clamp(-minus, plus),
+                // A torque holds it against that side of its play.
+                Load::Torque(sense) if sense > 0.0 => plus,
+                Load::Torque(_) => -minus,
+                // A spring pulls it towards its rest angle, as far as the play allows;
+                // the rest angle is against the target within one period, as predicted.
+                Load::Spring(rest_deg) => {
+                    let within = self
+                        .target
+                        .follower_at((effective / TAU).rem_euclid(1.0))
+                        .angle_z;
+                    (rest_deg.to_radians() - within).clamp(-minus, plus)
+                }
+            };
             self.drag = Some((state.angle_z, e));
             state.angle_z += e;
             state.rotation =
@@ -735,7 +752,7 @@ mod tests {
     /// otherwise (the target law itself where the interval is zero).
     #[test]
     fn the_geometry_plant_leaves_a_dragged_follower_at_the_edge_of_its_play() {
-        let table = PlayTable::new(vec![0.02; 8], vec![0.03; 8]);
+        let table = PlayTable::new(vec![0.02; 8], vec![0.03; 8], Load::Drag);
         let cfg = PlantConfig {
             play: Some(std::sync::Arc::new(table)),
             ..PlantConfig::default()
@@ -757,5 +774,54 @@ mod tests {
         let r = plant.follower(phi).rotation;
         let z = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), plant.follower(phi).angle_z);
         assert!(r.angle_to(&z) < 1e-9, "the rotation turns with the angle");
+    }
+
+    /// Guards the geometry plant under the other loads a prediction can be made with (issue
+    /// 15: it applied a drag whatever the load): a torque holds the follower against the
+    /// side of its play it pushes to whichever way the driver turns, and a spring leaves it
+    /// at the point of its free interval nearest the rest angle.
+    #[test]
+    fn the_geometry_plant_applies_the_predictions_load() {
+        // Driver angle 2 rad (within the first period), reached forward or after 1 rad
+        // forward and back: the follower's deviation from the target there.
+        let deviation = |load: Load, back: bool| {
+            let cfg = PlantConfig {
+                play: Some(std::sync::Arc::new(PlayTable::new(
+                    vec![0.02; 8],
+                    vec![0.03; 8],
+                    load,
+                ))),
+                ..PlantConfig::default()
+            };
+            let mut plant = Plant::new(LAW, cfg);
+            let steps = if back { 600 } else { 400 };
+            for k in 0..=steps {
+                let at = if k <= 600 && back && k > 400 {
+                    0.005 * (800 - k) as f64
+                } else {
+                    0.005 * k as f64
+                };
+                plant.follower(at);
+            }
+            plant.follower(2.0).angle_z - plant.ideal(2.0).angle_z
+        };
+        for back in [false, true] {
+            let up = deviation(Load::Torque(1.0), back);
+            assert!((up - 0.02).abs() < 1e-9, "torque+ (back {back}): {up}");
+            let down = deviation(Load::Torque(-1.0), back);
+            assert!((down + 0.03).abs() < 1e-9, "torque- (back {back}): {down}");
+        }
+        // A rest angle far below or above every target angle pulls the follower to that
+        // edge of its play; one just beside the target, to it.
+        let pulled = deviation(Load::Spring(-1000.0), false);
+        assert!((pulled + 0.03).abs() < 1e-9, "spring far below: {pulled}");
+        let pulled = deviation(Load::Spring(1000.0), false);
+        assert!((pulled - 0.02).abs() < 1e-9, "spring far above: {pulled}");
+        let target = Plant::new(LAW, PlantConfig::default()).ideal(2.0).angle_z;
+        let near = deviation(Load::Spring((target + 0.01).to_degrees()), false);
+        assert!(
+            (near - 0.01).abs() < 1e-9,
+            "spring beside the target: {near}"
+        );
     }
 }
