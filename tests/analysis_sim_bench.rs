@@ -88,7 +88,9 @@ fn uniform_prediction(path: &Path, free: f64) {
 /// 1° of free turn each way, dragged, lags 1° driven forward and leads 1° in reverse, so
 /// a session measured both ways shows an RMS error of 1° (±0.2°) against the target, which
 /// no offset fit removes (the plain target plant gives about 0.02°), and under 0.2°
-/// against the prediction that says so.
+/// against the prediction that says so. The play is the follower-side dead band, 2°
+/// (±0.2°), and the headline says so (it used to give only the driver-side figure,
+/// 0.002°).
 #[test]
 fn the_geometry_plant_shows_the_parts_play_in_a_measurement() {
     use mpc_rig::predict::table::PlayTable;
@@ -109,6 +111,15 @@ fn the_geometry_plant_shows_the_parts_play_in_a_measurement() {
     assert!((rms - 1.0).abs() < 0.2, "RMS {rms}");
     let max = s.headline.max_error_deg.unwrap();
     assert!(max < 1.5, "max {max}");
+    let play = s.headline.backlash_follower_deg.unwrap();
+    assert!((play - 2.0).abs() < 0.2, "follower dead band {play}");
+    let text = std::fs::read_to_string(rec.join("report/report.md")).unwrap();
+    assert!(
+        text.contains(&format!(
+            "° of driver angle and {play:.3}° of follower (its dead band)."
+        )),
+        "{text}"
+    );
     let p = s.prediction.expect("compared with the prediction");
     assert!(p.rms_deg < 0.2, "against the prediction: {p:?}");
     assert!((p.rms_vs_target_deg - rms).abs() < 0.1, "{p:?}");

@@ -157,7 +157,10 @@ pub fn print_summary(s: &Summary, report_dir: &Path) {
     }
     println!();
     if let Some(b) = h.backlash_driver_deg {
-        println!("backlash: {b:.3}° of driver angle (forward vs reverse)");
+        println!(
+            "backlash: {b:.3}° of driver angle{} (forward vs reverse)",
+            crate::analysis::report::follower_play(h)
+        );
     }
     println!(
         "samples:  {} at {:.1} Hz, {} gaps, {} cycles{}",

@@ -119,6 +119,9 @@ pub struct Headline {
     pub phase_lag_deg: f64,
     /// Driver-side backlash, when both directions were run.
     pub backlash_driver_deg: Option<f64>,
+    /// Follower-side dead band about z (its play: printed parts' clearance shows here, not
+    /// in the driver-side figure), when both directions were run.
+    pub backlash_follower_deg: Option<f64>,
     /// Complete forward/reverse cycles analysed.
     pub cycles: usize,
     /// Mean sample rate.
@@ -349,6 +352,7 @@ pub fn summarize(
             timing_ratio_target: ratio.map(|r| r.target),
             phase_lag_deg: a.phase_lag.driver_deg.value,
             backlash_driver_deg: bl.map(|b| b.driver_deg.value),
+            backlash_follower_deg: follower_bl(Dof::Rz),
             cycles,
             sample_rate_hz: a.sampling.mean_rate_hz,
             not_enough_data,
@@ -402,6 +406,13 @@ pub fn behind(src: &SourceInfo) -> String {
         out += &format!(", {} samples taken late by the device", src.late_rows);
     }
     out
+}
+
+/// The follower-side dead band after the driver-side backlash, when it was fitted.
+pub fn follower_play(h: &Headline) -> String {
+    h.backlash_follower_deg.map_or(String::new(), |f| {
+        format!(" and {f:.3}° of follower (its dead band)")
+    })
 }
 
 fn f3(v: f64) -> String {
@@ -487,7 +498,7 @@ fn blocks(s: &Summary, a: &Analysis, pictures: &[plots::Picture]) -> Vec<Block> 
             .map_or(String::new(), |ms| format!(" ({ms:.1} ms)")),
         h.backlash_driver_deg
             .map_or("backlash not measured (no reverse run)".to_string(), |v| {
-                format!("backlash {v:.3}° of driver angle")
+                format!("backlash {v:.3}° of driver angle{}", follower_play(h))
             })
     ));
     lines.push(format!(
