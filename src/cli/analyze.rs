@@ -9,6 +9,7 @@ use std::process::ExitCode;
 use anyhow::Context as _;
 use clap::Args;
 
+use crate::analysis::report::f3;
 use crate::analysis::{analyze_and_report, timing::parse_levels, ReportOptions, Summary};
 
 /// Exit code when the analysis ran but a tolerance (`--tol-*`) was missed.
@@ -145,9 +146,9 @@ pub fn print_summary(s: &Summary, report_dir: &Path) {
     if let Some(r) = h.rms_error_mm {
         println!("height:   RMS {r:.3} mm");
     }
-    print!("offsets:  driver {:.3}°", s.alignment.driver_offset_deg);
+    print!("offsets:  driver {}°", f3(s.alignment.driver_offset_deg));
     if let Some(c) = s.alignment.sensor_offset_rz_deg {
-        print!(", sensor rz {c:.3}°");
+        print!(", sensor rz {}°", f3(c));
     }
     if let Some(c) = s.alignment.sensor_offset_tz_mm {
         print!(", sensor tz {c:.3} mm");
@@ -158,7 +159,8 @@ pub fn print_summary(s: &Summary, report_dir: &Path) {
     println!();
     if let Some(b) = h.backlash_driver_deg {
         println!(
-            "backlash: {b:.3}° of driver angle{} (forward vs reverse)",
+            "backlash: {}° of driver angle{} (forward vs reverse)",
+            f3(b),
             crate::analysis::report::follower_play(h)
         );
     }

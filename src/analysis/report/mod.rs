@@ -411,12 +411,18 @@ pub fn behind(src: &SourceInfo) -> String {
 /// The follower-side dead band after the driver-side backlash, when it was fitted.
 pub fn follower_play(h: &Headline) -> String {
     h.backlash_follower_deg.map_or(String::new(), |f| {
-        format!(" and {f:.3}° of follower (its dead band)")
+        format!(" and {}° of follower (its dead band)", f3(f))
     })
 }
 
-fn f3(v: f64) -> String {
-    format!("{v:.3}")
+/// `v` with three decimals, without the sign of a value that rounds to zero ("-0.000"
+/// reads as a negative figure; issue 20).
+pub fn f3(v: f64) -> String {
+    let s = format!("{v:.3}");
+    match s.strip_prefix('-') {
+        Some(rest) if rest.bytes().all(|b| b == b'0' || b == b'.') => rest.to_string(),
+        _ => s,
+    }
 }
 
 fn opt3(v: Option<f64>) -> String {
@@ -491,14 +497,14 @@ fn blocks(s: &Summary, a: &Analysis, pictures: &[plots::Picture]) -> Vec<Block> 
         lines.push(format!("Height error after alignment: RMS **{r:.3} mm**."));
     }
     lines.push(format!(
-        "Phase lag {:.3}° of driver angle{}; {}.",
-        h.phase_lag_deg,
+        "Phase lag {}° of driver angle{}; {}.",
+        f3(h.phase_lag_deg),
         s.lag
             .phase_lag_ms
             .map_or(String::new(), |ms| format!(" ({ms:.1} ms)")),
         h.backlash_driver_deg
             .map_or("backlash not measured (no reverse run)".to_string(), |v| {
-                format!("backlash {v:.3}° of driver angle{}", follower_play(h))
+                format!("backlash {}° of driver angle{}", f3(v), follower_play(h))
             })
     ));
     lines.push(format!(
@@ -926,4 +932,19 @@ pub fn write_report(
     })?;
     doc::write(&json_path, &json)?;
     Ok(s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::f3;
+
+    /// Guards figures without a negative zero: what rounds to zero prints unsigned, the
+    /// rest keeps its sign.
+    #[test]
+    fn no_negative_zero() {
+        assert_eq!(f3(-0.0002), "0.000");
+        assert_eq!(f3(-0.0), "0.000");
+        assert_eq!(f3(-0.0006), "-0.001");
+        assert_eq!(f3(1.23449), "1.234");
+    }
 }
