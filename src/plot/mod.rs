@@ -18,6 +18,15 @@ static REGISTER: Once = Once::new();
 /// Default picture size in pixels (width, height).
 pub const DEFAULT_SIZE: (u32, u32) = (1000, 600);
 
+/// Above the data, a chart whose legend sits in the upper right corner reaches this
+/// multiple of the data's span (set by the caller in `y_range`), so the legend hides no
+/// peak: 1.45.
+pub const LEGEND_HEADROOM: f64 = 1.45;
+
+/// Opacity of a [`Mark::Band`]: 0.35, pale enough that points of any palette colour
+/// drawn on it stand out, dark enough to read as the reference where none are.
+pub const BAND_OPACITY: f64 = 0.35;
+
 /// Error while drawing or writing a chart.
 #[derive(Debug, thiserror::Error)]
 pub enum PlotError {
@@ -49,6 +58,9 @@ pub enum Mark {
     /// Vertical bars from y = 0, centred on each x, as wide as the closest x spacing
     /// (histograms).
     Bars,
+    /// A broad pale polyline of the given width in pixels: a reference that data drawn
+    /// after it lies on, both visible (a target under measured points).
+    Band(u32),
 }
 
 /// One named data series.
@@ -71,6 +83,21 @@ impl Series {
             label: label.into(),
             points,
             mark: Mark::Line,
+            color,
+        }
+    }
+
+    /// A broad pale line series ([`Mark::Band`]), to draw before the data it underlies.
+    pub fn band(
+        label: impl Into<String>,
+        points: Vec<(f64, f64)>,
+        color: usize,
+        width: u32,
+    ) -> Self {
+        Self {
+            label: label.into(),
+            points,
+            mark: Mark::Band(width),
             color,
         }
     }
@@ -286,9 +313,12 @@ impl Chart {
         }
         for s in &self.series {
             let colour = color(s.color);
-            let style = ShapeStyle::from(&colour).stroke_width(2);
+            let style = match s.mark {
+                Mark::Band(w) => ShapeStyle::from(&colour.mix(BAND_OPACITY)).stroke_width(w),
+                _ => ShapeStyle::from(&colour).stroke_width(2),
+            };
             let anno = match s.mark {
-                Mark::Line | Mark::Dashed => {
+                Mark::Line | Mark::Dashed | Mark::Band(_) => {
                     // Split at non-finite points so gaps show as gaps.
                     let mut runs: Vec<Vec<(f64, f64)>> = vec![Vec::new()];
                     for &(x, y) in &s.points {
@@ -300,7 +330,7 @@ impl Chart {
                     }
                     let mut last = None;
                     for run in runs.into_iter().filter(|r| !r.is_empty()) {
-                        last = Some(if s.mark == Mark::Line {
+                        last = Some(if s.mark != Mark::Dashed {
                             chart
                                 .draw_series(LineSeries::new(run, style))
                                 .map_err(|e| e.to_string())?

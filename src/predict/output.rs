@@ -10,14 +10,10 @@ use std::path::{Path, PathBuf};
 use serde_json::json;
 
 use super::{Prediction, DRIVE_LOST_DEG};
-use crate::plot::{Chart, PlotError, Series};
+use crate::plot::{Chart, PlotError, Series, LEGEND_HEADROOM};
 
 /// The `format` of `prediction.json`.
 pub const PREDICTION_FORMAT: &str = "mpcmech-prediction/1";
-
-/// The y axis of a chart reaches this multiple of the data's span, so the legend in the
-/// upper right corner does not hide the largest values.
-const LEGEND_HEADROOM: f64 = 1.45;
 
 /// Error writing a prediction.
 #[derive(Debug, thiserror::Error)]

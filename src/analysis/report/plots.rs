@@ -42,8 +42,11 @@ fn unit_label(unit: &str) -> &str {
     }
 }
 
-/// Follower DOF over one driver revolution: measured (sensor offset removed, folded into one
-/// cycle) against the target law.
+/// Follower DOF over one driver revolution: measured (the fitted driver and sensor offsets
+/// removed, as for the error; folded into one cycle) on the target law, which is drawn as a
+/// broad pale band under the points so neither hides the other (issue 20: the measured
+/// curve was hidden under the target, or shifted off it by an offset the error does not
+/// count).
 pub fn follower_chart(
     dir: &Path,
     run: &MeasuredRun,
@@ -68,8 +71,9 @@ pub fn follower_chart(
         .find(|d| d.dof == dof)
         .map_or(0.0, |d| d.total_offset());
     let adv = table.advance();
+    let driver_off = a.alignment.driver_offset_deg.value;
     let fold = |i: usize| {
-        let phi = run.driver_deg[i];
+        let phi = run.driver_deg[i] - driver_off;
         let k = (phi / 360.0).floor();
         (phi - 360.0 * k, y[i] - off - k * adv)
     };
@@ -97,6 +101,7 @@ pub fn follower_chart(
         ),
     );
     chart.x_range = Some((0.0, 360.0));
+    chart = chart.with(Series::band("target law", target, 2, 9));
     for (ph, label, color) in [
         (Phase::Forward, "measured, forward", 0),
         (Phase::Reverse, "measured, reverse", 1),
@@ -106,19 +111,21 @@ pub fn follower_chart(
             chart = chart.with(Series::points(label, pts, 2, color));
         }
     }
-    chart = chart.with(Series::dashed("target law", target, 6));
     let stem = dir.join(format!("follower_{}", dof.name()));
     chart.write(&stem)?;
     Ok((
         format!(
-            "Follower {} against the target over one driver revolution (all cycles folded).",
+            "Follower {} on the target (pale band) over one driver revolution, all cycles \
+             folded, the fitted offsets removed.",
             dof.name()
         ),
         stem.with_extension("png"),
     ))
 }
 
-/// Error over the (unwrapped) driver angle for the whole run.
+/// Error over the driver angle within the cycle, every cycle of both directions folded
+/// onto one revolution (issue 20: over the cumulative angle the reverse run retraced the
+/// forward one's x range backwards, and a cycle's features were spread over the run).
 pub fn error_chart(
     dir: &Path,
     run: &MeasuredRun,
@@ -129,19 +136,22 @@ pub fn error_chart(
     let u = unit_label(ch.unit);
     let mut chart = Chart::new(
         format!(
-            "{} error over driver angle — RMS {:.3}{u}, largest {:.3}{u}",
-            ch.name, m.overall.rms, m.overall.max_abs
+            "{} error over the driver angle in the cycle — RMS {}{u}, largest {}{u}",
+            ch.name,
+            super::f3(m.overall.rms),
+            super::f3(m.overall.max_abs)
         ),
-        "driver angle [°]",
+        "driver angle within the cycle [°]",
         format!("error [{}]", ch.unit),
     );
+    chart.x_range = Some((0.0, 360.0));
     for (ph, label, color) in [
         (Phase::Forward, "forward", 0),
         (Phase::Reverse, "reverse", 1),
     ] {
         let pts: Vec<(f64, f64)> = by_phase(run, ph)
             .into_iter()
-            .map(|i| (run.driver_deg[i], ch.values[i]))
+            .map(|i| (run.driver_deg[i].rem_euclid(360.0), ch.values[i]))
             .collect();
         if !pts.is_empty() {
             chart = chart.with(Series::points(label, pts, 2, color));
@@ -155,12 +165,17 @@ pub fn error_chart(
     let stem = dir.join(format!("error_{}", ch.name));
     chart.write(&stem)?;
     Ok((
-        format!("{} error over the driver angle for the whole run.", ch.name),
+        format!(
+            "{} error over the driver angle within the cycle, all cycles folded.",
+            ch.name
+        ),
         stem.with_extension("png"),
     ))
 }
 
-/// Per-cycle overlay of the binned error over one revolution, with the mean per direction.
+/// Per-cycle overlay of the binned error over one revolution, with the mean per direction:
+/// the cycles as pale bands, the means as solid lines on them, and headroom for the legend
+/// (issue 20: the dashed mean covered every cycle, and the legend a peak).
 pub fn cycles_chart(dir: &Path, ch: &ChannelMetrics) -> Result<Picture, AnalysisError> {
     let mut chart = Chart::new(
         format!("{} error per cycle (1° bins), overlaid", ch.name),
@@ -184,26 +199,37 @@ pub fn cycles_chart(dir: &Path, ch: &ChannelMetrics) -> Result<Picture, Analysis
             _ => "",
         };
         let pts = means.iter().enumerate().map(|(b, &v)| (x(b), v)).collect();
-        chart = chart.with(Series::line(label, pts, if forward { 0 } else { 1 }));
+        chart = chart.with(Series::band(label, pts, if forward { 0 } else { 1 }, 5));
     }
-    let mut mean_labelled = false;
-    for prof in [&ch.profile.forward, &ch.profile.reverse] {
+    for (prof, label, color) in [
+        (&ch.profile.forward, "forward mean", 0),
+        (&ch.profile.reverse, "reverse mean", 1),
+    ] {
         if prof.iter().any(|v| v.is_finite()) {
             let pts = prof.iter().enumerate().map(|(b, &v)| (x(b), v)).collect();
-            let label = if mean_labelled {
-                ""
-            } else {
-                "mean per direction"
-            };
-            mean_labelled = true;
-            chart = chart.with(Series::dashed(label, pts, 6));
+            chart = chart.with(Series::line(label, pts, color));
         }
+    }
+    let all = ch
+        .profile
+        .cycles
+        .iter()
+        .flat_map(|c| c.2.iter())
+        .copied()
+        .filter(|v| v.is_finite());
+    let (lo, hi) = all.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
+        (l.min(v), h.max(v))
+    });
+    if lo < hi {
+        let span = hi - lo;
+        chart.y_range = Some((lo - 0.05 * span, lo + crate::plot::LEGEND_HEADROOM * span));
     }
     let stem = dir.join(format!("cycles_{}", ch.name));
     chart.write(&stem)?;
     Ok((
         format!(
-            "{} error of every cycle over one driver revolution; dashed: mean per direction.",
+            "{} error of every cycle over one driver revolution (pale), and the mean per \
+             direction (solid).",
             ch.name
         ),
         stem.with_extension("png"),
