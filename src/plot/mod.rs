@@ -159,6 +159,9 @@ pub struct Chart {
     pub h_lines: Vec<(f64, String)>,
     /// Keep one data unit the same length on both axes (for paths and curves).
     pub equal_aspect: bool,
+    /// The x axis counts whole things (cycles): labels at whole numbers only, without
+    /// decimals (issue 20: ticks at 0.5 cycles).
+    pub whole_x: bool,
     /// Picture size in pixels.
     pub size: (u32, u32),
 }
@@ -179,6 +182,7 @@ impl Chart {
             y_range: None,
             h_lines: Vec::new(),
             equal_aspect: false,
+            whole_x: false,
             size: DEFAULT_SIZE,
         }
     }
@@ -284,15 +288,25 @@ impl Chart {
             .y_label_area_size(70)
             .build_cartesian_2d(xr.0..xr.1, yr.0..yr.1)
             .map_err(|e| e.to_string())?;
-        chart
-            .configure_mesh()
-            .x_desc(self.x_label.as_str())
+        let whole = |x: &f64| {
+            if (x - x.round()).abs() < 1e-9 {
+                format!("{:.0}", x.round())
+            } else {
+                String::new()
+            }
+        };
+        let mut mesh = chart.configure_mesh();
+        mesh.x_desc(self.x_label.as_str())
             .y_desc(self.y_label.as_str())
             .label_style(("sans-serif", 14))
             .axis_desc_style(("sans-serif", 16))
-            .light_line_style(RGBColor(235, 235, 235))
-            .draw()
-            .map_err(|e| e.to_string())?;
+            .light_line_style(RGBColor(235, 235, 235));
+        if self.whole_x {
+            // One label per whole number in the range (plotters then steps by 1).
+            let count = ((xr.1 - xr.0).floor() as usize + 1).clamp(2, 20);
+            mesh.x_labels(count).x_label_formatter(&whole);
+        }
+        mesh.draw().map_err(|e| e.to_string())?;
         let mut any_label = false;
         for (y, label) in &self.h_lines {
             let style = ShapeStyle::from(&RGBColor(200, 30, 30)).stroke_width(1);

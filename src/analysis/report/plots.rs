@@ -335,6 +335,7 @@ pub fn timing_chart(
             (a.min(c.cycle as f64), b.max(c.cycle as f64))
         });
     chart.x_range = Some((lo - 0.5, hi + 0.5));
+    chart.whole_x = true;
     let stem = dir.join("timing");
     chart.write(&stem)?;
     Ok((
