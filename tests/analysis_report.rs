@@ -77,10 +77,21 @@ fn writes_all_files_and_judges_tolerances() {
     assert!(json["errors"][0]["overall"]["rms_deg"].is_number());
     assert!(json["lag"]["backlash_driver_deg"].as_f64().unwrap() > 1.5);
     let html = std::fs::read_to_string(dir.path().join("report.html")).unwrap();
+    // Every picture embedded: dense scatters as PNG, the rest as inline SVG (smaller,
+    // zoomable), and none linked.
     assert!(html.contains("data:image/png;base64,"));
+    assert!(html.contains("<figure role=\"img\" aria-label=\"") && html.contains("<svg "));
     assert!(
-        !html.contains("src=\"follower"),
+        !html.contains("src=\"follower") && !html.contains(".svg\""),
         "HTML must not link external images"
+    );
+    assert!(
+        html.contains("device counters</td><td>"),
+        "counters as words, not JSON: {html}"
+    );
+    assert!(
+        !html.contains("{&quot;") && !html.contains("{\"crc"),
+        "raw JSON in the HTML"
     );
     let md = std::fs::read_to_string(dir.path().join("report.md")).unwrap();
     assert!(md.contains("PASS") && md.contains("![") && md.contains("follower_rz.png"));

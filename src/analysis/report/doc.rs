@@ -1,6 +1,7 @@
 //! A tiny document model rendered twice: as Markdown (`report.md`) and as a self-contained
-//! HTML page (`report.html`, images embedded as data URIs). Keeping one model guarantees the
-//! two reports say the same thing.
+//! HTML page (`report.html`, each picture embedded: its SVG inline, zoomable, unless the
+//! PNG is the smaller, as for dense scatter charts). Keeping one model guarantees the two
+//! reports say the same thing.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -98,7 +99,7 @@ pub fn html(title: &str, blocks: &[Block]) -> Result<String, AnalysisError> {
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{}</title>\n<style>\
 body{{font-family:sans-serif;max-width:1040px;margin:2em auto;padding:0 1em;color:#222}}\
 table{{border-collapse:collapse;margin:0.5em 0 1.2em}}td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}}\
-th{{background:#f2f2f2}}td:first-child,th:first-child{{text-align:left}}img{{max-width:100%;border:1px solid #ddd}}\
+th{{background:#f2f2f2}}td:first-child,th:first-child{{text-align:left}}img,figure svg{{max-width:100%;height:auto;border:1px solid #ddd}}\
 .v{{padding:0.6em 1em;font-size:1.2em;border-radius:4px}}.pass{{background:#d8f3dc}}.fail{{background:#ffd6d6}}.none{{background:#eef}}\
 figure{{margin:1em 0}}figcaption{{color:#555}}</style></head><body>\n",
         esc(title)
@@ -136,12 +137,25 @@ figure{{margin:1em 0}}figcaption{{color:#555}}</style></head><body>\n",
             }
             Block::Image(cap, path) => {
                 let bytes = std::fs::read(path).map_err(|e| AnalysisError::io(path, e))?;
-                let b64 = base64::engine::general_purpose::STANDARD.encode(bytes);
-                let _ = writeln!(
-                    s,
-                    "<figure><img alt=\"{0}\" src=\"data:image/png;base64,{b64}\"><figcaption>{0}</figcaption></figure>",
-                    esc(cap)
-                );
+                let svg = std::fs::read_to_string(path.with_extension("svg")).ok();
+                // Base64 makes the PNG a third larger on the page.
+                match svg.filter(|t| t.len() * 3 < bytes.len() * 4 && t.starts_with("<svg")) {
+                    Some(svg) => {
+                        let _ = writeln!(
+                            s,
+                            "<figure role=\"img\" aria-label=\"{0}\">{svg}<figcaption>{0}</figcaption></figure>",
+                            esc(cap)
+                        );
+                    }
+                    None => {
+                        let b64 = base64::engine::general_purpose::STANDARD.encode(bytes);
+                        let _ = writeln!(
+                            s,
+                            "<figure><img alt=\"{0}\" src=\"data:image/png;base64,{b64}\"><figcaption>{0}</figcaption></figure>",
+                            esc(cap)
+                        );
+                    }
+                }
             }
         }
     }

@@ -408,6 +408,19 @@ pub fn behind(src: &SourceInfo) -> String {
     out
 }
 
+/// The recording's counters as words ("crc errors 0, gaps 2, …") rather than raw JSON
+/// (issue 20).
+fn counters_text(counts: &serde_json::Value) -> String {
+    match counts.as_object() {
+        Some(map) => map
+            .iter()
+            .map(|(k, v)| format!("{} {v}", k.replace('_', " ")))
+            .collect::<Vec<_>>()
+            .join(", "),
+        None => counts.to_string(),
+    }
+}
+
 /// The follower-side dead band after the driver-side backlash, when it was fitted.
 pub fn follower_play(h: &Headline) -> String {
     h.backlash_follower_deg.map_or(String::new(), |f| {
@@ -850,7 +863,7 @@ fn blocks(s: &Summary, a: &Analysis, pictures: &[plots::Picture]) -> Vec<Block> 
                     "no".into()
                 },
             ],
-            vec!["device counters".into(), src.device_counts.to_string()],
+            vec!["device counters".into(), counters_text(&src.device_counts)],
             vec![
                 "target".into(),
                 format!("{} {}", src.target_kind, src.target_path.display()),
