@@ -23,6 +23,9 @@ pub const DEFAULT_SIZE: (u32, u32) = (1000, 600);
 /// peak: 1.45.
 pub const LEGEND_HEADROOM: f64 = 1.45;
 
+/// Opacity of a [`Chart::zones`] shading: 0.15, a tint under the data.
+pub const ZONE_OPACITY: f64 = 0.15;
+
 /// Opacity of a [`Mark::Band`]: 0.35, pale enough that points of any palette colour
 /// drawn on it stand out, dark enough to read as the reference where none are.
 pub const BAND_OPACITY: f64 = 0.35;
@@ -157,6 +160,9 @@ pub struct Chart {
     pub y_range: Option<(f64, f64)>,
     /// Horizontal reference lines (y value, legend label).
     pub h_lines: Vec<(f64, String)>,
+    /// Shaded horizontal zones drawn under everything: (from y, to y, palette colour,
+    /// legend label), e.g. where a figure is good and where it is bad.
+    pub zones: Vec<(f64, f64, usize, String)>,
     /// Keep one data unit the same length on both axes (for paths and curves).
     pub equal_aspect: bool,
     /// The x axis counts whole things (cycles): labels at whole numbers only, without
@@ -181,6 +187,7 @@ impl Chart {
             x_range: None,
             y_range: None,
             h_lines: Vec::new(),
+            zones: Vec::new(),
             equal_aspect: false,
             whole_x: false,
             size: DEFAULT_SIZE,
@@ -308,6 +315,21 @@ impl Chart {
         }
         mesh.draw().map_err(|e| e.to_string())?;
         let mut any_label = false;
+        for (y0, y1, c, label) in &self.zones {
+            let fill = color(*c).mix(ZONE_OPACITY).filled();
+            let series = chart
+                .draw_series(std::iter::once(Rectangle::new(
+                    [(xr.0, y0.max(yr.0)), (xr.1, y1.min(yr.1))],
+                    fill,
+                )))
+                .map_err(|e| e.to_string())?;
+            if !label.is_empty() {
+                any_label = true;
+                series
+                    .label(label.as_str())
+                    .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 20, y + 5)], fill));
+            }
+        }
         for (y, label) in &self.h_lines {
             let style = ShapeStyle::from(&RGBColor(200, 30, 30)).stroke_width(1);
             let series = chart

@@ -61,8 +61,16 @@ pub fn write_report(m: &Mechanism, dir: &Path) -> Result<Vec<PathBuf>, ReportErr
             1,
         ));
     }
-    dist.h_lines.push((-EPSILON, "−ε".into()));
-    dist.h_lines.push((0.0, "0".into()));
+    // Issue 20: the −ε and 0 lines were two identical red dashes; the zones say which
+    // side is which.
+    dist.zones.push((
+        -1.1,
+        -EPSILON,
+        2,
+        format!("closure with margin (≤ −ε = −{EPSILON})"),
+    ));
+    dist.zones
+        .push((0.0, DIST_PLOT_CLIP + 0.05, 1, "closure lost (> 0)".into()));
     dist.y_range = Some((-1.1, DIST_PLOT_CLIP + 0.05));
     out.extend(dist.write(&dir.join("dist"))?);
 
@@ -144,6 +152,34 @@ pub fn write_report(m: &Mechanism, dir: &Path) -> Result<Vec<PathBuf>, ReportErr
             format!("{d:.3}")
         }
     );
+    if m.class == Class::R1 {
+        // A 1R normal projects to one number, the sense it can turn the follower (issue
+        // 20: drawn on a plane with an "(unused)" axis): each contact's torque arm as a
+        // bar, closure needing both senses.
+        let sg = closure::GAMMA0_DEG.to_radians().sin();
+        let mut c = Chart::new(
+            format!("{title}: torque arm per contact"),
+            "curve pair",
+            "torque arm per unit radius",
+        );
+        let arms: Vec<(f64, f64)> = m
+            .curve_pairs
+            .iter()
+            .enumerate()
+            .map(|(k, cp)| {
+                let arm = closure::torque_arm(cp.samples.p[worst], cp.samples.n[worst]);
+                (k as f64, arm)
+            })
+            .collect();
+        c.series.push(Series::bars("", arms, 0));
+        c.h_lines.push((sg, "±sin 10° (robust)".into()));
+        c.h_lines.push((-sg, String::new()));
+        c.y_range = Some((-1.05, 1.05 * crate::plot::LEGEND_HEADROOM));
+        c.x_range = Some((-0.5, m.curve_pairs.len() as f64 - 0.5));
+        c.whole_x = true;
+        out.extend(c.write(&dir.join("normals-worst"))?);
+        return Ok(out);
+    }
     let views: Vec<(usize, usize, &str)> = match m.class {
         Class::R1 | Class::R1T1 => vec![(0, 1, "")],
         Class::R3 => vec![(0, 1, "-xy"), (0, 2, "-xz")],
@@ -157,7 +193,7 @@ pub fn write_report(m: &Mechanism, dir: &Path) -> Result<Vec<PathBuf>, ReportErr
                 Class::R3 => "ñ component",
             },
             match m.class {
-                Class::R1 => "(unused)",
+                Class::R1 => "",
                 Class::R1T1 => "ñ₂ ((p×n)·z, normalized)",
                 Class::R3 => "ñ component",
             },
