@@ -82,23 +82,32 @@ pub fn charts(motion: &Motion, n: usize) -> Vec<(String, Chart)> {
                 ));
                 c.x_range = xr;
                 out.push(("height".to_string(), c));
+                // One chart per unit (issue 20: velocity and acceleration shared an axis,
+                // so the acceleration's larger numbers flattened the velocity).
                 let mut c = Chart::new(
-                    format!("{name}: vertical velocity and acceleration"),
+                    format!("{name}: vertical velocity"),
                     t_label,
-                    "dh/dt [units/period], d²h/dt² [units/period²]",
+                    "dh/dt [model units/period]",
                 )
                 .with(Series::line(
                     "dh/dt",
                     samples.iter().map(|s| (s.t, s.velocity.z)).collect(),
                     0,
-                ))
+                ));
+                c.x_range = xr;
+                out.push(("height-velocity".to_string(), c));
+                let mut c = Chart::new(
+                    format!("{name}: vertical acceleration"),
+                    t_label,
+                    "d²h/dt² [model units/period²]",
+                )
                 .with(Series::line(
                     "d²h/dt²",
                     samples.iter().map(|s| (s.t, s.acceleration.z)).collect(),
                     1,
                 ));
                 c.x_range = xr;
-                out.push(("height-rates".to_string(), c));
+                out.push(("height-acceleration".to_string(), c));
             }
         }
         MotionClass::R3 => {

@@ -173,6 +173,26 @@ pub fn error_chart(
     ))
 }
 
+/// Longest run of empty bins a cycle's line is drawn across: 4 (4° at 1° bins). A 100 Hz
+/// IMU at 30 rpm fills every other 1° bin, and its line must not break at each (issue 20:
+/// the 3R chart looked broken); a longer hole is data missing, and shows as a break.
+const BRIDGED_EMPTY_BINS: usize = 4;
+
+/// Binned values as line points: empty bins skipped, a break (NaN) across a run of more
+/// than [`BRIDGED_EMPTY_BINS`].
+fn bridged(values: &[f64], x: impl Fn(usize) -> f64) -> Vec<(f64, f64)> {
+    let mut pts = Vec::with_capacity(values.len());
+    let mut last: Option<usize> = None;
+    for (b, &v) in values.iter().enumerate().filter(|(_, v)| v.is_finite()) {
+        if last.is_some_and(|l| b - l > BRIDGED_EMPTY_BINS + 1) {
+            pts.push((f64::NAN, f64::NAN));
+        }
+        pts.push((x(b), v));
+        last = Some(b);
+    }
+    pts
+}
+
 /// Per-cycle overlay of the binned error over one revolution, with the mean per direction:
 /// the cycles as pale bands, the means as solid lines on them, and headroom for the legend
 /// (issue 20: the dashed mean covered every cycle, and the legend a peak).
@@ -198,7 +218,7 @@ pub fn cycles_chart(dir: &Path, ch: &ChannelMetrics) -> Result<Picture, Analysis
             }
             _ => "",
         };
-        let pts = means.iter().enumerate().map(|(b, &v)| (x(b), v)).collect();
+        let pts = bridged(means, x);
         chart = chart.with(Series::band(label, pts, if forward { 0 } else { 1 }, 5));
     }
     for (prof, label, color) in [
@@ -206,7 +226,7 @@ pub fn cycles_chart(dir: &Path, ch: &ChannelMetrics) -> Result<Picture, Analysis
         (&ch.profile.reverse, "reverse mean", 1),
     ] {
         if prof.iter().any(|v| v.is_finite()) {
-            let pts = prof.iter().enumerate().map(|(b, &v)| (x(b), v)).collect();
+            let pts = bridged(prof, x);
             chart = chart.with(Series::line(label, pts, color));
         }
     }
@@ -490,4 +510,23 @@ pub fn axis_over_driver_chart(
         "End-effector axis tilt over one driver revolution (all cycles folded): measured against target.".into(),
         stem.with_extension("png"),
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Guards the per-cycle lines: a sparse sensor's every-other empty bin is drawn
+    /// across, a hole longer than [`BRIDGED_EMPTY_BINS`] bins breaks the line.
+    #[test]
+    fn empty_bins_are_bridged_up_to_a_limit() {
+        let n = f64::NAN;
+        let v = [1.0, n, 2.0, n, n, n, n, 3.0, n, n, n, n, n, 4.0];
+        let pts = bridged(&v, |b| b as f64);
+        assert_eq!(pts.len(), 5, "{pts:?}");
+        // One empty bin and a 4-bin hole are drawn across.
+        assert_eq!(pts[..3], [(0.0, 1.0), (2.0, 2.0), (7.0, 3.0)]);
+        assert!(pts[3].0.is_nan(), "a 5-bin hole breaks the line: {pts:?}");
+        assert_eq!(pts[4], (13.0, 4.0));
+    }
 }
