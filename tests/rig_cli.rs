@@ -33,6 +33,11 @@ fn start_sim(faults: &[&str]) -> SimChild {
 }
 
 fn measure(sim: &SimChild, out: &Path) -> std::process::Output {
+    measure_with(sim, out, &["--cycles", "3", "--no-analysis"])
+}
+
+/// `measure` at 90 rpm on the simulator towards half-turn-2to1 into `out`, with `args`.
+fn measure_with(sim: &SimChild, out: &Path, args: &[&str]) -> std::process::Output {
     Command::new(bin())
         .arg("measure")
         .arg("--rig")
@@ -40,8 +45,11 @@ fn measure(sim: &SimChild, out: &Path) -> std::process::Output {
         .args(["--port", &sim.first_line])
         .arg("--motion")
         .arg(root().join("data/motions/half-turn-2to1.toml"))
-        .args(["--speed", "90", "--cycles", "3", "--no-analysis", "-o"])
+        .args(["--speed", "90"])
+        .args(args)
+        .arg("-o")
         .arg(out)
+        .stdin(Stdio::null())
         .output()
         .unwrap()
 }
@@ -164,27 +172,7 @@ fn measure_json_is_one_object_with_the_outcome_and_the_summary() {
     let dir = tempfile::tempdir().unwrap();
     for (tol, code) in [("5", 0), ("0.000001", 3)] {
         let rec = dir.path().join(format!("rec-{code}"));
-        let out = Command::new(bin())
-            .arg("measure")
-            .arg("--rig")
-            .arg(root().join("rigs/sim-stepper.toml"))
-            .args(["--port", &sim.first_line])
-            .arg("--motion")
-            .arg(root().join("data/motions/half-turn-2to1.toml"))
-            .args([
-                "--speed",
-                "90",
-                "--cycles",
-                "1",
-                "--json",
-                "--tol-deg",
-                tol,
-                "-o",
-            ])
-            .arg(&rec)
-            .stdin(Stdio::null())
-            .output()
-            .unwrap();
+        let out = measure_with(&sim, &rec, &["--cycles", "1", "--json", "--tol-deg", tol]);
         let stdout = String::from_utf8_lossy(&out.stdout);
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(code), "{stdout}{stderr}");
