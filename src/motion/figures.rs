@@ -341,7 +341,8 @@ mod tests {
             (
                 "class = \"1R1T\"\n[[key]]\nt = 0.0\nangle = 0.0\nheight = 0.0\n\
                  [[key]]\nt = 0.5\nangle = 30.0\nheight = 1.0\n",
-                5,
+                // angle, its two rates, height, its velocity and its acceleration.
+                6,
             ),
             (
                 "class = \"3R\"\n[[key]]\nt = 0.0\nazimuth = 0\nelevation = 80\n\
