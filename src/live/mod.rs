@@ -82,10 +82,11 @@ impl LiveServer {
         };
         let with_port = if addr.parse::<SocketAddr>().is_ok() || has_port(addr) {
             addr.to_string()
-        } else if addr.contains(':') {
+        } else if addr.contains(':') && !addr.starts_with('[') {
             // A bare IPv6 address.
             format!("[{addr}]:0")
         } else {
+            // A name, an IPv4 address or a bracketed IPv6 address.
             format!("{addr}:0")
         };
         let resolved = with_port
@@ -450,6 +451,7 @@ mod tests {
         assert!(has_port("localhost:80"));
         assert!(has_port("[::1]:80"));
         assert!(!has_port("::1"));
+        assert!(!has_port("[::1]"));
         assert!(!has_port("127.0.0.1"));
         let feed = LiveFeed::new(Arc::new(AtomicBool::new(false)));
         let e = LiveServer::start("127.0.0.1:notaport", feed.clone())
@@ -464,6 +466,12 @@ mod tests {
             e.ends_with("give HOST or HOST:PORT, e.g. 127.0.0.1:8080"),
             "{e}"
         );
+        // A bracketed IPv6 address without a port is an address (binding it may still
+        // fail where the machine has no IPv6).
+        match LiveServer::start("[::1]", feed.clone()) {
+            Ok(s) => assert!(s.is_loopback()),
+            Err(e) => assert!(matches!(e, LiveError::Bind { .. }), "{e}"),
+        }
         let taken = LiveServer::start("127.0.0.1", feed.clone()).unwrap();
         let e = LiveServer::start(&taken.addr().to_string(), feed)
             .err()
