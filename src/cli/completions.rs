@@ -8,11 +8,8 @@ use clap_complete::Shell;
 
 use super::Cli;
 
-/// Print a shell completion script on standard output.
-///
-/// Bash: `mpc-rig completions bash > ~/.local/share/bash-completion/completions/mpc-rig`.
-/// Zsh: `mpc-rig completions zsh > ~/.zfunc/_mpc-rig` (with `fpath+=~/.zfunc` before
-/// `compinit`). Fish: `mpc-rig completions fish > ~/.config/fish/completions/mpc-rig.fish`.
+/// Arguments of `mpc-rig completions` (where each shell's script goes is in its help, on
+/// the subcommand in `cli`).
 #[derive(Debug, Args)]
 pub struct CompletionsArgs {
     /// The shell.
@@ -54,6 +51,25 @@ mod tests {
             assert!(s.contains("live"), "{shell}: no --live");
         }
         assert!(script(Shell::Bash).contains("complete -F _mpc__rig "));
+    }
+
+    /// Guards the help the README points to: `completions --help` says where each
+    /// shell's script goes.
+    #[test]
+    fn the_help_says_where_each_script_goes() {
+        let mut cli = Cli::command();
+        let help = cli
+            .find_subcommand_mut("completions")
+            .unwrap()
+            .render_long_help()
+            .to_string();
+        for place in [
+            "~/.local/share/bash-completion/completions/mpc-rig",
+            "~/.zfunc/_mpc-rig",
+            "~/.config/fish/completions/mpc-rig.fish",
+        ] {
+            assert!(help.contains(place), "{help}");
+        }
     }
 
     /// Guards the bash script in bash itself: sourced, it completes `mpc-rig meas` to

@@ -96,6 +96,11 @@ pub enum Command {
     /// Print a captured byte stream of the bench link frame by frame, to debug a link.
     WireDump(wire_dump::WireDumpArgs),
     /// Print a shell completion script (bash, zsh, fish, elvish, powershell).
+    ///
+    /// Where to put it — bash: `mpc-rig completions bash >
+    /// ~/.local/share/bash-completion/completions/mpc-rig`; zsh: `mpc-rig completions zsh >
+    /// ~/.zfunc/_mpc-rig` (with `fpath+=~/.zfunc` before `compinit` in ~/.zshrc); fish:
+    /// `mpc-rig completions fish > ~/.config/fish/completions/mpc-rig.fish`.
     Completions(completions::CompletionsArgs),
 }
 
