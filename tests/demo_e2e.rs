@@ -50,6 +50,20 @@ fn demo_end_to_end_with_cache_and_backlash() {
     let r = s["headline"]["timing_ratio_measured"].as_f64().unwrap();
     assert!((r - 2.0).abs() < 0.05, "ratio {r}");
     assert!(s["headline"]["rms_error_deg"].as_f64().unwrap() < 2.0);
+    // The synthesis charts beside the mechanism, as `synth` writes them.
+    let mechanism = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("mechanism:"))
+        .map(|p| PathBuf::from(p.trim()))
+        .expect("mechanism path printed");
+    let charts = mechanism.parent().unwrap().join("report");
+    for chart in ["dist.png", "torque-arm.svg", "normals-worst.png"] {
+        assert!(
+            charts.join(chart).exists(),
+            "no {chart} in {}",
+            charts.display()
+        );
+    }
 
     let (out, stdout) = demo(tmp.path(), &["--fault", "backlash=2"]);
     assert!(
@@ -61,4 +75,35 @@ fn demo_end_to_end_with_cache_and_backlash() {
     let s = summary_of(&stdout);
     let b = s["headline"]["backlash_driver_deg"].as_f64().unwrap();
     assert!((b - 2.0).abs() < 0.5, "backlash {b}");
+}
+
+/// Guards the demo's argument checks (issue 20: `demo --cycles 0` or `--speed 500` ran the
+/// synthesis before refusing): a plan the bench would refuse is refused before step 1, and
+/// nothing is written.
+#[test]
+fn a_plan_the_bench_refuses_is_refused_before_the_synthesis() {
+    let tmp = tempfile::tempdir().unwrap();
+    for (args, why) in [
+        (
+            ["--cycles", "0"],
+            "refused: at least one measured cycle is needed",
+        ),
+        (
+            ["--speed", "500"],
+            "refused: 500 rpm exceeds safety.max_speed_rpm = 120 of rig `sim-stepper`",
+        ),
+    ] {
+        let out = assert_cmd::Command::cargo_bin("mpc-rig")
+            .unwrap()
+            .args(["demo", "-o"])
+            .arg(tmp.path())
+            .args(args)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{stderr}");
+        assert!(stderr.contains(&format!("caused by: {why}")), "{stderr}");
+        assert!(!stderr.contains("[1/4]"), "refused after work: {stderr}");
+        assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 0);
+    }
 }

@@ -25,7 +25,7 @@ use crate::rig::config::RigConfig;
 use crate::rig::recording::{utc_dir_stamp, Phase};
 use crate::rig::session::{self, MeasureOptions, Progress, TargetSpec};
 use crate::rig::sim::plant::PlantConfig;
-use crate::synth::{Mechanism, Outcome, SynthOptions, SynthProgress};
+use crate::synth::{Mechanism, Outcome, SynthOptions};
 
 /// Which simulated bench the demo measures on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -171,15 +171,6 @@ fn cache_key(motion_bytes: &[u8], o: &SynthOptions) -> String {
         .collect()
 }
 
-/// Synthesis progress on stderr: attempts and GA generations.
-struct StderrProgress;
-
-impl SynthProgress for StderrProgress {
-    fn attempt_started(&self, k: usize, dx: f64, new_candidates: usize) {
-        eprintln!("      trying K = {k}, d_x = {dx}: {new_candidates} candidates to solve");
-    }
-}
-
 /// Synthesize or reuse the cached mechanism; returns its path and whether it was cached.
 fn mechanism_for(
     args: &DemoArgs,
@@ -202,18 +193,30 @@ fn mechanism_for(
         }
     }
     let t0 = Instant::now();
-    let mech = match crate::synth::synthesize(motion, &o, &StderrProgress)
-        .with_context(|| format!("synthesizing a mechanism for {}", motion.name()))?
-    {
-        Outcome::Accepted(m) => m,
-        Outcome::Infeasible { reason, .. } => {
-            bail!("no mechanism for {} was accepted: {reason}", motion.name())
-        }
-        Outcome::Cancelled { .. } => bail!("synthesis cancelled"),
-    };
+    // The progress bar `synth` shows (issue 20: a static line through a 105 s synthesis).
+    let progress = super::synth::Bar::new();
+    let result = crate::synth::synthesize(motion, &o, &progress);
+    progress.finish();
+    let mech =
+        match result.with_context(|| format!("synthesizing a mechanism for {}", motion.name()))? {
+            Outcome::Accepted(m) => m,
+            Outcome::Infeasible { reason, .. } => {
+                bail!("no mechanism for {} was accepted: {reason}", motion.name())
+            }
+            Outcome::Cancelled { .. } => bail!("synthesis cancelled"),
+        };
     mech.save(&file)
         .with_context(|| format!("saving {}", file.display()))?;
     eprintln!("      synthesized in {:.1} s", t0.elapsed().as_secs_f64());
+    // The synthesis charts `synth` writes (issue 20: the demo wrote none).
+    let report = dir.join("report");
+    let charts = crate::synth::report::write_report(&mech, &report)
+        .with_context(|| format!("writing the synthesis charts in {}", report.display()))?;
+    eprintln!(
+        "      synthesis charts ({} files): {}",
+        charts.len(),
+        report.display()
+    );
     Ok((file, false))
 }
 
@@ -238,6 +241,17 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
     let plant = super::sim_device::plant_from(&args.faults)?;
     let rig_path = shipped(rig_for(args.bench, motion.class()));
     let rig = RigConfig::load(&rig_path)?;
+    // Refuse a plan the bench would refuse before minutes of synthesis (issue 20).
+    session::check_run(
+        &rig,
+        &session::RunPlan {
+            speed_rpm: args.speed,
+            cycles: args.cycles,
+            settle_cycles: session::DEFAULT_SETTLE_CYCLES,
+            reverse: !args.no_reverse,
+        },
+    )
+    .with_context(|| format!("the demo's run on rig {}", rig_path.display()))?;
 
     eprintln!("[1/4] mechanism for {} ({})", motion.name(), motion.class());
     let (mech_path, cached) = mechanism_for(&args, &motion_path, &motion)?;

@@ -111,8 +111,27 @@ impl From<ConeArg> for synth::closure::NormalCone {
     }
 }
 
-struct Bar {
+/// The synthesis progress bar on standard error (hidden when it is not a terminal, the
+/// attempts' lines printed instead), shared with `demo`.
+pub(crate) struct Bar {
     bar: ProgressBar,
+}
+
+impl Bar {
+    /// A bar with the synthesis' style.
+    pub(crate) fn new() -> Bar {
+        let bar = ProgressBar::new(0);
+        bar.set_style(
+            ProgressStyle::with_template("{spinner} {msg} [{bar:30}] {pos}/{len} {elapsed}")
+                .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        );
+        Bar { bar }
+    }
+
+    /// Remove the bar when the synthesis is over.
+    pub(crate) fn finish(&self) {
+        self.bar.finish_and_clear();
+    }
 }
 
 impl SynthProgress for Bar {
@@ -302,14 +321,9 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
         printed_rim: args.printed_rim,
         ..SynthOptions::default()
     };
-    let bar = ProgressBar::new(0);
-    bar.set_style(
-        ProgressStyle::with_template("{spinner} {msg} [{bar:30}] {pos}/{len} {elapsed}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
-    let progress = Bar { bar };
+    let progress = Bar::new();
     let result = synth::synthesize(&motion, &opts, &progress);
-    progress.bar.finish_and_clear();
+    progress.finish();
     let outcome = result?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     match outcome {

@@ -249,6 +249,33 @@ fn claim_folder(opts: &MeasureOptions) -> Result<Claim, RigError> {
 
 /// Refuse plans that break the rig's limits before touching the hardware.
 pub fn check_plan(rig: &RigConfig, opts: &MeasureOptions) -> Result<(), RigError> {
+    check_run(
+        rig,
+        &RunPlan {
+            speed_rpm: opts.speed_rpm,
+            cycles: opts.cycles,
+            settle_cycles: opts.settle_cycles,
+            reverse: opts.reverse,
+        },
+    )
+}
+
+/// What [`check_run`] judges: the run's speed and extent.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RunPlan {
+    /// Driver speed, rpm.
+    pub speed_rpm: f64,
+    /// Measured cycles per direction.
+    pub cycles: u32,
+    /// Settle cycles before the measured ones.
+    pub settle_cycles: u32,
+    /// Also run in reverse.
+    pub reverse: bool,
+}
+
+/// [`check_plan`] before there are session options (`demo` asks it before its synthesis,
+/// so a bad `--cycles` or `--speed` is refused at once, not after minutes of work).
+pub fn check_run(rig: &RigConfig, opts: &RunPlan) -> Result<(), RigError> {
     if !(opts.speed_rpm.is_finite() && opts.speed_rpm > 0.0) {
         return Err(RigError::Safety(format!(
             "speed must be a positive number of rpm, got {}",
