@@ -181,6 +181,7 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
             if tty {
                 eprint!("\r{}   ", progress_line(p));
                 let _ = std::io::stderr().flush();
+                crate::cli::status_line_shown();
             } else if last_line.elapsed().as_secs_f64() >= 2.0 {
                 eprintln!("{}", progress_line(p));
                 last_line = std::time::Instant::now();
@@ -202,6 +203,7 @@ pub fn run(args: MeasureArgs) -> anyhow::Result<ExitCode> {
         outcome.with_context(|| format!("measurement with rig {}", rig_path.display()))?;
     if tty {
         eprintln!();
+        crate::cli::status_line_ended();
     }
     let c = outcome.meta.counts;
     if !args.json {
@@ -355,9 +357,11 @@ fn detect_rig(
 /// The live status line: in the settle phase how far the settle has come (of the settle
 /// revolutions), in a measured phase how far the cycles have (of the cycles).
 pub(crate) fn progress_line(p: &Progress) -> String {
-    let err = p
-        .error_deg
-        .map_or(String::new(), |e| format!("  error {e:+.2}°"));
+    // Rounded first, and +0.0 added, so that a small negative error reads "+0.00", not
+    // "-0.00".
+    let err = p.error_deg.map_or(String::new(), |e| {
+        format!("  error {:+.2}°", (e * 100.0).round() / 100.0 + 0.0)
+    });
     let (what, of) = if p.phase == Phase::Settle {
         ("settle", p.settle_cycles)
     } else {
@@ -406,5 +410,15 @@ mod tests {
             progress_line(&progress(Phase::Forward, 3.0)),
             "[forward] cycle 3.00/3  1500 samples  1000 Hz  gaps 0  error +0.01°  1.5 s"
         );
+        // No negative zero (issue 20): a small negative error reads +0.00.
+        let mut small = progress(Phase::Forward, 1.0);
+        small.error_deg = Some(-0.004);
+        assert!(
+            progress_line(&small).contains("  error +0.00°  "),
+            "{}",
+            progress_line(&small)
+        );
+        small.error_deg = Some(-0.006);
+        assert!(progress_line(&small).contains("  error -0.01°  "));
     }
 }

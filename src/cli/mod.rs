@@ -131,13 +131,55 @@ pub fn init_logging(verbose: u8, quiet: bool) {
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
-        .with_writer(std::io::stderr)
+        .with_writer(|| LogWriter)
         .with_ansi(colour_on(
             std::io::stderr().is_terminal(),
             std::env::var_os("NO_COLOR").as_deref(),
         ))
         .with_target(false)
         .try_init();
+}
+
+/// Set while a live status line, ended by `\r` and no newline, is the last thing on
+/// standard error (`measure` on a terminal).
+static STATUS_LINE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// A status line was just printed with `\r` and no newline: the next log line starts on
+/// a line of its own.
+pub(crate) fn status_line_shown() {
+    STATUS_LINE.store(true, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// The status line was ended by a newline.
+pub(crate) fn status_line_ended() {
+    STATUS_LINE.store(false, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// Where log lines go: standard error, after a newline when a status line is showing
+/// (issue 20: timestamped WARN lines were glued onto the live status line).
+struct LogWriter;
+
+impl std::io::Write for LogWriter {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        write_log(&mut std::io::stderr().lock(), &STATUS_LINE, buf)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        std::io::stderr().flush()
+    }
+}
+
+/// Write `buf` to `out`, ending a showing status line first (`status` says whether one
+/// shows; it is cleared).
+fn write_log(
+    out: &mut impl std::io::Write,
+    status: &std::sync::atomic::AtomicBool,
+    buf: &[u8],
+) -> std::io::Result<usize> {
+    if status.swap(false, std::sync::atomic::Ordering::Relaxed) {
+        out.write_all(b"\n")?;
+    }
+    out.write(buf)
 }
 
 /// Whether to colour a stream: only a terminal, and only without `NO_COLOR` set to
@@ -185,8 +227,20 @@ pub struct ExitStatusError {
 #[cfg(test)]
 mod colour_tests {
     use std::ffi::OsStr;
+    use std::sync::atomic::AtomicBool;
 
-    use super::colour_on;
+    use super::{colour_on, write_log};
+
+    /// Guards log lines on their own line: with a status line showing, a log line starts
+    /// after a newline, once; without one, it is written as is.
+    #[test]
+    fn a_log_line_does_not_glue_onto_the_status_line() {
+        let status = AtomicBool::new(true);
+        let mut out = Vec::new();
+        write_log(&mut out, &status, b"WARN one\n").unwrap();
+        write_log(&mut out, &status, b"WARN two\n").unwrap();
+        assert_eq!(String::from_utf8(out).unwrap(), "\nWARN one\nWARN two\n");
+    }
 
     /// Guards colour only on a terminal: never into a pipe or file, never with `NO_COLOR`
     /// set to a value, and an empty `NO_COLOR` counts as unset (no-color.org).
