@@ -17,6 +17,7 @@ use mpc_wire::{Decoder, DeviceInfo, Report, SensorSet};
 
 use crate::motion::MotionClass;
 use crate::rig::backend::dynamixel::{echo, models, worker::DxlBus};
+use crate::rig::backend::stepper::convert::SensorMap;
 use crate::rig::backend::stepper::link;
 use crate::rig::config::{DriverConfig, RigConfig, SensorConfig};
 use crate::rig::RigError;
@@ -211,17 +212,6 @@ pub fn shipped_path(name: &str) -> PathBuf {
     PathBuf::from(format!("rigs/{name}.toml"))
 }
 
-/// The firmware sensors a rig reads.
-fn firmware_sensors(rig: &RigConfig) -> SensorSet {
-    rig.sensors.iter().fold(SensorSet::EMPTY, |set, s| match s {
-        SensorConfig::As5600(a) if a.channel == 0 => set | SensorSet::ENCODER_A,
-        SensorConfig::As5600(_) => set | SensorSet::ENCODER_B,
-        SensorConfig::Quadrature(_) => set | SensorSet::QUADRATURE,
-        SensorConfig::Imu(_) => set | SensorSet::IMU,
-        SensorConfig::Dynamixel(_) => set,
-    })
-}
-
 /// Whether a shipped Dynamixel rig fits the servos found: its driver's ID answered with
 /// its model and every follower servo's ID answered. Sets the driver's baud to the one
 /// found.
@@ -276,14 +266,12 @@ pub fn default_rig(
             continue;
         };
         let fit = match found {
-            Found::Firmware { info } => {
-                let needs = firmware_sensors(&rig);
-                if info.capabilities.sensors.contains(needs) {
-                    Ok(())
-                } else {
-                    Err(format!("it reads {}", sensor_names(needs)))
-                }
-            }
+            // The sensors the stepper backend would ask the board for.
+            Found::Firmware { info } => match SensorMap::new(&rig) {
+                Ok(map) if info.capabilities.sensors.contains(map.set) => Ok(()),
+                Ok(map) => Err(format!("it reads {}", sensor_names(map.set))),
+                Err(e) => Err(e.to_string()),
+            },
             Found::Dynamixel { baud, servos } => fits_bus(&mut rig, *baud, servos),
         }
         .and_then(|()| match rig.missing_sensors(class) {

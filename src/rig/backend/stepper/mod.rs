@@ -13,7 +13,7 @@
 //! `reverse = false`, and driver angles are `direction · position · 360 / microsteps per
 //! driver turn`.
 
-mod convert;
+pub(crate) mod convert;
 pub mod link;
 
 use std::path::{Path, PathBuf};
