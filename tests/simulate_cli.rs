@@ -4,6 +4,11 @@ use assert_cmd::Command;
 
 const TEST_MECHANISM: &str = "tests/data/mechanism/half-turn-2to1";
 
+/// `simulate` of the test mechanism with the parts in `parts`, writing into `out`.
+fn simulate_args<'a>(parts: &'a str, out: &'a str) -> [&'a str; 6] {
+    ["simulate", TEST_MECHANISM, "--parts", parts, "-o", out]
+}
+
 /// Run `mpc-rig ARGS`, which must exit 1; its (stdout, stderr).
 fn refused(args: &[&str]) -> (String, String) {
     let assert = Command::cargo_bin("mpc-rig")
@@ -25,14 +30,10 @@ fn simulating_without_built_parts_says_to_build_them() {
     let dir = tempfile::tempdir().unwrap();
     let parts = dir.path().join("no-parts");
     let out = dir.path().join("prediction");
-    let (_, stderr) = refused(&[
-        "simulate",
-        TEST_MECHANISM,
-        "--parts",
+    let (_, stderr) = refused(&simulate_args(
         parts.to_str().unwrap(),
-        "-o",
         out.to_str().unwrap(),
-    ]);
+    ));
     assert_eq!(
         stderr,
         format!(
@@ -103,14 +104,10 @@ fn parts_that_never_meet_lose_the_drive_everywhere() {
     let out = dir.path().join("prediction");
     let assert = Command::cargo_bin("mpc-rig")
         .unwrap()
-        .args([
-            "simulate",
-            TEST_MECHANISM,
-            "--parts",
+        .args(simulate_args(
             parts.to_str().unwrap(),
-            "-o",
             out.to_str().unwrap(),
-        ])
+        ))
         .assert()
         .success();
     let stdout = String::from_utf8_lossy(&assert.get_output().stdout).to_string();
