@@ -144,6 +144,29 @@ fn mechanism_file_round_trip() {
     }
 }
 
+/// Guards the scale a mechanism file's figures are read at (`motion check`/`show`): its
+/// `scale_mm`, the default when a file predates the field, and a whole error naming the
+/// file and field for a scale that is not a positive number.
+#[test]
+fn mechanism_scale_is_the_files_own() {
+    use mpc_rig::motion::{mechanism_scale_mm, DEFAULT_SCALE_MM};
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("mechanism.json");
+    let write = |doc: serde_json::Value| std::fs::write(&path, doc.to_string()).unwrap();
+    write(serde_json::json!({"class": "1R", "scale_mm": 12.5}));
+    assert_eq!(mechanism_scale_mm(dir.path()).unwrap(), 12.5);
+    write(serde_json::json!({"class": "1R"}));
+    assert_eq!(mechanism_scale_mm(&path).unwrap(), DEFAULT_SCALE_MM);
+    write(serde_json::json!({"class": "1R", "scale_mm": -3}));
+    assert_eq!(
+        mechanism_scale_mm(&path).unwrap_err().to_string(),
+        format!(
+            "{}: field `scale_mm`: -3 is not a positive number of millimetres per model unit",
+            path.display()
+        )
+    );
+}
+
 /// Guards `from_dense` for 1R: a full-turn law given as rows with wrapped quaternions is
 /// unwrapped into one net turn and sampled continuously across the period boundary.
 #[test]

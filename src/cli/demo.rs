@@ -60,7 +60,7 @@ pub struct DemoArgs {
     #[arg(long, default_value_t = 3)]
     pub cycles: u32,
     /// Driver speed, rpm.
-    #[arg(long, default_value_t = 30.0)]
+    #[arg(long, default_value_t = crate::motion::DEFAULT_BENCH_RPM)]
     pub speed: f64,
     /// Measure forward only (no reverse run, so no backlash figure).
     #[arg(long)]

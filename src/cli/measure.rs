@@ -76,7 +76,7 @@ pub struct MeasureArgs {
     #[arg(long, value_name = "FILE")]
     pub motion: Option<PathBuf>,
     /// Driver speed, rpm.
-    #[arg(long, default_value_t = 30.0)]
+    #[arg(long, default_value_t = crate::motion::DEFAULT_BENCH_RPM)]
     pub speed: f64,
     /// Measured cycles (driver revolutions) per direction.
     #[arg(long, default_value_t = 3)]

@@ -1,12 +1,14 @@
 //! `mpc-rig motion check|show|sample`: validate, plot and sample motion specifications.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{bail, Context};
 use clap::{Args, Subcommand};
 
-use crate::motion::{self, Motion, MotionClass, DEFAULT_SAMPLES};
+use crate::motion::{
+    self, BenchScale, Motion, MotionClass, DEFAULT_BENCH_RPM, DEFAULT_SAMPLES, DEFAULT_SCALE_MM,
+};
 
 /// Work with motion specifications (.toml keyframes, .csv dense samples).
 #[derive(Debug, Args)]
@@ -28,6 +30,9 @@ pub enum MotionCommand {
         /// usage error).
         #[arg(long)]
         strict: bool,
+        /// How lengths and rates are read at the bench.
+        #[command(flatten)]
+        bench: BenchScaleArgs,
     },
     /// Plot a motion (PNG and SVG): angles/heights over t, and for 3R the end-effector
     /// axis path with the keyframes marked.
@@ -46,6 +51,9 @@ pub enum MotionCommand {
         /// Samples per period for the curves.
         #[arg(short = 'n', long, default_value_t = 4 * DEFAULT_SAMPLES)]
         samples: usize,
+        /// How lengths and rates are read at the bench.
+        #[command(flatten)]
+        bench: BenchScaleArgs,
     },
     /// Write the motion sampled at t_i = i/N as CSV (the dense format, readable again).
     Sample {
@@ -63,13 +71,49 @@ pub enum MotionCommand {
     },
 }
 
-/// Load a motion file, or the target law of a mechanism (a .json file or a directory).
-pub fn load(path: &std::path::Path) -> anyhow::Result<Motion> {
-    let is_mechanism = path.is_dir()
+/// How a motion's lengths and rates are read at the bench: millimetres and seconds.
+#[derive(Debug, Args)]
+pub struct BenchScaleArgs {
+    /// Millimetres per model unit for the heights shown (default: a mechanism file's
+    /// `scale_mm`, else 10).
+    #[arg(long, value_name = "MM", value_parser = crate::cli::analyze::positive)]
+    pub scale_mm: Option<f64>,
+    /// Driver speed, rpm, at which rates are shown per second (one period is one driver
+    /// turn).
+    #[arg(
+        long,
+        value_name = "RPM",
+        default_value_t = DEFAULT_BENCH_RPM,
+        value_parser = crate::cli::analyze::positive
+    )]
+    pub speed: f64,
+}
+
+impl BenchScaleArgs {
+    /// The scale for `path`: `--scale-mm`, else a mechanism file's own, else the default.
+    fn scale_for(&self, path: &Path) -> anyhow::Result<BenchScale> {
+        let scale_mm = match self.scale_mm {
+            Some(s) => s,
+            None if is_mechanism(path) => motion::mechanism_scale_mm(path)?,
+            None => DEFAULT_SCALE_MM,
+        };
+        // Both are positive (their parsers) and a file's scale_mm is checked where it is read.
+        BenchScale::new(scale_mm, self.speed)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+    }
+}
+
+/// Whether `path` names a mechanism (a directory or a .json file) rather than a motion file.
+fn is_mechanism(path: &Path) -> bool {
+    path.is_dir()
         || path
             .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("json"));
-    let motion = if is_mechanism {
+            .is_some_and(|e| e.eq_ignore_ascii_case("json"))
+}
+
+/// Load a motion file, or the target law of a mechanism (a .json file or a directory).
+pub fn load(path: &Path) -> anyhow::Result<Motion> {
+    let motion = if is_mechanism(path) {
         Motion::from_mechanism_file(path)
     } else {
         Motion::from_file(path)
@@ -81,15 +125,21 @@ pub fn load(path: &std::path::Path) -> anyhow::Result<Motion> {
 /// Run a `motion` subcommand.
 pub fn run(args: MotionArgs) -> anyhow::Result<ExitCode> {
     match args.command {
-        MotionCommand::Check { files, strict } => check(&files, strict),
+        MotionCommand::Check {
+            files,
+            strict,
+            bench,
+        } => check(&files, strict, &bench),
         MotionCommand::Show {
             file,
             output,
             samples,
+            bench,
         } => {
             let m = load(&file)?;
+            let scale = bench.scale_for(&file)?;
             report_warnings(&m);
-            let written = motion::figures::write_all(&m, &output, samples)?;
+            let written = motion::figures::write_all(&m, &output, samples, &scale)?;
             if !super::quiet() {
                 for p in written {
                     println!("{}", p.display());
@@ -140,12 +190,13 @@ fn report_warnings(m: &Motion) {
 /// so a script could not tell a typo from a warning (issue 20).
 pub const STRICT_WARNINGS_EXIT: u8 = 3;
 
-fn check(files: &[PathBuf], strict: bool) -> anyhow::Result<ExitCode> {
+fn check(files: &[PathBuf], strict: bool, bench: &BenchScaleArgs) -> anyhow::Result<ExitCode> {
     let mut failed = 0;
     let mut warned = 0;
     for path in files {
-        let m = match load(path) {
-            Ok(m) => m,
+        let loaded = load(path).and_then(|m| Ok((bench.scale_for(path)?, m)));
+        let (scale, m) = match loaded {
+            Ok(x) => x,
             Err(e) => {
                 // Report every file; fail at the end.
                 eprintln!("error: {e:#}");
@@ -153,7 +204,7 @@ fn check(files: &[PathBuf], strict: bool) -> anyhow::Result<ExitCode> {
                 continue;
             }
         };
-        println!("{}", summary(&m, path));
+        println!("{}", summary(&m, path, &scale));
         for w in m.warnings() {
             println!("  warning: {w}");
         }
@@ -178,8 +229,9 @@ fn check(files: &[PathBuf], strict: bool) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// One-paragraph description of a loaded motion.
-fn summary(m: &Motion, path: &std::path::Path) -> String {
+/// One-paragraph description of a loaded motion: figures in the files' units (model units,
+/// per period) with their bench reading (mm, per second at `scale`) beside them.
+fn summary(m: &Motion, path: &Path, scale: &BenchScale) -> String {
     let n = motion::WARNING_SCAN_SAMPLES;
     let samples = m.samples(n);
     let max = |f: &dyn Fn(&motion::PoseSample) -> f64| samples.iter().map(f).fold(0.0, f64::max);
@@ -211,7 +263,17 @@ fn summary(m: &Motion, path: &std::path::Path) -> String {
                     .fold((f64::INFINITY, f64::NEG_INFINITY), |r, s| {
                         (r.0.min(s.translation.z), r.1.max(s.translation.z))
                     });
-                out += &format!(", height {lo:.3}..{hi:.3}");
+                let v = samples
+                    .iter()
+                    .map(|s| s.velocity.z.abs())
+                    .fold(0.0, f64::max);
+                out += &format!(
+                    ", height {lo:.3}..{hi:.3} model units ({:.1}..{:.1} mm), \
+                     max |dh/dt| {v:.2} units/period ({:.1} mm/s)",
+                    scale.mm(lo),
+                    scale.mm(hi),
+                    scale.per_s(scale.mm(v))
+                );
             }
         }
         MotionClass::R3 => {
@@ -223,8 +285,16 @@ fn summary(m: &Motion, path: &std::path::Path) -> String {
         }
     }
     out += &format!(
-        ", max |ω| {w:.2} rad/period, max |ω'| {a:.1} rad/period², {} warning(s)",
-        m.warnings().len()
+        ", max |ω| {w:.2} rad/period ({:.0}°/s), max |ω'| {a:.1} rad/period² ({:.0}°/s²), \
+         {} warning(s)\n  at the bench: {}",
+        scale.per_s(w).to_degrees(),
+        scale.per_s2(a).to_degrees(),
+        m.warnings().len(),
+        if m.class() == MotionClass::R1T1 {
+            scale.describe()
+        } else {
+            scale.describe_period()
+        }
     );
     out
 }

@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use crate::plot::{Chart, PlotError, Series};
 
 use super::rotation::{end_effector_axis, roll_deg, tilt_deg};
-use super::{Motion, MotionClass};
+use super::{BenchScale, Motion, MotionClass};
 
 /// Unwrap a sequence of angles in degrees (remove ±360° jumps).
 fn unwrap_deg(values: &mut [f64]) {
@@ -25,14 +25,27 @@ fn unwrap_deg(values: &mut [f64]) {
 }
 
 /// Build the charts for `motion` sampled at `n` points (plus the closing point t = 1).
-pub fn charts(motion: &Motion, n: usize) -> Vec<(String, Chart)> {
+/// Heights are drawn in millimetres and rates per second, read at `scale` (issue 20: a
+/// person at the bench reads mm and seconds); t stays the fraction of the period that the
+/// keyframes are written in, its axis saying how long a period is at that speed.
+pub fn charts(motion: &Motion, n: usize, scale: &BenchScale) -> Vec<(String, Chart)> {
     let n = n.max(8);
     let ts: Vec<f64> = (0..=n).map(|i| i as f64 / n as f64).collect();
     let samples: Vec<_> = ts.iter().map(|&t| motion.sample(t)).collect();
     let name = motion.name();
     let mut out = Vec::new();
     let xr = Some((0.0, 1.0));
-    let t_label = "t [fraction of the period]";
+    let t_label = format!(
+        "t [fraction of the period; 1 = {} s at {}]",
+        super::units::trim(scale.period_s(), 3),
+        scale.speed_text()
+    );
+    let t_label = t_label.as_str();
+    let mm_label = format!(
+        "mm = model units × {}",
+        super::units::trim(scale.scale_mm, 3)
+    );
+    let speed = scale.speed_text();
 
     match motion.class() {
         MotionClass::R1 | MotionClass::R1T1 => {
@@ -63,11 +76,11 @@ pub fn charts(motion: &Motion, n: usize) -> Vec<(String, Chart)> {
             c.x_range = xr;
             out.push(("angle".to_string(), c));
             if motion.class() == MotionClass::R1T1 {
-                let h = |t: f64| motion.height(t).map_or(0.0, |h| h[0]);
+                let h = |t: f64| scale.mm(motion.height(t).map_or(0.0, |h| h[0]));
                 let mut c = Chart::new(
                     format!("{name}: height along z"),
                     t_label,
-                    "h [model units]",
+                    format!("h [{mm_label}]"),
                 )
                 .with(Series::line(
                     "h(t)",
@@ -87,11 +100,14 @@ pub fn charts(motion: &Motion, n: usize) -> Vec<(String, Chart)> {
                 let mut c = Chart::new(
                     format!("{name}: vertical velocity"),
                     t_label,
-                    "dh/dt [model units/period]",
+                    format!("dh/dt [mm/s at {speed}]"),
                 )
                 .with(Series::line(
                     "dh/dt",
-                    samples.iter().map(|s| (s.t, s.velocity.z)).collect(),
+                    samples
+                        .iter()
+                        .map(|s| (s.t, scale.per_s(scale.mm(s.velocity.z))))
+                        .collect(),
                     0,
                 ));
                 c.x_range = xr;
@@ -99,11 +115,14 @@ pub fn charts(motion: &Motion, n: usize) -> Vec<(String, Chart)> {
                 let mut c = Chart::new(
                     format!("{name}: vertical acceleration"),
                     t_label,
-                    "d²h/dt² [model units/period²]",
+                    format!("d²h/dt² [mm/s² at {speed}]"),
                 )
                 .with(Series::line(
                     "d²h/dt²",
-                    samples.iter().map(|s| (s.t, s.acceleration.z)).collect(),
+                    samples
+                        .iter()
+                        .map(|s| (s.t, scale.per_s2(scale.mm(s.acceleration.z))))
+                        .collect(),
                     1,
                 ));
                 c.x_range = xr;
@@ -252,13 +271,13 @@ pub fn charts(motion: &Motion, n: usize) -> Vec<(String, Chart)> {
         }
     }
 
-    // Rates, all classes.
+    // Rates, all classes, in degrees per second at the bench speed.
     let comps = |f: &dyn Fn(&super::PoseSample) -> nalgebra::Vector3<f64>| -> [Vec<(f64, f64)>; 3] {
         let mut r: [Vec<(f64, f64)>; 3] = [Vec::new(), Vec::new(), Vec::new()];
         for s in &samples {
             let v = f(s);
             for k in 0..3 {
-                r[k].push((s.t, v[k]));
+                r[k].push((s.t, v[k].to_degrees()));
             }
         }
         r
@@ -267,14 +286,15 @@ pub fn charts(motion: &Motion, n: usize) -> Vec<(String, Chart)> {
         (
             "angular-velocity",
             "angular velocity ω (frame R)",
-            "ω [rad/period]",
-            (&|s: &super::PoseSample| s.angular_velocity) as &dyn Fn(&super::PoseSample) -> _,
+            format!("ω [°/s at {speed}]"),
+            (&|s: &super::PoseSample| scale.per_s(1.0) * s.angular_velocity)
+                as &dyn Fn(&super::PoseSample) -> _,
         ),
         (
             "angular-acceleration",
             "angular acceleration dω/dt (frame R)",
-            "dω/dt [rad/period²]",
-            &|s: &super::PoseSample| s.angular_acceleration,
+            format!("dω/dt [°/s² at {speed}]"),
+            &|s: &super::PoseSample| scale.per_s2(1.0) * s.angular_acceleration,
         ),
     ] {
         let [x, y, z] = comps(f);
@@ -290,15 +310,20 @@ pub fn charts(motion: &Motion, n: usize) -> Vec<(String, Chart)> {
     out
 }
 
-/// Write every chart of `motion` as `<dir>/<name>-<chart>.png` and `.svg`; returns the
-/// files written.
-pub fn write_all(motion: &Motion, dir: &Path, n: usize) -> Result<Vec<PathBuf>, FigureError> {
+/// Write every chart of `motion`, read at `scale`, as `<dir>/<name>-<chart>.png` and
+/// `.svg`; returns the files written.
+pub fn write_all(
+    motion: &Motion,
+    dir: &Path,
+    n: usize,
+    scale: &BenchScale,
+) -> Result<Vec<PathBuf>, FigureError> {
     std::fs::create_dir_all(dir).map_err(|source| FigureError::Dir {
         path: dir.to_path_buf(),
         source,
     })?;
     let mut written = Vec::new();
-    for (stem, chart) in charts(motion, n) {
+    for (stem, chart) in charts(motion, n, scale) {
         let [png, svg] = chart.write(&dir.join(format!("{}-{stem}", motion.name())))?;
         written.push(png);
         written.push(svg);
@@ -353,7 +378,7 @@ mod tests {
         ];
         for (i, (text, charts)) in cases.iter().enumerate() {
             let m = parse_spec(text, Some(Path::new(&format!("case{i}.toml")))).unwrap();
-            let files = write_all(&m, dir.path(), 200).unwrap();
+            let files = write_all(&m, dir.path(), 200, &BenchScale::default()).unwrap();
             assert_eq!(files.len(), 2 * charts, "case {i}");
             for f in files {
                 assert!(

@@ -22,7 +22,9 @@ pub const MECHANISM_FILE: &str = "mechanism.json";
 /// benches and analysis all read it from here.
 pub const DEFAULT_SCALE_MM: f64 = 10.0;
 
-pub(crate) fn load(path: &Path) -> Result<Motion, MotionError> {
+/// The mechanism file a path names (the path itself, or `MECHANISM_FILE` in a directory)
+/// and its parsed JSON.
+fn read(path: &Path) -> Result<(PathBuf, Value), MotionError> {
     let file: PathBuf = if path.is_dir() {
         path.join(MECHANISM_FILE)
     } else {
@@ -32,11 +34,32 @@ pub(crate) fn load(path: &Path) -> Result<Motion, MotionError> {
         path: file.clone(),
         source,
     })?;
-    let at = |field: &str| Location::new(Some(file.clone()), None, field);
     let doc: Value = serde_json::from_str(&text).map_err(|e| MotionError::Syntax {
         at: Location::new(Some(file.clone()), Some(e.line()), ""),
         message: e.to_string(),
     })?;
+    Ok((file, doc))
+}
+
+/// The millimetres per model unit a mechanism file was designed at: its `scale_mm`, or
+/// [`DEFAULT_SCALE_MM`] when the field is absent (files older than the field).
+pub fn mechanism_scale_mm(path: &Path) -> Result<f64, MotionError> {
+    let (file, doc) = read(path)?;
+    match doc.get("scale_mm") {
+        None => Ok(DEFAULT_SCALE_MM),
+        Some(v) => v
+            .as_f64()
+            .filter(|s| s.is_finite() && *s > 0.0)
+            .ok_or_else(|| MotionError::Invalid {
+                at: Location::new(Some(file), None, "scale_mm"),
+                message: format!("{v} is not a positive number of millimetres per model unit"),
+            }),
+    }
+}
+
+pub(crate) fn load(path: &Path) -> Result<Motion, MotionError> {
+    let (file, doc) = read(path)?;
+    let at = |field: &str| Location::new(Some(file.clone()), None, field);
     let invalid = |field: &str, message: String| MotionError::Invalid {
         at: at(field),
         message,

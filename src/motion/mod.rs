@@ -44,6 +44,7 @@ mod mechanism;
 pub mod rotation;
 pub mod spec;
 mod spline;
+pub mod units;
 
 use std::path::{Path, PathBuf};
 
@@ -52,7 +53,8 @@ use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 pub use angle::AngleScheme;
 pub use class::{MotionClass, UnknownClass};
 pub use error::{Location, MotionError, MotionWarning, WarningKind};
-pub use mechanism::{DEFAULT_SCALE_MM, MECHANISM_FILE};
+pub use mechanism::{mechanism_scale_mm, DEFAULT_SCALE_MM, MECHANISM_FILE};
+pub use units::{BenchScale, DEFAULT_BENCH_RPM};
 
 use angle::AngleLaw;
 use rotation::RotationLaw;

@@ -392,7 +392,7 @@ pub fn axis_chart(
         .map(|i| project(off.world.inverse() * meas[i] * off.mount.inverse() * Vector3::z()))
         .collect();
     let base = law.motion.as_ref().and_then(|m| {
-        crate::motion::figures::charts(m, 360)
+        crate::motion::figures::charts(m, 360, &crate::motion::BenchScale::default())
             .into_iter()
             .find(|(name, _)| name == "axis-path")
             .map(|(_, c)| c)
