@@ -55,7 +55,10 @@ fn synth_end_to_end_then_check_and_reject_tampering() {
             "best reached per K tried (closure margin asked: E_maxDist ≤ −0.02):\n  K = 3, d_x = 6:",
         ))
         .stdout(predicate::str::contains("(accepted)"))
-        .stdout(predicate::str::contains("layout: band gap 0.5, axis room none"));
+        .stdout(predicate::str::contains(
+            "lengths in model units, 10 mm each (scale_mm): d_x 6 = 60 mm, band gap 0.5 = 5 mm, \
+             axis room none",
+        ));
     let file = out.join("mechanism.json");
     assert!(file.exists());
     for plot in [

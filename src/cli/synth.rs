@@ -50,7 +50,7 @@ pub struct SynthArgs {
     /// margin usually costs curve pairs (see docs/synthesis.md, "K against margin").
     #[arg(long, default_value_t = synth::closure::EPSILON)]
     pub min_margin: f64,
-    /// Driver offset d_x in model units (default: search a grid).
+    /// Driver offset d_x in model units, × `--scale-mm` for mm (default: search a grid).
     #[arg(long)]
     pub dx: Option<f64>,
     /// Samples per period N.
@@ -66,7 +66,8 @@ pub struct SynthArgs {
     /// GA generations (paper: 300).
     #[arg(long, default_value_t = synth::ga::GENERATIONS)]
     pub generations: usize,
-    /// Millimetres per model unit written into the file.
+    /// Millimetres per model unit written into the file: the size the parts are built at
+    /// and the mm figures of the summary.
     #[arg(long, default_value_t = synth::mechanism::DEFAULT_SCALE_MM)]
     pub scale_mm: f64,
     /// 3R only: bound on the contact normals. `tangent` is the paper's Eq. 30 as printed
@@ -75,7 +76,8 @@ pub struct SynthArgs {
     /// docs/synthesis.md).
     #[arg(long, value_enum, default_value_t = ConeArg::Tangent)]
     pub normal_cone: ConeArg,
-    /// Free height between neighbouring bands, model units (0 to 5). The default 0.5 leaves
+    /// Free height between neighbouring bands, model units (0 to 5; 5 mm per 0.5 at the
+    /// default scale). The default 0.5 leaves
     /// no room for a printed follower's plate and rim between two driver bands; 1.5 does,
     /// at the cost of curve pairs (see docs/synthesis.md, "Printable layouts").
     #[arg(long, default_value_t = synth::bands::BAND_GAP, allow_negative_numbers = true)]
@@ -206,6 +208,7 @@ fn attempt_figures(a: &Attempt) -> String {
 }
 
 fn summary(m: &Mechanism) -> String {
+    use crate::motion::units::trim;
     let over = m.closure.oversampled.as_ref();
     let note = if m.class == synth::Class::R3 && m.solve.normal_cone == NormalCone::Arm {
         "\nnormal cone: arm (|n·p̂| ≤ cos 10°); the search's \"robust\" above counts the contacts \
@@ -228,9 +231,10 @@ fn summary(m: &Mechanism) -> String {
         .collect();
     format!(
         "class  K  d_x    E_valiTime  E_maxDist  robust_vali  robust_max  vali@4x  residual°  time s\n\
-         {:<6} {:<2} {:<6} {:<11.4} {:<10} {:<12.4} {:<11} {:<8.4} {:<10.3} {:.1}{note}
-         layout: band gap {}, axis room {}{}
-         {LEGEND}
+         {:<6} {:<2} {:<6} {:<11.4} {:<10} {:<12.4} {:<11} {:<8.4} {:<10.3} {:.1}{note}\n\
+         lengths in model units, {} mm each (scale_mm): d_x {} = {} mm, band gap {} = {} mm, \
+         axis room {}{}\n\
+         {LEGEND}\n\
          best reached per K tried (closure margin asked: E_maxDist ≤ −{}):{}",
         m.class.label(),
         m.curve_pairs.len(),
@@ -242,9 +246,15 @@ fn summary(m: &Mechanism) -> String {
         over.map_or(f64::NAN, |o| o.vali_time),
         m.closure.worst_residual_deg,
         m.solve.seconds,
+        trim(m.scale_mm, 3),
+        m.driver_offset,
+        trim(m.scale_mm * m.driver_offset, 2),
         m.solve.band_gap,
-        m.solve.axis_room
-            .map_or("none".to_string(), |a| format!("{a} (curves within d_x − {a} of the axes)")),
+        trim(m.scale_mm * m.solve.band_gap, 2),
+        m.solve.axis_room.map_or("none".to_string(), |a| format!(
+            "{a} = {} mm (curves within d_x − {a} of the axes)",
+            trim(m.scale_mm * a, 2)
+        )),
         if m.solve.printed_rim {
             "; closure counts only the contacts the printed rims keep (--printed-rim)"
         } else {

@@ -29,10 +29,11 @@ pub fn write_report(m: &Mechanism, dir: &Path) -> Result<Vec<PathBuf>, ReportErr
     let clip = |d: f64| d.min(DIST_PLOT_CLIP);
     let mut dist = Chart::new(
         format!(
-            "dist(t), {} K = {}, d_x = {}: E_valiTime {:.3}, E_maxDist {}",
+            "dist(t), {} K = {}, d_x = {} ({} mm): E_valiTime {:.3}, E_maxDist {}",
             m.class.label(),
             m.curve_pairs.len(),
             m.driver_offset,
+            crate::motion::units::trim(m.driver_offset * m.scale_mm, 2),
             m.closure.vali_time,
             super::closure::dist_text(m.closure.max_dist)
         ),
@@ -101,14 +102,17 @@ pub fn write_report(m: &Mechanism, dir: &Path) -> Result<Vec<PathBuf>, ReportErr
 
     for (frame, name) in [("follower", "c2"), ("driver", "c1")] {
         for (view, a, b) in [("top", 0usize, 1usize), ("side", 0, 2)] {
+            // In millimetres, the size the parts are built at (issue 20).
+            let mm = |axis: &str| {
+                format!(
+                    "{axis} [mm = model units × {}]",
+                    crate::motion::units::trim(m.scale_mm, 3)
+                )
+            };
             let mut c = Chart::new(
                 format!("curves in the {frame} frame ({view} view)"),
-                if a == 0 { "x (model units)" } else { "y" },
-                if b == 1 {
-                    "y (model units)"
-                } else {
-                    "z (model units)"
-                },
+                mm("x"),
+                mm(if b == 1 { "y" } else { "z" }),
             );
             c.equal_aspect = true;
             for (k, cp) in m.curve_pairs.iter().enumerate() {
@@ -117,7 +121,10 @@ pub fn write_report(m: &Mechanism, dir: &Path) -> Result<Vec<PathBuf>, ReportErr
                 } else {
                     &cp.samples.c1
                 };
-                let mut v: Vec<(f64, f64)> = pts.iter().map(|p| (p[a], p[b])).collect();
+                let mut v: Vec<(f64, f64)> = pts
+                    .iter()
+                    .map(|p| (p[a] * m.scale_mm, p[b] * m.scale_mm))
+                    .collect();
                 v.push(v[0]);
                 c.series
                     .push(Series::line(format!("{name} pair {k}"), v, k));
