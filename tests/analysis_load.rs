@@ -284,3 +284,45 @@ fn rows_with_a_held_driver_angle_are_left_out_and_said() {
             .unwrap();
     assert_eq!(summary["source"]["held_rows"], 100);
 }
+
+/// Guards the units in the CSV header (issue 20) and the reading of older recordings: the
+/// header names each sensor column with its unit, and a recording from before that (the
+/// column named by the sensor alone), with or without the sidecar's `sensor` field, gives
+/// the same figures.
+#[test]
+fn the_header_carries_units_and_older_headers_still_read() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rec = half_turn_recording(tmp.path(), &bench());
+    let csv = rec.join("recording.csv");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let (header, rows) = text.split_once('\n').unwrap();
+    assert_eq!(
+        header,
+        "device_time_us,host_time_s,phase,driver_angle_deg,follower_rz_counts,flags"
+    );
+    let now = analyze_and_report(&rec, &ReportOptions::default()).unwrap();
+
+    let legacy = header.replace("follower_rz_counts", "follower_rz");
+    std::fs::write(&csv, format!("{legacy}\n{rows}")).unwrap();
+    let sidecar = rec.join("recording.json");
+    let mut meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&sidecar).unwrap()).unwrap();
+    // The fingerprint is of the CSV as written; an older sidecar has none.
+    meta["csv"] = serde_json::Value::Null;
+    assert_eq!(meta["columns"][4]["name"], "follower_rz_counts");
+    meta["columns"][4]["name"] = "follower_rz".into();
+    for with_sensor_field in [true, false] {
+        if !with_sensor_field {
+            for c in meta["columns"].as_array_mut().unwrap() {
+                c.as_object_mut().unwrap().remove("sensor");
+            }
+        }
+        std::fs::write(&sidecar, meta.to_string()).unwrap();
+        let before = analyze_and_report(&rec, &ReportOptions::default()).unwrap();
+        assert_eq!(
+            before.headline.rms_error_deg, now.headline.rms_error_deg,
+            "sensor field: {with_sensor_field}"
+        );
+        assert_eq!(before.source.rows, now.source.rows);
+    }
+}

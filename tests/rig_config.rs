@@ -37,7 +37,7 @@ fn sim_stepper_rig_has_as5600_follower() {
     let cfg = RigConfig::load(&path).unwrap();
     assert_eq!(cfg.driver.kind(), "stepper-firmware");
     let cols: Vec<_> = cfg.sensor_columns().into_iter().map(|c| c.name).collect();
-    assert_eq!(cols, ["follower_rz"]);
+    assert_eq!(cols, ["follower_rz_counts"]);
     assert_eq!(cfg.sensors[0].counts_per_rev(), Some(4096.0));
 }
 

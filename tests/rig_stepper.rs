@@ -92,7 +92,7 @@ fn full_session_against_simulated_stepper_bench() {
     assert_eq!(rec.meta.device.board.as_deref(), Some("sim-stepper"));
     // The follower reading tracks the target law (up to a constant offset).
     let motion = Motion::from_file(&motion_path()).unwrap();
-    let enc = rec.sensor("follower_rz").unwrap();
+    let enc = rec.sensor("follower_rz_counts").unwrap();
     let errs: Vec<f64> = (0..rec.len())
         .filter(|&i| rec.phase[i] == Phase::Forward)
         .map(|i| {

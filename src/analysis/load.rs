@@ -60,15 +60,20 @@ pub fn load_run(dir: &Path) -> Result<LoadedRecording, AnalysisError> {
     let (meta, mut reader) = RecordingReader::open(dir).map_err(|e| recording_err(dir, e))?;
     let columns: Vec<String> = reader.columns().to_vec();
     let lead = crate::rig::recording::LEADING_COLUMNS.len();
-    let col_of = |name: &str| -> Result<usize, AnalysisError> {
-        columns
+    // A sensor's first column: the sidecar says which columns belong to which sensor (the
+    // header names carry units since issue 20: `follower_rz_counts`), in the header's
+    // order (the reader checked that the two agree); a sidecar that does not say finds it
+    // by the name recordings used before (`follower_rz`, `imu_qw`).
+    let col_of = |sensor: &str, legacy: &str| -> Result<usize, AnalysisError> {
+        meta.columns
             .iter()
-            .position(|c| c == name)
+            .position(|c| c.sensor.as_deref() == Some(sensor))
+            .or_else(|| columns.iter().position(|c| c == legacy))
             .and_then(|i| i.checked_sub(lead))
             .ok_or_else(|| {
                 recording_err(
                     dir,
-                    format!("the CSV header has no column `{name}` for the rig's sensor"),
+                    format!("the CSV header has no column for the rig's sensor `{sensor}`"),
                 )
             })
     };
@@ -79,10 +84,10 @@ pub fn load_run(dir: &Path) -> Result<LoadedRecording, AnalysisError> {
     for s in &meta.rig.sensors {
         match (s, s.dof()) {
             (SensorConfig::Imu(i), _) if imu.is_none() => {
-                imu = Some((i, col_of(&format!("{}_qw", i.name))?));
+                imu = Some((i, col_of(&i.name, &format!("{}_qw", i.name))?));
             }
-            (_, Some(RigDof::Rz)) if rz.is_none() => rz = Some((s, col_of(s.name())?)),
-            (_, Some(RigDof::Tz)) if tz.is_none() => tz = Some((s, col_of(s.name())?)),
+            (_, Some(RigDof::Rz)) if rz.is_none() => rz = Some((s, col_of(s.name(), s.name())?)),
+            (_, Some(RigDof::Tz)) if tz.is_none() => tz = Some((s, col_of(s.name(), s.name())?)),
             _ => {}
         }
     }

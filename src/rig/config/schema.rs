@@ -300,23 +300,13 @@ impl SensorConfig {
     /// The recording columns this sensor produces, in order.
     pub fn columns(&self) -> Vec<ColumnSpec> {
         match self {
-            SensorConfig::As5600(e) | SensorConfig::Quadrature(e) => vec![ColumnSpec {
-                name: e.name.clone(),
-                unit: "counts".into(),
-                sensor: Some(e.name.clone()),
-            }],
-            SensorConfig::Dynamixel(d) => vec![ColumnSpec {
-                name: d.name.clone(),
-                unit: "counts".into(),
-                sensor: Some(d.name.clone()),
-            }],
+            SensorConfig::As5600(e) | SensorConfig::Quadrature(e) => {
+                vec![ColumnSpec::sensor(&e.name, "", "counts")]
+            }
+            SensorConfig::Dynamixel(d) => vec![ColumnSpec::sensor(&d.name, "", "counts")],
             SensorConfig::Imu(i) => ["qw", "qx", "qy", "qz"]
                 .iter()
-                .map(|c| ColumnSpec {
-                    name: format!("{}_{c}", i.name),
-                    unit: "1".into(),
-                    sensor: Some(i.name.clone()),
-                })
+                .map(|c| ColumnSpec::sensor(&i.name, c, "1"))
                 .collect(),
         }
     }
@@ -393,6 +383,29 @@ pub struct ColumnSpec {
     /// The sensor name, for sensor columns.
     #[serde(default)]
     pub sensor: Option<String>,
+}
+
+impl ColumnSpec {
+    /// A sensor's column: `sensor` and its `part` (`qw`… of an IMU, or none), with the unit
+    /// as the header's suffix, as the leading columns carry theirs (`driver_angle_deg`), so
+    /// a person or a spreadsheet reading `recording.csv` alone sees the unit
+    /// (`follower_rz_counts`; issue 20). A dimensionless unit (`"1"`) adds no suffix
+    /// (`imu_qw`). Recordings made before the suffix name a scalar sensor's column by the
+    /// sensor alone; readers find a sensor's columns by [`ColumnSpec::sensor`].
+    pub fn sensor(sensor: &str, part: &str, unit: &str) -> ColumnSpec {
+        let mut name = sensor.to_string();
+        for piece in [part, if unit == "1" { "" } else { unit }] {
+            if !piece.is_empty() {
+                name.push('_');
+                name.push_str(piece);
+            }
+        }
+        ColumnSpec {
+            name,
+            unit: unit.into(),
+            sensor: Some(sensor.into()),
+        }
+    }
 }
 
 /// Sampling settings.

@@ -41,7 +41,10 @@ fn loads_valid_config_with_defaults() {
     assert_eq!(cfg.sampling.rate_hz, DEFAULT_SAMPLE_RATE_HZ);
     assert_eq!(cfg.safety.watchdog_ms, DEFAULT_WATCHDOG_MS);
     let cols: Vec<_> = cfg.sensor_columns().into_iter().map(|c| c.name).collect();
-    assert_eq!(cols, ["follower", "imu_qw", "imu_qx", "imu_qy", "imu_qz"]);
+    assert_eq!(
+        cols,
+        ["follower_counts", "imu_qw", "imu_qx", "imu_qy", "imu_qz"]
+    );
     let DriverConfig::StepperFirmware(s) = &cfg.driver else {
         panic!()
     };

@@ -7,8 +7,9 @@
 //! a crash leaves counts no older than a flush), and rewritten at the end.
 //!
 //! CSV columns: `device_time_us, host_time_s, phase, driver_angle_deg`, then one column per
-//! sensor channel of the rig ([`crate::rig::config::SensorConfig::columns`]), then `flags`
-//! (bits in [`flags`]). A crash, unplug or Ctrl-C leaves a CSV whose last line may be cut
+//! sensor channel of the rig ([`crate::rig::config::SensorConfig::columns`]; each header
+//! ends in its unit, `follower_rz_counts`, except dimensionless ones, `imu_qw`), then
+//! `flags` (bits in [`flags`]). The sidecar's `columns` give each column's unit and sensor. A crash, unplug or Ctrl-C leaves a CSV whose last line may be cut
 //! short: [`RecordingReader`] drops such a line and reports it
 //! ([`Recording::truncated_last_line`]).
 //!

@@ -87,7 +87,7 @@ fn write_then_load_round_trip() {
     assert_eq!(rec.phase[2], Phase::Settle);
     assert_eq!(rec.phase[3], Phase::Forward);
     assert_eq!(rec.driver_angle_deg[7], 7.0 * 0.1);
-    assert_eq!(rec.sensor("enc").unwrap()[9], 9.0);
+    assert_eq!(rec.sensor("enc_counts").unwrap()[9], 9.0);
     assert_eq!(rec.sensor("imu_qw").unwrap()[9], 1.0);
     assert_eq!(rec.flags[1], flags::IMU_STALE);
     assert_eq!(rec.meta.columns.len(), 4 + 5 + 1);
