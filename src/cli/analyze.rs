@@ -151,7 +151,7 @@ pub fn print_summary(s: &Summary, report_dir: &Path) {
         print!(", sensor rz {}°", f3(c));
     }
     if let Some(c) = s.alignment.sensor_offset_tz_mm {
-        print!(", sensor tz {c:.3} mm");
+        print!(", sensor tz {} mm", f3(c));
     }
     if let Some(w) = s.alignment.world_offset_deg {
         print!(", IMU frame {w:.2}°");

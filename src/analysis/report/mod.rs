@@ -431,7 +431,12 @@ pub fn follower_play(h: &Headline) -> String {
 /// `v` with three decimals, without the sign of a value that rounds to zero ("-0.000"
 /// reads as a negative figure; issue 20).
 pub fn f3(v: f64) -> String {
-    let s = format!("{v:.3}");
+    fixed(v, 3)
+}
+
+/// `v` with `decimals` decimals, without the sign of a value that rounds to zero.
+pub fn fixed(v: f64, decimals: usize) -> String {
+    let s = format!("{v:.decimals$}");
     match s.strip_prefix('-') {
         Some(rest) if rest.bytes().all(|b| b == b'0' || b == b'.') => rest.to_string(),
         _ => s,
@@ -514,7 +519,7 @@ fn blocks(s: &Summary, a: &Analysis, pictures: &[plots::Picture]) -> Vec<Block> 
         f3(h.phase_lag_deg),
         s.lag
             .phase_lag_ms
-            .map_or(String::new(), |ms| format!(" ({ms:.1} ms)")),
+            .map_or(String::new(), |ms| format!(" ({} ms)", fixed(ms, 1))),
         h.backlash_driver_deg
             .map_or("backlash not measured (no reverse run)".to_string(), |v| {
                 format!("backlash {}° of driver angle{}", f3(v), follower_play(h))
@@ -949,7 +954,7 @@ pub fn write_report(
 
 #[cfg(test)]
 mod tests {
-    use super::f3;
+    use super::{f3, fixed};
 
     /// Guards figures without a negative zero: what rounds to zero prints unsigned, the
     /// rest keeps its sign.
@@ -959,5 +964,7 @@ mod tests {
         assert_eq!(f3(-0.0), "0.000");
         assert_eq!(f3(-0.0006), "-0.001");
         assert_eq!(f3(1.23449), "1.234");
+        assert_eq!(fixed(-0.04, 1), "0.0");
+        assert_eq!(fixed(-0.06, 1), "-0.1");
     }
 }
