@@ -108,9 +108,13 @@ fn garbage_is_located_and_cut_off_line_tolerated() {
     let e = analyze_and_report(&rec, &ReportOptions::default())
         .unwrap_err()
         .to_string();
-    assert!(
-        e.contains(&format!(":{}", lines + 1)) && e.contains("driver_angle_deg"),
-        "{e}"
+    assert_eq!(
+        e.replace(&rec.display().to_string(), "REC"),
+        format!(
+            "cannot load recording REC: REC/recording.csv:{}: column `driver_angle_deg`: `abc` \
+             is not a number",
+            lines + 1
+        )
     );
 }
 

@@ -41,11 +41,14 @@ fn sim_stepper_rig_has_as5600_follower() {
     assert_eq!(cfg.sensors[0].counts_per_rev(), Some(4096.0));
 }
 
-/// Guards: a missing file gives an error that names it.
+/// Guards: a missing file gives an error that names it (the whole message).
 #[test]
 fn missing_rig_file_is_named() {
     let err = RigConfig::load(Path::new("rigs/nope.toml")).unwrap_err();
-    assert!(err.to_string().contains("rigs/nope.toml"), "{err}");
+    assert_eq!(
+        err.to_string(),
+        "cannot read rig configuration rigs/nope.toml: No such file or directory (os error 2)"
+    );
 }
 
 /// Guards the gear ratio bound (issue 16: `gear_ratio = 1e9` got a message from deep in
