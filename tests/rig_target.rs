@@ -25,31 +25,32 @@ fn good_mechanism() -> Value {
     serde_json::from_str(&text).unwrap()
 }
 
-/// One edit of the good mechanism: name, a fragment of its refusal, the edit.
+/// One edit of the good mechanism: name, its whole refusal (`FILE` for the file's path),
+/// the edit.
 type Edit = (&'static str, &'static str, Box<dyn Fn(&mut Value)>);
 
-/// The broken variants of the issue, each with a fragment its refusal must contain: the
-/// file name, and what `synth --check` names.
+/// The broken variants of the issue, each with its whole refusal, which names the file and
+/// what `synth --check` names (issue 18: whole texts, so a change of wording shows).
 fn broken_variants(dir: &Path) -> Vec<(PathBuf, &'static str)> {
     let edits: Vec<Edit> = vec![
         (
             "format-2",
-            "`format`",
+            "field `format`: expected \"mpcmech-mechanism/1\", found \"mpcmech-mechanism/2\"",
             Box::new(|m| m["format"] = json!("mpcmech-mechanism/2")),
         ),
         (
             "null-sample",
-            "null",
+            "field `curve_pairs[0].samples.p[3]`: invalid type: null, expected an array of length 3",
             Box::new(|m| m["curve_pairs"][0]["samples"]["p"][3] = Value::Null),
         ),
         (
             "no-pairs",
-            "no curve pairs",
+            "field `curve_pairs`: no curve pairs",
             Box::new(|m| m["curve_pairs"] = json!([])),
         ),
         (
             "short-array",
-            "curve_pairs[1].samples.n",
+            "field `curve_pairs[1].samples.n`: 89 entries, expected samples = 90",
             Box::new(|m| {
                 m["curve_pairs"][1]["samples"]["n"]
                     .as_array_mut()
@@ -59,29 +60,35 @@ fn broken_variants(dir: &Path) -> Vec<(PathBuf, &'static str)> {
         ),
         (
             "short-follower-motion",
-            "follower_motion",
+            "field `follower_motion`: 25 entries, expected samples = 90",
             Box::new(|m| {
                 m["follower_motion"].as_array_mut().unwrap().truncate(25);
             }),
         ),
         (
             "zero-samples",
-            "samples",
+            "field `samples`: 0 samples is too few (≥ 8)",
             Box::new(|m| m["samples"] = json!(0)),
         ),
         (
             "zero-normal",
-            "opposite normals",
+            "fails the mechanism check (`mpc-rig synth --check` shows it): opposite normals: \
+             max |R2·n2+n| = 1.00e0, |Rz·n1−n| = 1.00e0, ||n|−1| = 1.00e0",
             Box::new(|m| m["curve_pairs"][2]["samples"]["n"][7] = json!([0.0, 0.0, 0.0])),
         ),
         (
             "class-3r",
-            "fails the mechanism check",
+            "fails the mechanism check (`mpc-rig synth --check` shows it): stored dist(t) \
+             reproduced: max |Δdist| = 1.88e0; dynamic form closure: E_valiTime = 0.0889, \
+             E_maxDist = 0.8835 (worst at t = 0.5778; need 1 and ≤ −0.02); robust closure: \
+             robust E_valiTime = 0.0000, robust E_maxDist = 1000.0000; 3R normal cone: max \
+             |n·p̂| = 0.9928 ≤ sin 10° = 0.1736 (tangent cone)",
             Box::new(|m| m["class"] = json!("3R")),
         ),
         (
             "partial",
-            "partial design",
+            "a partial design (written after a cancelled or failed synthesis, not accepted); run \
+             `mpc-rig synth` to the end and measure its mechanism.json",
             Box::new(|m| m["solve"]["partial"] = json!(true)),
         ),
     ];
@@ -101,6 +108,23 @@ fn broken_variants(dir: &Path) -> Vec<(PathBuf, &'static str)> {
             (file, fragment)
         })
         .collect()
+}
+
+/// The message with the mechanism file's path written `FILE`.
+fn with_file(text: &str, file: &Path) -> String {
+    text.replace(&file.display().to_string(), "FILE")
+}
+
+/// Compare every refusal of a table with its whole expected text and report all the
+/// differences at once.
+#[track_caller]
+fn assert_all_match(found: Vec<(String, String, String)>) {
+    let wrong: Vec<String> = found
+        .iter()
+        .filter(|(_, got, want)| got != want)
+        .map(|(what, got, want)| format!("{what}:\n  got:  {got}\n  want: {want}"))
+        .collect();
+    assert!(wrong.is_empty(), "{}", wrong.join("\n"));
 }
 
 /// Options of a session on `rig` towards `target` (30 rpm, one cycle).
@@ -151,7 +175,8 @@ fn broken_mechanisms_never_move_a_motor() {
         ),
         ("rigs/sim-dynamixel-1r1t.toml", mixed_sim.port_overrides()),
     ];
-    for (file, fragment) in &variants {
+    let mut found = Vec::new();
+    for (file, expected) in &variants {
         for (rig, ports) in &benches {
             let out = tmp.path().join("rec");
             let mut opts = options(
@@ -163,15 +188,23 @@ fn broken_mechanisms_never_move_a_motor() {
             let err = measure(&mut opts).expect_err("a broken mechanism is refused");
             let text = err.to_string();
             assert!(matches!(err, RigError::Target { .. }), "{text}");
-            assert!(text.contains(&file.display().to_string()), "{text}");
-            assert!(text.contains(fragment), "{}: {text}", file.display());
             assert!(!out.exists(), "no recording is started for {text}");
+            found.push((
+                format!("measure on {rig}, {}", file.display()),
+                with_file(&text, file),
+                format!("target FILE: {expected}"),
+            ));
         }
         let err = load_target(&TargetSource::Mechanism(file.clone()))
             .expect_err("analysis refuses it too")
             .to_string();
-        assert!(err.contains(fragment), "{err}");
+        found.push((
+            format!("analysis, {}", file.display()),
+            with_file(&err, file),
+            format!("cannot load target FILE: {expected}"),
+        ));
     }
+    assert_all_match(found);
     let status = stepper_sim.stop().unwrap();
     assert_eq!(
         (status.bytes_in, status.steps),
@@ -190,7 +223,8 @@ fn broken_mechanisms_never_move_a_motor() {
 #[test]
 fn sim_device_refuses_broken_mechanisms() {
     let tmp = tempfile::tempdir().unwrap();
-    for (file, fragment) in broken_variants(tmp.path()) {
+    let mut found = Vec::new();
+    for (file, expected) in broken_variants(tmp.path()) {
         for device in ["stepper", "dynamixel"] {
             let out = std::process::Command::new(env!("CARGO_BIN_EXE_mpc-rig"))
                 .args(["sim-device", device, "--mechanism"])
@@ -200,9 +234,14 @@ fn sim_device_refuses_broken_mechanisms() {
             let stderr = String::from_utf8_lossy(&out.stderr);
             assert!(!out.status.success(), "{device} served {}", file.display());
             assert!(out.stdout.is_empty(), "printed a port: {:?}", out.stdout);
-            assert!(stderr.contains(fragment), "{stderr}");
+            found.push((
+                format!("sim-device {device}, {}", file.display()),
+                with_file(&stderr, &file),
+                format!("error: target FILE: {expected}\n"),
+            ));
         }
     }
+    assert_all_match(found);
 }
 
 /// Guards the class check (issue 16: a 3R motion on a rig without an IMU ran the whole

@@ -31,8 +31,11 @@ pub enum MechanismFileError {
         #[source]
         source: std::io::Error,
     },
-    /// Malformed JSON.
-    #[error("{path}:{line}:{column}: {message}")]
+    /// Malformed JSON, or a value of the wrong type.
+    #[error(
+        "{path}:{line}:{column}: {}{message}",
+        field.as_ref().map_or(String::new(), |f| format!("field `{f}`: "))
+    )]
     Parse {
         /// The file.
         path: PathBuf,
@@ -40,6 +43,9 @@ pub enum MechanismFileError {
         line: usize,
         /// Column (1-based).
         column: usize,
+        /// The field whose value is wrong (`curve_pairs[0].samples.p[3]`), when the JSON is
+        /// well formed.
+        field: Option<String>,
         /// What the parser said.
         message: String,
     },

@@ -364,12 +364,28 @@ impl Mechanism {
             path: file.clone(),
             source,
         })?;
-        let m: Mechanism = serde_json::from_str(&text).map_err(|e| MechanismFileError::Parse {
-            path: file.clone(),
-            line: e.line(),
-            column: e.column(),
-            message: e.to_string(),
-        })?;
+        let m: Mechanism =
+            serde_path_to_error::deserialize(&mut serde_json::Deserializer::from_str(&text))
+                .map_err(|e| {
+                    // `.` is the path of a failure at the top level (a syntax error): no
+                    // field to name, and the message keeps its position, which readers
+                    // that drop the file's prefix rely on.
+                    let field = Some(e.path().to_string()).filter(|f| f != ".");
+                    let e = e.into_inner();
+                    let position = format!(" at line {} column {}", e.line(), e.column());
+                    let message = e.to_string();
+                    let message = match field {
+                        Some(_) => message.strip_suffix(&position).unwrap_or(&message).into(),
+                        None => message,
+                    };
+                    MechanismFileError::Parse {
+                        path: file.clone(),
+                        line: e.line(),
+                        column: e.column(),
+                        field,
+                        message,
+                    }
+                })?;
         m.validate(&file)?;
         Ok(m)
     }
