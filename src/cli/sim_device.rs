@@ -22,7 +22,7 @@ use crate::rig::sim::dynamixel::{
     self, BusConfig, HardwareFault, MotionTarget, ServerEnd, SimDynamixelOptions,
 };
 use crate::rig::sim::mixed;
-use crate::rig::sim::plant::{PlantConfig, FAULT_KEYS};
+use crate::rig::sim::plant::PlantConfig;
 use crate::rig::sim::stepper::{self, Mechanics, SimStepperOptions};
 use crate::rig::target;
 
@@ -203,11 +203,11 @@ pub(super) fn serve_until_ctrl_c(running: impl Fn() -> bool) -> anyhow::Result<(
     Ok(())
 }
 
+/// The plant `--fault` describes. The library's error names the flag, the key and what is
+/// wrong (and lists the known keys for an unknown one); a context listing the keys again
+/// put them before the problem, twice (issue 18).
 pub(super) fn plant_from(faults: &[String]) -> anyhow::Result<PlantConfig> {
-    PlantConfig::from_faults(faults).with_context(|| {
-        let keys: Vec<&str> = FAULT_KEYS.iter().map(|k| k.0).collect();
-        format!("known --fault keys: {}", keys.join(", "))
-    })
+    Ok(PlantConfig::from_faults(faults)?)
 }
 
 /// The plant of `faults`, moved by the built parts when `geometry` names a prediction

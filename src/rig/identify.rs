@@ -224,10 +224,10 @@ fn fits_bus(rig: &mut RigConfig, baud: u32, servos: &[(u8, u16)]) -> Result<(), 
         None => return Err(format!("its driver is ID {}, which did not answer", d.id)),
         Some(m) if Some(m) != models::model_number(&d.model) => {
             return Err(format!(
-                "its driver, ID {}, should be a {} but is a {}",
+                "its driver, ID {}, should be model {} but is model {}",
                 d.id,
                 d.model,
-                models::model_name(m).unwrap_or("servo of unknown model")
+                models::model_name(m).unwrap_or("unknown")
             ))
         }
         Some(_) => {}

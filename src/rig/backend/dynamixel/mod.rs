@@ -385,7 +385,7 @@ impl DynamixelBench {
                     path: self.path.clone(),
                     expected: crate::rig::error::NOT_THE_SERVOS,
                     detail: format!(
-                        "ID {id} is a {} (model number {model}), but driver.model in the rig file is `{}` ({expected_model})",
+                        "ID {id} is model {} (model number {model}), but driver.model in the rig file is `{}` ({expected_model})",
                         models::model_name(model).unwrap_or("unknown model"),
                         self.driver.model
                     ),

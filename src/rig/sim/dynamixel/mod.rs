@@ -70,7 +70,7 @@ impl MotionTarget {
     pub fn new(motion: crate::motion::Motion) -> Result<Self, RigError> {
         if motion.angle_z(0.0).is_none() {
             return Err(RigError::Setup(format!(
-                "motion `{}` is {:?}: a Dynamixel follower encoder measures one rotation about z; use a 1R or 1R1T target, or measure 3R with an IMU on a firmware board (`sim-device mixed --rig rigs/sim-dynamixel-imu.toml`, or the stepper bench)",
+                "motion `{}` is {}: a Dynamixel follower encoder measures one rotation about z; use a 1R or 1R1T target, or measure 3R with an IMU on a firmware board (`sim-device mixed --rig rigs/sim-dynamixel-imu.toml`, or the stepper bench)",
                 motion.name(),
                 motion.class()
             )));
