@@ -70,8 +70,14 @@ fn absurd_gear_ratio_names_file_line_and_field() {
         let path = dir.path().join(rig);
         std::fs::write(&path, bad).unwrap();
         let err = RigConfig::load(&path).unwrap_err().to_string();
-        let place = format!("{}:{line}: field `driver.gear_ratio`", path.display());
-        assert!(err.starts_with(&place), "{err}");
+        let err = err.replace(&path.display().to_string(), "RIG");
+        assert_eq!(
+            err,
+            format!(
+            "RIG:{line}: field `driver.gear_ratio`: must be a number from 0.001 to 1000 (motor or \
+             servo revolutions per driver revolution)"
+        )
+        );
         let out = std::process::Command::new(env!("CARGO_BIN_EXE_mpc-rig"))
             .args(["measure", "--rig"])
             .arg(&path)
@@ -83,6 +89,13 @@ fn absurd_gear_ratio_names_file_line_and_field() {
             .unwrap();
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success());
-        assert!(stderr.contains(&place), "{stderr}");
+        assert_eq!(
+            stderr.replace(&path.display().to_string(), "RIG"),
+            format!(
+                "error: measurement with rig RIG\n  caused by: RIG:{line}: field `driver.gear_ratio`: \
+                 must be a number from 0.001 to 1000 (motor or servo revolutions per driver \
+                 revolution)\n"
+            )
+        );
     }
 }

@@ -96,9 +96,10 @@ fn a_busy_or_taken_folder_is_refused() {
         1,
     ))
     .expect_err("a finished recording is not overwritten");
-    assert!(
-        err.to_string().contains("already holds a recording"),
-        "{err}"
+    assert_eq!(
+        err.to_string().replace(&dir.display().to_string(), "DIR"),
+        "DIR already holds a recording; choose another folder, or replace it explicitly \
+         (measure --replace)"
     );
     let mut again = options("rigs/sim-stepper.toml", sim.path(), Some(&dir), 1);
     again.replace = true;

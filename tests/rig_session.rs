@@ -358,11 +358,18 @@ fn unsafe_plans_are_refused() {
     let mut opts = options(dir.path(), false);
     opts.speed_rpm = 500.0;
     let err = check_plan(&rig(), &opts).unwrap_err().to_string();
-    assert!(err.contains("max_speed_rpm"), "{err}");
+    assert_eq!(
+        err,
+        "refused: 500 rpm exceeds safety.max_speed_rpm = 120 of rig `sim-stepper`"
+    );
     opts.speed_rpm = 1.0;
     opts.cycles = 20;
     let err = check_plan(&rig(), &opts).unwrap_err().to_string();
-    assert!(err.contains("max_run_s"), "{err}");
+    assert_eq!(
+        err,
+        "refused: the plan takes about 1512 s, more than safety.max_run_s = 600 s; use fewer \
+         cycles or a higher speed"
+    );
 }
 
 /// Guards: two sessions on the same (deterministic) bench record the same samples — the

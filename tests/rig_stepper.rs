@@ -202,10 +202,13 @@ fn version_mismatch_is_reported_clearly() {
         matches!(err, RigError::VersionMismatch { device: 9, .. }),
         "{err}"
     );
-    let msg = err.to_string();
-    assert!(
-        msg.contains("version 9") && msg.contains("flash a matching firmware"),
-        "{msg}"
+    let msg = err
+        .to_string()
+        .replace(&sim.path().display().to_string(), "PORT");
+    assert_eq!(
+        msg,
+        "PORT: firmware 0.1.0 speaks wire protocol version 9, this host speaks 1; flash a \
+         matching firmware (see firmware/README.md) or use a matching mpc-rig"
     );
     drop(sim);
 }

@@ -263,19 +263,23 @@ fn targets_the_rig_cannot_measure_are_refused_before_moving() {
             "rigs/sim-stepper.toml",
             vec![stepper_sim.path().display().to_string()],
             "data/motions/figure-eight.toml",
-            "orientation sensor",
+            "refused: rig `sim-stepper` cannot measure a 3R target: it has no orientation sensor \
+             (`kind = \"imu\"`) on the follower (rigs/README.md lists the sensors each class needs)",
         ),
         (
             "rigs/sim-dynamixel.toml",
             vec![dxl_sim.path().display().to_string()],
             "data/motions/screw-bob.toml",
-            "linear sensor",
+            "refused: rig `sim-dynamixel` cannot measure a 1R1T target: it has no linear sensor \
+             (`dof = \"tz\"`) for the height (rigs/README.md lists the sensors each class needs)",
         ),
         (
             "rigs/sim-dynamixel-imu.toml",
             mixed_sim.port_overrides(),
             "data/motions/half-turn-2to1.toml",
-            "rotary sensor",
+            "refused: rig `sim-dynamixel-imu` cannot measure a 1R target: it has no rotary sensor \
+             (`dof = \"rz\"` or a follower servo) (rigs/README.md lists the sensors each class \
+             needs)",
         ),
     ];
     for (rig, ports, motion, missing) in cases {
@@ -283,7 +287,7 @@ fn targets_the_rig_cannot_measure_are_refused_before_moving() {
         let mut opts = options(rig, ports, TargetSpec::Motion(repo(motion)), &out);
         let err = measure(&mut opts).expect_err("refused");
         assert!(matches!(err, RigError::CannotMeasure { .. }), "{err}");
-        assert!(err.to_string().contains(missing), "{err}");
+        assert_eq!(err.to_string(), missing);
         assert!(!out.exists());
     }
     assert_eq!(stepper_sim.stop().unwrap().bytes_in, 0);
