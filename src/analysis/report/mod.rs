@@ -468,12 +468,26 @@ fn verdict(s: &Summary) -> (Option<bool>, String) {
     }
 }
 
+/// The report as blocks, section by section.
 fn blocks(s: &Summary, a: &Analysis, pictures: &[plots::Picture]) -> Vec<Block> {
+    let mut b = Vec::new();
+    headline_blocks(s, pictures, &mut b);
+    alignment_blocks(s, &mut b);
+    error_blocks(s, a, &mut b);
+    timing_blocks(s, &mut b);
+    key_pose_blocks(s, &mut b);
+    sampling_blocks(s, &mut b);
+    b
+}
+
+/// The top of the report: title, verdict, the headline sentences, the checks and the
+/// pictures, so a person understands the result at a glance.
+fn headline_blocks(s: &Summary, pictures: &[plots::Picture], b: &mut Vec<Block>) {
     let h = &s.headline;
-    let mut b = vec![Block::Heading(
+    b.push(Block::Heading(
         1,
         format!("Bench report: {} ({})", h.motion, h.class),
-    )];
+    ));
     let (v, text) = verdict(s);
     b.push(Block::Verdict(v, text));
     let mut lines = Vec::new();
@@ -573,6 +587,10 @@ fn blocks(s: &Summary, a: &Analysis, pictures: &[plots::Picture]) -> Vec<Block> 
     for (cap, path) in pictures {
         b.push(Block::Image(cap.clone(), path.clone()));
     }
+}
+
+/// The offsets the alignment fitted and the play it found (reported, not hidden).
+fn alignment_blocks(s: &Summary, b: &mut Vec<Block>) {
     b.push(Block::Heading(2, "Alignment (reported, not hidden)".into()));
     let al = &s.alignment;
     let mut rows = vec![vec![
@@ -641,6 +659,11 @@ fn blocks(s: &Summary, a: &Analysis, pictures: &[plots::Picture]) -> Vec<Block> 
         vec!["offset".into(), "value".into(), "note".into()],
         rows,
     ));
+}
+
+/// The error statistics per channel and direction, repeatability, hysteresis and the
+/// first channel's cycles.
+fn error_blocks(s: &Summary, a: &Analysis, b: &mut Vec<Block>) {
     b.push(Block::Heading(2, "Errors".into()));
     let mut rows = Vec::new();
     for c in &a.channels {
@@ -729,6 +752,10 @@ fn blocks(s: &Summary, a: &Analysis, pictures: &[plots::Picture]) -> Vec<Block> 
             rows,
         ));
     }
+}
+
+/// The timing ratios and each cycle's durations.
+fn timing_blocks(s: &Summary, b: &mut Vec<Block>) {
     if let Some(t) = &s.timing {
         b.push(Block::Heading(2, "Timing".into()));
         b.push(Block::Para(format!(
@@ -786,6 +813,10 @@ fn blocks(s: &Summary, a: &Analysis, pictures: &[plots::Picture]) -> Vec<Block> 
         head.extend((0..t.ratios.len()).map(|j| format!("ratio {j}")));
         b.push(Block::Table(head, rows));
     }
+}
+
+/// The error at each key pose.
+fn key_pose_blocks(s: &Summary, b: &mut Vec<Block>) {
     if !s.key_poses.is_empty() {
         b.push(Block::Heading(2, "Key poses".into()));
         let rows = s
@@ -808,6 +839,10 @@ fn blocks(s: &Summary, a: &Analysis, pictures: &[plots::Picture]) -> Vec<Block> 
             rows,
         ));
     }
+}
+
+/// How the samples were taken and what the recording holds.
+fn sampling_blocks(s: &Summary, b: &mut Vec<Block>) {
     b.push(Block::Heading(2, "Sampling and recording".into()));
     let sm = &s.sampling;
     let src = &s.source;
@@ -875,7 +910,6 @@ fn blocks(s: &Summary, a: &Analysis, pictures: &[plots::Picture]) -> Vec<Block> 
             ],
         ],
     ));
-    b
 }
 
 /// Write every chart, `report.md`, `report.html` and `summary.json` into `out_dir`.
