@@ -25,6 +25,18 @@ pub fn write_report(m: &Mechanism, dir: &Path) -> Result<Vec<PathBuf>, ReportErr
         source,
     })?;
     let mut out = Vec::new();
+    let charts = std::iter::once(("dist".to_string(), dist_chart(m)))
+        .chain(torque_arm_chart(m))
+        .chain(curve_charts(m))
+        .chain(normals_charts(m));
+    for (stem, chart) in charts {
+        out.extend(chart.write(&dir.join(stem))?);
+    }
+    Ok(out)
+}
+
+/// dist(t) against the zones of closure with margin and closure lost (paper Fig. 8 middle).
+fn dist_chart(m: &Mechanism) -> Chart {
     let n = m.samples as f64;
     let clip = |d: f64| d.min(DIST_PLOT_CLIP);
     let mut dist = Chart::new(
@@ -73,8 +85,13 @@ pub fn write_report(m: &Mechanism, dir: &Path) -> Result<Vec<PathBuf>, ReportErr
     dist.zones
         .push((0.0, DIST_PLOT_CLIP + 0.05, 1, "closure lost (> 0)".into()));
     dist.y_range = Some((-1.1, DIST_PLOT_CLIP + 0.05));
-    out.extend(dist.write(&dir.join("dist"))?);
+    dist
+}
 
+/// 1R/1R1T: each contact's torque arm over t, what the robust closure looks at.
+fn torque_arm_chart(m: &Mechanism) -> Option<(String, Chart)> {
+    let n = m.samples as f64;
+    let mut out = None;
     if matches!(m.class, Class::R1 | Class::R1T1) {
         // Torque arm per contact: what the robust closure looks at.
         let sg = closure::GAMMA0_DEG.to_radians().sin();
@@ -97,9 +114,15 @@ pub fn write_report(m: &Mechanism, dir: &Path) -> Result<Vec<PathBuf>, ReportErr
         c.h_lines.push((sg, "+sin 10°".into()));
         c.h_lines.push((-sg, "−sin 10°".into()));
         c.y_range = Some((-1.05, 1.05));
-        out.extend(c.write(&dir.join("torque-arm"))?);
+        out = Some(("torque-arm".to_string(), c));
     }
 
+    out
+}
+
+/// The curve pairs in the follower's and the driver's frames, top and side views, in mm.
+fn curve_charts(m: &Mechanism) -> Vec<(String, Chart)> {
+    let mut out = Vec::new();
     for (frame, name) in [("follower", "c2"), ("driver", "c1")] {
         for (view, a, b) in [("top", 0usize, 1usize), ("side", 0, 2)] {
             // In millimetres, the size the parts are built at (issue 20).
@@ -131,10 +154,18 @@ pub fn write_report(m: &Mechanism, dir: &Path) -> Result<Vec<PathBuf>, ReportErr
             }
             c.series
                 .push(Series::points("axis", vec![(0.0, 0.0)], 4, 7));
-            out.extend(c.write(&dir.join(format!("curves-{frame}-{view}")))?);
+            out.push((format!("curves-{frame}-{view}"), c));
         }
     }
 
+    out
+}
+
+/// The projected normals ñ and their hull at the worst instant (paper Fig. 8 right); for
+/// 1R each contact's torque arm as a bar.
+fn normals_charts(m: &Mechanism) -> Vec<(String, Chart)> {
+    let n = m.samples as f64;
+    let mut out = Vec::new();
     // Projected normals at the worst time.
     let worst = m
         .closure
@@ -184,8 +215,8 @@ pub fn write_report(m: &Mechanism, dir: &Path) -> Result<Vec<PathBuf>, ReportErr
         c.y_range = Some((-1.05, 1.05 * crate::plot::LEGEND_HEADROOM));
         c.x_range = Some((-0.5, m.curve_pairs.len() as f64 - 0.5));
         c.whole_x = true;
-        out.extend(c.write(&dir.join("normals-worst"))?);
-        return Ok(out);
+        out.push(("normals-worst".to_string(), c));
+        return out;
     }
     let views: Vec<(usize, usize, &str)> = match m.class {
         Class::R1 | Class::R1T1 => vec![(0, 1, "")],
@@ -219,7 +250,7 @@ pub fn write_report(m: &Mechanism, dir: &Path) -> Result<Vec<PathBuf>, ReportErr
         c.series.push(Series::points("ñ_k", proj, 6, 0));
         c.series
             .push(Series::points("origin", vec![(0.0, 0.0)], 5, 2));
-        out.extend(c.write(&dir.join(format!("normals-worst{suffix}")))?);
+        out.push((format!("normals-worst{suffix}"), c));
     }
-    Ok(out)
+    out
 }
