@@ -154,6 +154,22 @@ fn curve_charts(m: &Mechanism) -> Vec<(String, Chart)> {
             }
             c.series
                 .push(Series::points("axis", vec![(0.0, 0.0)], 4, 7));
+            // Room above the curves for the legend, which hid the top band's curve where
+            // it reached the right edge.
+            let (lo, hi) = c
+                .series
+                .iter()
+                .flat_map(|s| s.points.iter().map(|p| p.1))
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), y| {
+                    (lo.min(y), hi.max(y))
+                });
+            if lo < hi {
+                let pad = 0.04 * (hi - lo);
+                c.y_range = Some((
+                    lo - pad,
+                    lo + (hi - lo) * crate::plot::LEGEND_HEADROOM + pad,
+                ));
+            }
             out.push((format!("curves-{frame}-{view}"), c));
         }
     }
