@@ -188,6 +188,59 @@ fn extended_position_move_to_lands_on_target() {
     assert!((bench.position_deg().unwrap() - 450.0).abs() < 0.1);
 }
 
+/// Guards commands after a silence the backend has not yet noticed: the bus goes silent
+/// for 0.5 s (longer than the 260 ms bus watchdog) while the driver turns, so the servo
+/// stops itself and refuses goals with a data range error until its watchdog is cleared.
+/// The first command after the silence (a stop, as at the end of a run) succeeds: the
+/// backend sees the trip, re-arms and writes its goal once more. A later speed is obeyed.
+/// (CI once failed a run's final stop with "servo error 4 (data range error)".)
+#[test]
+fn a_command_after_a_watchdog_trip_rearms_and_is_obeyed() {
+    let _serial = serial_group::lock();
+    let sim = sim_with(PlantConfig::from_faults(&["dropout_at_s=1.0", "dropout_s=0.5"]).unwrap());
+    let started = Instant::now();
+    let mut bench = DynamixelBench::from_rig(&rig(sim.path())).unwrap();
+    bench.enable().unwrap();
+    bench.run_at(20.0).unwrap();
+    std::thread::sleep(Duration::from_secs_f64(1.7).saturating_sub(started.elapsed()));
+    assert!(
+        sim.bus().driver().watchdog_tripped(),
+        "the silence did not trip the watchdog; the test needs a longer one"
+    );
+    bench.stop().expect("the stop after a trip is obeyed");
+    assert!(!sim.bus().driver().watchdog_tripped(), "re-armed");
+    assert_eq!(bench.counts().reconnects, 1);
+    bench.run_at(20.0).expect("a new speed after the trip");
+    std::thread::sleep(Duration::from_millis(300));
+    assert!(sim.bus().driver().present_velocity() > 0, "turning again");
+    bench.stop().unwrap();
+}
+
+/// Guards the host's voice on a lossy bus: with 2 % of the reply bytes lost, some command
+/// replies lose a length byte, and the retry's drain must not spin on the stuck header
+/// for a second of bus silence (it did: the servos' 260 ms bus watchdog tripped and CI's
+/// final stop was refused). Over 300 commands the driver's watchdog never trips and every
+/// command succeeds (with the spin, the watchdog tripped by the 9th).
+#[test]
+fn command_retries_on_a_lossy_bus_never_silence_the_host() {
+    let _serial = serial_group::lock();
+    let sim = sim_with(PlantConfig::from_faults(&["drop_prob=0.02", "seed=5"]).unwrap());
+    let mut bench = DynamixelBench::from_rig(&rig(sim.path())).unwrap();
+    bench.enable().unwrap();
+    bench.run_at(20.0).unwrap();
+    for k in 0..300 {
+        bench
+            .position_deg()
+            .unwrap_or_else(|e| panic!("read {k}: {e}"));
+        assert!(
+            !sim.bus().driver().watchdog_tripped(),
+            "the bus watchdog tripped by read {k}: the host went silent"
+        );
+    }
+    bench.stop().unwrap();
+    assert_eq!(bench.counts().reconnects, 0);
+}
+
 /// Guards the wrong-ID and wrong-model messages: they name the ID, what is on the bus, and
 /// the rig file's model.
 #[test]

@@ -106,6 +106,9 @@ struct Shared {
     enabled: bool,
     /// What the driver was last told to do.
     motion: Motion,
+    /// Profile Velocity last written (counts): what a watchdog trip zeroed and re-arming
+    /// restores.
+    profile_velocity: i32,
 }
 
 /// A Dynamixel bench: driver servo plus torque-off follower servos on one bus.
@@ -258,6 +261,7 @@ impl DynamixelBench {
                 mode: MODE_VELOCITY,
                 enabled: false,
                 motion: Motion::Idle,
+                profile_velocity: 0,
             },
             device: DeviceInfo {
                 backend: "dynamixel".into(),
@@ -280,26 +284,41 @@ impl DynamixelBench {
         what: &str,
         f: impl Fn(&mut DxlBus) -> Result<T, dynamixel2::TransferError> + Send + 'static,
     ) -> Result<T, RigError> {
+        self.bus_outcome(f)
+            .map_err(|failure| self.bus_failure(what, failure))
+    }
+
+    /// Run a transaction like [`Self::bus`] but hand back the library's error with the
+    /// attempts made, for a caller that acts on the servo's error number.
+    fn bus_outcome<T: Send + 'static>(
+        &self,
+        f: impl Fn(&mut DxlBus) -> Result<T, dynamixel2::TransferError> + Send + 'static,
+    ) -> Result<T, BusFailure> {
         let pause = self.retry_pause();
         match call(&self.tx, move |b| with_retries(b, pause, f)) {
             Some((Ok(v), _)) => Ok(v),
-            Some((Err(e), attempts)) => Err(self.transfer_error(what, &e, attempts)),
-            None => Err(self.thread_ended()),
+            Some((Err(e), attempts)) => Err(BusFailure::Transfer(e, attempts)),
+            None => Err(BusFailure::ThreadEnded),
+        }
+    }
+
+    fn bus_failure(&self, what: &str, failure: BusFailure) -> RigError {
+        match failure {
+            BusFailure::Transfer(e, attempts) => self.transfer_error(what, &e, attempts),
+            BusFailure::ThreadEnded => self.thread_ended(),
         }
     }
 
     fn transfer_error(&self, what: &str, e: &dynamixel2::TransferError, attempts: u32) -> RigError {
         use dynamixel2::{ReadError, TransferError};
-        match e {
-            TransferError::ReadError(ReadError::MotorError(m)) => RigError::Device {
+        if let Some(n) = servo_error(e) {
+            return RigError::Device {
                 path: self.path.clone(),
                 command: what.to_string(),
-                message: format!(
-                    "servo error {} ({})",
-                    m.raw & 0x7F,
-                    motor_error_text(m.raw & 0x7F)
-                ),
-            },
+                message: format!("servo error {n} ({})", motor_error_text(n)),
+            };
+        }
+        match e {
             TransferError::ReadError(ReadError::Io(io))
                 if io.kind() == std::io::ErrorKind::TimedOut =>
             {
@@ -323,6 +342,26 @@ impl DynamixelBench {
 
     fn write_i32(&self, id: u8, address: u16, v: i32, what: &str) -> Result<(), RigError> {
         self.write(id, address, v.to_le_bytes().to_vec(), what)
+    }
+
+    /// Write a goal (velocity or position) to the driver. A servo whose bus watchdog has
+    /// tripped refuses goals with a data range error until the watchdog is cleared: the
+    /// host was silent too long (a stalled or loaded machine), and the servo has already
+    /// stopped itself. Then re-arm it ([`Self::rearm_if_tripped`]) and write the goal once
+    /// more, so a stop or a new speed is not refused for a silence that is over.
+    fn write_goal(&mut self, address: u16, v: i32, what: &str) -> Result<(), RigError> {
+        let id = self.driver.id;
+        let write = move |b: &mut DxlBus| b.write(id, address, &v.to_le_bytes()).map(|_| ());
+        match self.bus_outcome(write) {
+            Err(BusFailure::Transfer(e, attempts)) if servo_error(&e) == Some(ERR_DATA_RANGE) => {
+                if self.rearm_if_tripped(&format!("`{what}` was refused (data range error)"))? {
+                    self.write_i32(id, address, v, what)
+                } else {
+                    Err(self.transfer_error(what, &e, attempts))
+                }
+            }
+            r => r.map_err(|f| self.bus_failure(what, f)),
+        }
     }
 
     fn read_i32(&self, id: u8, address: u16, what: &str) -> Result<i32, RigError> {
@@ -468,6 +507,18 @@ impl DynamixelBench {
         Ok(())
     }
 
+    /// Write the driver's Profile Velocity (counts) and remember it for re-arming.
+    fn set_profile_velocity(&mut self, units: i32) -> Result<(), RigError> {
+        self.write_i32(
+            self.driver.id,
+            PROFILE_VELOCITY,
+            units,
+            "set profile velocity",
+        )?;
+        self.shared.profile_velocity = units;
+        Ok(())
+    }
+
     /// Switch the driver's operating mode (torque off meanwhile) and restore the profile,
     /// which a mode change resets.
     fn set_mode(&mut self, mode: u8) -> Result<(), RigError> {
@@ -483,12 +534,7 @@ impl DynamixelBench {
             self.driver.profile_acceleration as i32,
             "set profile acceleration",
         )?;
-        self.write_i32(
-            id,
-            PROFILE_VELOCITY,
-            self.driver.profile_velocity as i32,
-            "set profile velocity",
-        )?;
+        self.set_profile_velocity(self.driver.profile_velocity as i32)?;
         self.shared.mode = mode;
         if was_enabled {
             self.write_u8(id, TORQUE_ENABLE, 1, "torque on after a mode change")?;
@@ -561,12 +607,7 @@ impl DynamixelBench {
         if self.shared.mode != MODE_EXTENDED_POSITION {
             self.set_mode(MODE_EXTENDED_POSITION)?;
         }
-        self.write_i32(
-            self.driver.id,
-            GOAL_POSITION,
-            goal as i32,
-            "set goal position",
-        )
+        self.write_goal(GOAL_POSITION, goal as i32, "set goal position")
     }
 
     /// After the bus was silent for `silent`: if that was long enough for the servos' bus
@@ -579,6 +620,26 @@ impl DynamixelBench {
         if silent < period.mul_f64(WATCHDOG_CHECK_FRACTION) {
             return Ok(false);
         }
+        let why = format!(
+            "the bus was silent for {:.0} ms",
+            silent.as_secs_f64() * 1e3
+        );
+        if !self.rearm_if_tripped(&why)? {
+            return Ok(false);
+        }
+        match self.shared.motion {
+            Motion::Idle => {}
+            Motion::RunAt(rpm) => self.run_at(rpm)?,
+            Motion::MoveTo(deg) => self.move_to(deg)?,
+        }
+        Ok(true)
+    }
+
+    /// If the driver's bus watchdog has tripped (it reads 0xFF): clear it, re-arm it and
+    /// restore the profile the trip zeroed; counted as a reconnect. `why` says what noticed
+    /// it, for the warning. Returns whether it had tripped. The caller repeats or writes
+    /// the goal it wants: a trip leaves the driver stopped.
+    fn rearm_if_tripped(&mut self, why: &str) -> Result<bool, RigError> {
         let id = self.driver.id;
         let wd = self.bus("read bus watchdog", move |b| {
             b.read_u8(id, BUS_WATCHDOG).map(|r| r.data)
@@ -586,10 +647,7 @@ impl DynamixelBench {
         if wd != 0xFF {
             return Ok(false);
         }
-        tracing::warn!(
-            "the bus was silent for {:.0} ms and the driver's bus watchdog stopped it; re-arming and resuming",
-            silent.as_secs_f64() * 1e3
-        );
+        tracing::warn!("{why}: the driver's bus watchdog had stopped it; re-arming");
         self.write_u8(id, BUS_WATCHDOG, 0, "clear bus watchdog error")?;
         self.write_u8(
             id,
@@ -604,17 +662,7 @@ impl DynamixelBench {
             self.driver.profile_acceleration as i32,
             "set profile acceleration",
         )?;
-        self.write_i32(
-            id,
-            PROFILE_VELOCITY,
-            self.driver.profile_velocity as i32,
-            "set profile velocity",
-        )?;
-        match self.shared.motion {
-            Motion::Idle => {}
-            Motion::RunAt(rpm) => self.run_at(rpm)?,
-            Motion::MoveTo(deg) => self.move_to(deg)?,
-        }
+        self.set_profile_velocity(self.shared.profile_velocity)?;
         self.counts
             .lock()
             .unwrap_or_else(|p| p.into_inner())
@@ -685,7 +733,7 @@ impl Driver for DynamixelBench {
                 if self.shared.mode != MODE_VELOCITY {
                     self.set_mode(MODE_VELOCITY)?;
                 }
-                self.write_i32(self.driver.id, GOAL_VELOCITY, units, "set goal velocity")?;
+                self.write_goal(GOAL_VELOCITY, units, "set goal velocity")?;
             }
             DynamixelMode::ExtendedPosition => {
                 // Constant speed in position mode: the far end of the range at the profile
@@ -693,23 +741,13 @@ impl Driver for DynamixelBench {
                 if self.shared.mode != MODE_EXTENDED_POSITION {
                     self.set_mode(MODE_EXTENDED_POSITION)?;
                 }
-                self.write_i32(
-                    self.driver.id,
-                    PROFILE_VELOCITY,
-                    units.abs(),
-                    "set profile velocity",
-                )?;
+                self.set_profile_velocity(units.abs())?;
                 let far = if units >= 0 {
                     EXTENDED_POSITION_LIMIT
                 } else {
                     -EXTENDED_POSITION_LIMIT
                 };
-                self.write_i32(
-                    self.driver.id,
-                    GOAL_POSITION,
-                    far as i32,
-                    "set goal position",
-                )?;
+                self.write_goal(GOAL_POSITION, far as i32, "set goal position")?;
             }
         }
         self.shared.motion = Motion::RunAt(rpm);
@@ -722,12 +760,7 @@ impl Driver for DynamixelBench {
         if self.shared.mode == MODE_EXTENDED_POSITION
             && self.driver.mode == DynamixelMode::ExtendedPosition
         {
-            self.write_i32(
-                self.driver.id,
-                PROFILE_VELOCITY,
-                self.driver.profile_velocity as i32,
-                "set profile velocity",
-            )?;
+            self.set_profile_velocity(self.driver.profile_velocity as i32)?;
         }
         self.goal_position(target)?;
         self.shared.motion = Motion::MoveTo(deg);
@@ -742,15 +775,10 @@ impl Driver for DynamixelBench {
     fn stop(&mut self) -> Result<(), RigError> {
         self.shared.motion = Motion::Idle;
         if self.shared.mode == MODE_VELOCITY {
-            self.write_i32(self.driver.id, GOAL_VELOCITY, 0, "stop (goal velocity 0)")
+            self.write_goal(GOAL_VELOCITY, 0, "stop (goal velocity 0)")
         } else {
             let p = self.read_i32(self.driver.id, PRESENT_POSITION, "read present position")?;
-            self.write_i32(
-                self.driver.id,
-                GOAL_POSITION,
-                p,
-                "stop (goal = present position)",
-            )
+            self.write_goal(GOAL_POSITION, p, "stop (goal = present position)")
         }
     }
 
@@ -919,23 +947,38 @@ pub const DRAIN_QUIET_PAUSES: u32 = 3;
 /// Read and drop status replies until none arrives for `quiet` (at most [`DRAIN_LIMIT`]):
 /// late answers to earlier instructions, which the next attempt would otherwise take for
 /// its own. Returns how many were dropped.
+///
+/// Only a read that consumed its bytes (a reply, or one with a bad checksum or a servo
+/// error) continues the loop. `dynamixel2` leaves a header whose length field a lost byte
+/// made too large for its buffer ("buffer full") in place for the next instruction to
+/// discard, so reading again returns the same error at once: CI saw that loop spin for the
+/// whole second, the host silent on the bus meanwhile, the servos' bus watchdog trip and the
+/// run's final stop refused. Such a read, or a failing port, ends the drain after waiting
+/// `quiet` for late replies to arrive; the next instruction discards them.
 fn drain(bus: &mut DxlBus, quiet: Duration) -> usize {
+    use dynamixel2::{ReadError, TransferError};
     let end = Instant::now() + DRAIN_LIMIT;
     let mut dropped = 0;
     while Instant::now() < end {
         let read = worker::transaction(|| {
             bus.read_status_response_deadline(Instant::now() + quiet)
                 .map(|_| ())
-                .map_err(dynamixel2::TransferError::ReadError)
+                .map_err(TransferError::ReadError)
         });
         match read {
-            Err(dynamixel2::TransferError::ReadError(dynamixel2::ReadError::Io(io)))
+            // A late reply, or a damaged one: either way not the next attempt's.
+            Ok(())
+            | Err(TransferError::ReadError(ReadError::InvalidMessage(_)))
+            | Err(TransferError::ReadError(ReadError::MotorError(_))) => dropped += 1,
+            Err(TransferError::ReadError(ReadError::Io(io)))
                 if io.kind() == std::io::ErrorKind::TimedOut =>
             {
                 break
             }
-            // A late reply, or a damaged one: either way not the next attempt's.
-            _ => dropped += 1,
+            Err(_) => {
+                std::thread::sleep(quiet);
+                break;
+            }
         }
     }
     dropped
@@ -963,6 +1006,27 @@ fn with_retries<T>(
             }
             r => return (r, attempt),
         }
+    }
+}
+
+/// Status packet error number "data range error" (e-manual, Protocol 2.0), which a servo
+/// whose bus watchdog has tripped answers to every goal write.
+const ERR_DATA_RANGE: u8 = 4;
+
+/// A bus transaction that failed: the library's error after the attempts made, or the bus
+/// thread gone.
+enum BusFailure {
+    Transfer(dynamixel2::TransferError, u32),
+    ThreadEnded,
+}
+
+/// The servo's own error number, when the failure is the servo's error reply.
+fn servo_error(e: &dynamixel2::TransferError) -> Option<u8> {
+    match e {
+        dynamixel2::TransferError::ReadError(dynamixel2::ReadError::MotorError(m)) => {
+            Some(m.raw & 0x7F)
+        }
+        _ => None,
     }
 }
 
