@@ -103,18 +103,24 @@ impl BenchScale {
     }
 }
 
-/// A number with at most `decimals` decimals and no trailing zeros (`10`, `2.5`, `0.667`).
+/// A number with at most `decimals` decimals and no trailing zeros (`10`, `2.5`, `0.667`),
+/// without the sign of a value that rounds to zero ([`fixed`]).
 pub fn trim(x: f64, decimals: usize) -> String {
-    let s = format!("{x:.decimals$}");
-    let s = if s.contains('.') {
+    let s = fixed(x, decimals);
+    if s.contains('.') {
         s.trim_end_matches('0').trim_end_matches('.').to_string()
     } else {
         s
-    };
-    if s == "-0" {
-        "0".into()
-    } else {
-        s
+    }
+}
+
+/// `v` with exactly `decimals` decimals, without the sign of a value that rounds to zero:
+/// "-0.000" reads as a negative figure where there is none (issue 20).
+pub fn fixed(v: f64, decimals: usize) -> String {
+    let s = format!("{v:.decimals$}");
+    match s.strip_prefix('-') {
+        Some(rest) if rest.bytes().all(|b| b == b'0' || b == b'.') => rest.to_string(),
+        _ => s,
     }
 }
 
@@ -155,12 +161,16 @@ mod tests {
         );
     }
 
-    /// Guards the short number form: no trailing zeros and no negative zero.
+    /// Guards the two number forms, fixed decimals and no trailing zeros: neither shows a
+    /// negative zero.
     #[test]
     fn trims_numbers() {
         assert_eq!(trim(10.0, 3), "10");
         assert_eq!(trim(2.50, 3), "2.5");
         assert_eq!(trim(-0.0001, 3), "0");
         assert_eq!(trim(0.6666, 3), "0.667");
+        assert_eq!(fixed(-0.04, 1), "0.0");
+        assert_eq!(fixed(-0.06, 1), "-0.1");
+        assert_eq!(fixed(2.5, 2), "2.50");
     }
 }

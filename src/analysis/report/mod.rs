@@ -20,6 +20,7 @@ use super::sampling::SamplingStats;
 use super::target::TargetLaw;
 use super::timing::TimingReport;
 use super::{Analysis, AnalysisError, KeyPoseError};
+use crate::motion::units::fixed;
 use doc::Block;
 
 /// Cycles covering less of the revolution than this are left out of the per-cycle table
@@ -432,15 +433,6 @@ pub fn follower_play(h: &Headline) -> String {
 /// reads as a negative figure; issue 20).
 pub fn f3(v: f64) -> String {
     fixed(v, 3)
-}
-
-/// `v` with `decimals` decimals, without the sign of a value that rounds to zero.
-pub fn fixed(v: f64, decimals: usize) -> String {
-    let s = format!("{v:.decimals$}");
-    match s.strip_prefix('-') {
-        Some(rest) if rest.bytes().all(|b| b == b'0' || b == b'.') => rest.to_string(),
-        _ => s,
-    }
 }
 
 fn opt3(v: Option<f64>) -> String {
@@ -988,7 +980,7 @@ pub fn write_report(
 
 #[cfg(test)]
 mod tests {
-    use super::{f3, fixed};
+    use super::f3;
 
     /// Guards figures without a negative zero: what rounds to zero prints unsigned, the
     /// rest keeps its sign.
@@ -998,7 +990,5 @@ mod tests {
         assert_eq!(f3(-0.0), "0.000");
         assert_eq!(f3(-0.0006), "-0.001");
         assert_eq!(f3(1.23449), "1.234");
-        assert_eq!(fixed(-0.04, 1), "0.0");
-        assert_eq!(fixed(-0.06, 1), "-0.1");
     }
 }
