@@ -344,6 +344,10 @@ pub fn signed_dist_3d(pts: &[[f64; 3]]) -> f64 {
                     } else if s < -HULL_TOL {
                         neg = true;
                     }
+                    if pos && neg {
+                        // Points on both sides: not a facet, whatever the rest.
+                        break;
+                    }
                 }
                 if pos && neg {
                     continue;
