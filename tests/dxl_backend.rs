@@ -256,10 +256,10 @@ fn wrong_id_and_wrong_model_are_explained() {
     assert_eq!(
         err.replace(&sim.path().display().to_string(), "PORT"),
         "PORT: the device on this port is not the Dynamixel bus the rig describes (is it our \
-         firmware board or another device?) (no Dynamixel answered as the driver, ID 7, at 57600 \
+         firmware board or another device?): no Dynamixel answered as the driver, ID 7, at 57600 \
          baud (failed to read from serial port: timed out); servos on the bus: ID 1 (XL430-W250), \
          ID 2 (XL430-W250). Check the servo power supply, the baud rate and the IDs in the rig \
-         file); is this the right port (`mpc-rig ports`)?"
+         file. Is this the right port (`mpc-rig ports`)?"
     );
     let mut rig = self::rig(sim.path());
     let mpc_rig::rig::config::DriverConfig::Dynamixel(d) = &mut rig.driver else {
@@ -270,8 +270,8 @@ fn wrong_id_and_wrong_model_are_explained() {
     assert_eq!(
         err.replace(&sim.path().display().to_string(), "PORT"),
         "PORT: the device on this port is not the Dynamixel bus the rig describes (is it our \
-         firmware board or another device?) (ID 1 is model XL430-W250 (model number 1060), but \
-         driver.model in the rig file is `XM430-W350` (1020)); is this the right port \
+         firmware board or another device?): ID 1 is model XL430-W250 (model number 1060), but \
+         driver.model in the rig file is `XM430-W350` (1020). Is this the right port \
          (`mpc-rig ports`)?"
     );
 }

@@ -102,10 +102,10 @@ fn a_silent_port_is_an_error_that_says_what_was_tried() {
         stderr.starts_with(&format!(
             "no --rig: identifying what is on {port} …\n\
              error: {port}: the device on this port answers neither as our firmware nor as a \
-             Dynamixel bus (the firmware handshake said: {port}: no answer to the handshake \
+             Dynamixel bus: the firmware handshake said: {port}: no answer to the handshake \
              within 1500 ms (is the firmware flashed and running? is this the right port?); \
              no Dynamixel answered a broadcast ping at 57600, 1000000, 115200, 2000000, \
-             3000000, 4000000 baud); is this the right port (`mpc-rig ports`)?\n"
+             3000000, 4000000 baud. Is this the right port (`mpc-rig ports`)?\n"
         )),
         "{stderr}"
     );

@@ -57,13 +57,15 @@ pub enum RigError {
     },
     /// The device on the port is not the one the rig file puts there (our firmware, or
     /// the Dynamixel servos it names).
-    #[error("{path}: the device on this port {expected} ({detail}); is this the right port (`mpc-rig ports`)?")]
+    /// The predicates end in a question in parentheses, and details carry parentheses of
+    /// their own, so the detail follows a colon: nested parentheses read poorly.
+    #[error("{path}: the device on this port {expected}: {detail}. Is this the right port (`mpc-rig ports`)?")]
     WrongDevice {
         /// The port path.
         path: PathBuf,
         /// What was expected, as a predicate: [`NOT_OUR_FIRMWARE`] or [`NOT_THE_SERVOS`].
         expected: &'static str,
-        /// What was seen.
+        /// What was seen: a clause without a final full stop.
         detail: String,
     },
     /// Nothing answered the handshake.
