@@ -57,6 +57,7 @@ pub enum RigError {
     },
     /// The device on the port is not the one the rig file puts there (our firmware, or
     /// the Dynamixel servos it names).
+    ///
     /// The predicates end in a question in parentheses, and details carry parentheses of
     /// their own, so the detail follows a colon: nested parentheses read poorly.
     #[error("{path}: the device on this port {expected}: {detail}. Is this the right port (`mpc-rig ports`)?")]
