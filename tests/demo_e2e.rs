@@ -75,6 +75,14 @@ fn demo_end_to_end_with_cache_and_backlash() {
     let s = summary_of(&stdout);
     let b = s["headline"]["backlash_driver_deg"].as_f64().unwrap();
     assert!((b - 2.0).abs() < 0.5, "backlash {b}");
+    // The printed figure carries its standard error, as summary.json has it.
+    let e = s["lag"]["backlash_driver_std_err_deg"].as_f64().unwrap();
+    let line = format!(
+        "backlash: {} ± {}° of driver angle",
+        mpc_rig::analysis::report::f3(b),
+        mpc_rig::analysis::report::f3(e)
+    );
+    assert!(stdout.contains(&line), "no `{line}` in {stdout}");
 }
 
 /// Guards the demo's argument checks (issue 20: `demo --cycles 0` or `--speed 500` ran the

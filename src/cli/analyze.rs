@@ -160,7 +160,7 @@ pub fn print_summary(s: &Summary, report_dir: &Path) {
     if let Some(b) = h.backlash_driver_deg {
         println!(
             "backlash: {}° of driver angle{} (forward vs reverse)",
-            f3(b),
+            crate::analysis::report::backlash_with_error(b, s.lag.backlash_driver_std_err_deg),
             crate::analysis::report::follower_play(h)
         );
     }

@@ -429,6 +429,15 @@ pub fn follower_play(h: &Headline) -> String {
     })
 }
 
+/// The driver-side backlash with its standard error, "2.013 ± 0.004": a figure near zero
+/// reads as zero within its error rather than as a negative backlash ("-0.001" alone did).
+pub fn backlash_with_error(value: f64, std_err: Option<f64>) -> String {
+    match std_err {
+        Some(e) if e.is_finite() => format!("{} ± {}", f3(value), f3(e)),
+        _ => f3(value),
+    }
+}
+
 /// `v` with three decimals, without the sign of a value that rounds to zero ("-0.000"
 /// reads as a negative figure; issue 20).
 pub fn f3(v: f64) -> String {
@@ -528,7 +537,11 @@ fn headline_blocks(s: &Summary, pictures: &[plots::Picture], b: &mut Vec<Block>)
             .map_or(String::new(), |ms| format!(" ({} ms)", fixed(ms, 1))),
         h.backlash_driver_deg
             .map_or("backlash not measured (no reverse run)".to_string(), |v| {
-                format!("backlash {}° of driver angle{}", f3(v), follower_play(h))
+                format!(
+                    "backlash {}° of driver angle{}",
+                    backlash_with_error(v, s.lag.backlash_driver_std_err_deg),
+                    follower_play(h)
+                )
             })
     ));
     lines.push(format!(
@@ -980,7 +993,7 @@ pub fn write_report(
 
 #[cfg(test)]
 mod tests {
-    use super::f3;
+    use super::{backlash_with_error, f3};
 
     /// Guards figures without a negative zero: what rounds to zero prints unsigned, the
     /// rest keeps its sign.
@@ -990,5 +1003,15 @@ mod tests {
         assert_eq!(f3(-0.0), "0.000");
         assert_eq!(f3(-0.0006), "-0.001");
         assert_eq!(f3(1.23449), "1.234");
+    }
+
+    /// Guards the backlash figure: with its standard error when the fit gave one, so a
+    /// value near zero is read against its error; alone when it did not.
+    #[test]
+    fn backlash_carries_its_error() {
+        assert_eq!(backlash_with_error(-0.0014, Some(0.0011)), "-0.001 ± 0.001");
+        assert_eq!(backlash_with_error(2.0134, Some(0.0042)), "2.013 ± 0.004");
+        assert_eq!(backlash_with_error(2.0134, None), "2.013");
+        assert_eq!(backlash_with_error(2.0134, Some(f64::NAN)), "2.013");
     }
 }
