@@ -23,6 +23,16 @@ pub const DEFAULT_SIZE: (u32, u32) = (1000, 600);
 /// peak: 1.45.
 pub const LEGEND_HEADROOM: f64 = 1.45;
 
+/// Margin below data in a [`legend_room_y_range`], as a fraction of its span: 0.05.
+pub const BELOW_DATA_MARGIN: f64 = 0.05;
+
+/// The y range for data from `lo` spanning `span`: [`BELOW_DATA_MARGIN`] below it and
+/// [`LEGEND_HEADROOM`] × `span` above `lo`, so the legend in the upper right corner hides
+/// no peak.
+pub fn legend_room_y_range(lo: f64, span: f64) -> (f64, f64) {
+    (lo - BELOW_DATA_MARGIN * span, lo + LEGEND_HEADROOM * span)
+}
+
 /// Opacity of a [`Chart::zones`] shading: 0.15, a tint under the data.
 pub const ZONE_OPACITY: f64 = 0.15;
 

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use serde_json::json;
 
 use super::{Prediction, DRIVE_LOST_DEG};
-use crate::plot::{Chart, PlotError, Series, LEGEND_HEADROOM};
+use crate::plot::{legend_room_y_range, Chart, PlotError, Series};
 
 /// The `format` of `prediction.json`.
 pub const PREDICTION_FORMAT: &str = "mpcmech-prediction/1";
@@ -98,7 +98,7 @@ pub fn write(
         .flat_map(|s| [s.forward_deg - s.target_deg, s.reverse_deg - s.target_deg]);
     let (low, high) = deviations.fold((0.0f64, 0.0f64), |(lo, hi), d| (lo.min(d), hi.max(d)));
     let span = (high - low).max(0.1);
-    dev.y_range = Some((low - 0.05 * span, low + LEGEND_HEADROOM * span));
+    dev.y_range = Some(legend_room_y_range(low, span));
     dev.h_lines = vec![(0.0, "target".to_string())];
     files.extend(dev.write(&out.join("deviation"))?);
 
@@ -129,7 +129,7 @@ pub fn write(
     play.x_range = Some((0.0, 360.0));
     // Headroom above the data for the legend (drawn in the upper right corner).
     let top = p.worst_play.deg.max(DRIVE_LOST_DEG);
-    play.y_range = Some((-0.05 * top, LEGEND_HEADROOM * top));
+    play.y_range = Some(legend_room_y_range(0.0, top));
     play.h_lines = vec![(DRIVE_LOST_DEG, "drive lost above".to_string())];
     files.extend(play.write(&out.join("play"))?);
 

@@ -164,11 +164,7 @@ fn curve_charts(m: &Mechanism) -> Vec<(String, Chart)> {
                     (lo.min(y), hi.max(y))
                 });
             if lo < hi {
-                let pad = 0.04 * (hi - lo);
-                c.y_range = Some((
-                    lo - pad,
-                    lo + (hi - lo) * crate::plot::LEGEND_HEADROOM + pad,
-                ));
+                c.y_range = Some(crate::plot::legend_room_y_range(lo, hi - lo));
             }
             out.push((format!("curves-{frame}-{view}"), c));
         }

@@ -241,8 +241,7 @@ pub fn cycles_chart(dir: &Path, ch: &ChannelMetrics) -> Result<Picture, Analysis
         (l.min(v), h.max(v))
     });
     if lo < hi {
-        let span = hi - lo;
-        chart.y_range = Some((lo - 0.05 * span, lo + crate::plot::LEGEND_HEADROOM * span));
+        chart.y_range = Some(crate::plot::legend_room_y_range(lo, hi - lo));
     }
     let stem = dir.join(format!("cycles_{}", ch.name));
     chart.write(&stem)?;
