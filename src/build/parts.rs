@@ -33,7 +33,7 @@ use super::kinematics::Kinematics;
 use super::layout::{cover_cylinder, Layout, Pieces};
 use super::segments::{self, Segment};
 use super::shapes;
-use super::swept::{Balls, ExactSweep, Frame};
+use super::swept::{Balls, Certificates, ExactSweep, Frame};
 use super::{BuildError, BuildOptions};
 
 /// A strut's root lies this far inside the piece it leaves from (behind the rim's flat
@@ -47,6 +47,9 @@ const RAY_REACH_MM: f64 = 12.0;
 /// The exact carve of the driver is computed only where its value matters: within this many
 /// cells of the surface (values beyond are capped).
 const CARVE_CAP_CELLS: f64 = 3.0;
+/// Lattice of the carve's certificates (`swept::Certificates`), mm: every grid point in a
+/// 1 mm cube starts from the search made at its centre.
+const CARVE_CERTIFICATE_CELL_MM: f64 = 1.0;
 
 /// Everything the parts are made of, placed and planned.
 pub struct Design {
@@ -926,6 +929,7 @@ impl Design {
             material: self.driver_material(),
             rims: Union::new(self.rims.iter().cloned().map(boxed).collect()),
             design: self,
+            certificates: Certificates::new(CARVE_CERTIFICATE_CELL_MM),
         }
     }
 
@@ -972,6 +976,7 @@ pub struct DriverSolid<'a> {
     material: Union,
     rims: Union,
     design: &'a Design,
+    certificates: Certificates,
 }
 
 impl Sdf for DriverSolid<'_> {
@@ -988,8 +993,8 @@ impl Sdf for DriverSolid<'_> {
                 target: Frame::Driver,
                 cap,
                 coarse: Some(&self.design.driver_field),
-            }
-            .value(p);
+            };
+            let sweep = self.certificates.value(&sweep, p);
             m.max(0.5 * self.design.clearance - sweep)
         };
         self.design
