@@ -534,15 +534,33 @@ mod tests {
     /// tolerance.
     const EXACT_VS_BRUTE_MM: f64 = 0.01;
 
+    /// The sweep that carves the groove: `solid` on the follower, seen from the driver.
+    fn carving<'a, S: Sdf>(kin: &'a Kinematics, solid: &'a S, cap: f64) -> ExactSweep<'a, S> {
+        ExactSweep {
+            kin,
+            solid,
+            frame: Frame::Follower,
+            target: Frame::Driver,
+            cap,
+            coarse: None,
+        }
+    }
+
+    /// The test mechanism (half-turn-2to1) and its motion at 10 mm per unit.
+    fn half_turn() -> (Mechanism, Kinematics) {
+        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data/mechanism/half-turn-2to1/mechanism.json");
+        let mech = Mechanism::load(&file).expect("the test mechanism loads");
+        let kin = Kinematics::new(&mech, 10.0).expect("its law rebuilds");
+        (mech, kin)
+    }
+
     /// Guards the groove: the swept distance of a ball on the follower, seen from the driver
     /// (what carves the groove), equals the minimum over a dense set of instants, at points
     /// near and inside the swept volume, and is capped where it should be.
     #[test]
     fn exact_sweep_is_the_minimum_over_time() {
-        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("tests/data/mechanism/half-turn-2to1/mechanism.json");
-        let mech = Mechanism::load(&file).expect("the test mechanism loads");
-        let kin = Kinematics::new(&mech, 10.0).expect("its law rebuilds");
+        let (mech, kin) = half_turn();
         // A ball on the first curve pair's follower curve, 2 mm in radius.
         let c2 = mech.curve_pairs[0].samples.c2[0];
         let ball = Sphere {
@@ -550,14 +568,7 @@ mod tests {
             radius: 2.0,
         };
         let cap = 5.0;
-        let sweep = ExactSweep {
-            kin: &kin,
-            solid: &ball,
-            frame: Frame::Follower,
-            target: Frame::Driver,
-            cap,
-            coarse: None,
-        };
+        let sweep = carving(&kin, &ball, cap);
         // Probe points: where the ball's centre passes in the driver's frame, offset.
         let n = 200_000;
         let mut checked = 0;
@@ -596,10 +607,7 @@ mod tests {
     /// above here; up to 0.26 mm at grid points of a build).
     #[test]
     fn exact_sweep_finds_the_lowest_of_several_minima() {
-        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("tests/data/mechanism/half-turn-2to1/mechanism.json");
-        let mech = Mechanism::load(&file).expect("the test mechanism loads");
-        let kin = Kinematics::new(&mech, 10.0).expect("its law rebuilds");
+        let (mech, kin) = half_turn();
         let rims = crate::geometry::sdf::Union::new(
             mech.curve_pairs
                 .iter()
@@ -607,14 +615,7 @@ mod tests {
                 .collect(),
         );
         let cap = 2.0;
-        let sweep = ExactSweep {
-            kin: &kin,
-            solid: &rims,
-            frame: Frame::Follower,
-            target: Frame::Driver,
-            cap,
-            coarse: None,
-        };
+        let sweep = carving(&kin, &rims, cap);
         let certificates = Certificates::new(1.0);
         let n = 200_000;
         let (mut checked, mut worst_plain, mut worst_cert) = (0, 0.0f64, 0.0f64);
@@ -651,19 +652,9 @@ mod tests {
     /// blocks that other threads may run in any order, and both must agree exactly).
     #[test]
     fn certificate_values_do_not_depend_on_the_order_asked() {
-        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("tests/data/mechanism/half-turn-2to1/mechanism.json");
-        let mech = Mechanism::load(&file).expect("the test mechanism loads");
-        let kin = Kinematics::new(&mech, 10.0).expect("its law rebuilds");
+        let (mech, kin) = half_turn();
         let rim = crate::build::shapes::rim(&mech.curve_pairs[0], 10.0);
-        let sweep = ExactSweep {
-            kin: &kin,
-            solid: &rim,
-            frame: Frame::Follower,
-            target: Frame::Driver,
-            cap: 2.0,
-            coarse: None,
-        };
+        let sweep = carving(&kin, &rim, 2.0);
         let c1 = mech.curve_pairs[0].samples.c1[5];
         let base = Vec3::new(c1[0], c1[1], c1[2]) * 10.0;
         // A 6 × 6 × 6 grid of 0.4 mm around a point of the groove: several lattice cells.
