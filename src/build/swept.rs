@@ -296,14 +296,13 @@ impl<S: Sdf> ExactSweep<'_, S> {
 
     /// The [`ExactSweep::value`] at `q`, starting from the certificate of a point within its
     /// reach: only the intervals the certificate cannot rule out at `q` are searched.
-    /// Equal to [`ExactSweep::value`] within the search's tolerance.
+    /// Equal to [`ExactSweep::value`] within the search's tolerance. The caller has asked
+    /// the coarse field already ([`Certificates::value`] does, before it looks for a
+    /// certificate).
     fn value_near(&self, q: Vec3, cert: &Certificate) -> f64 {
         let d = (q - cert.p).norm();
         if d > cert.reach || cert.cap != self.cap {
             return self.value(q);
-        }
-        if self.capped(q) {
-            return self.cap;
         }
         let mut open: Vec<(f64, f64, f64)> = Vec::with_capacity(cert.leaves.len());
         let mut best = f64::INFINITY;
