@@ -2,8 +2,9 @@
 //!
 //! Owns [`Section`] (the cross-sections parts use: a half ellipse for the follower's contact
 //! rims, a rounded rectangle for the driver's bands), [`Frame`] and [`Sweep`], whose
-//! distance is the union of the section extruded along each segment of the sampled loop,
-//! found through a bounding-volume hierarchy over the segments. The section lies in the
+//! distance is the union of the section extruded along each segment of the sampled loop
+//! (reaching to the mitre planes that bisect the turns, so that no wedge opens between
+//! segments), found through a bounding-volume hierarchy over the segments. The section lies in the
 //! plane normal to the loop; its coordinates are (u, v) along the frame's `u` and
 //! `v = t × u`. It does not know what the curves mean (contact curves are `build`'s).
 
@@ -287,27 +288,57 @@ impl Bvh {
 #[derive(Clone, Debug)]
 pub struct Sweep {
     frames: Vec<Frame>,
+    /// At frame i, the unit normal of the plane that ends segment i − 1 and starts
+    /// segment i (see [`Sweep::segment_dist`]).
+    mitres: Vec<Vec3>,
     section: Section,
     bvh: Bvh,
 }
+
+/// Largest turn between two segments that is joined by a mitre, degrees; sharper joints
+/// keep the segments' square ends (a mitre's reach beyond the frame grows as 1/cos of
+/// half the turn). The parts' loops turn by at most 11° per segment.
+const MITRE_MAX_TURN_DEG: f64 = 60.0;
 
 impl Sweep {
     /// Sweep `section` along the closed loop `frames` (at least 3; `u` need not be exactly
     /// normal to the loop: each segment re-orthogonalizes it).
     pub fn new(frames: Vec<Frame>, section: Section) -> Sweep {
         let n = frames.len();
+        let tangent = |i: usize| (frames[(i + 1) % n].o - frames[i].o).try_normalize(0.0);
+        let cos_max = MITRE_MAX_TURN_DEG.to_radians().cos();
+        // A mitre bisects the turn; a joint too sharp (or next to an empty segment) gets
+        // a zero normal: its segments keep square ends.
+        let mitres: Vec<Vec3> = (0..n)
+            .map(|i| match (tangent((i + n - 1) % n), tangent(i)) {
+                (Some(a), Some(b)) if a.dot(&b) >= cos_max => (a + b).normalize(),
+                _ => Vec3::zeros(),
+            })
+            .collect();
         let r = section.extent();
         let boxes: Vec<Aabb> = (0..n)
             .map(|i| {
                 let (a, b) = (frames[i].o, frames[(i + 1) % n].o);
+                // Beyond a square end the piece reaches out to the mitre, so a point in it
+                // at lateral offset ρ is up to ρ / cos α from the frame (α half the turn),
+                // while its distance is at least ρ − r. The box must never be farther than
+                // the distance (the hierarchy prunes by it), which holds for every ρ whose
+                // distance can matter (ρ < r + SWEEP_EXACT_WITHIN_MM) when the frame's
+                // ball grows by (r + SWEEP_EXACT_WITHIN_MM)(1 / cos α − 1).
+                let cos_half = tangent(i).map_or(1.0, |t| {
+                    let end = |m: Vec3| if m == Vec3::zeros() { 1.0 } else { m.dot(&t) };
+                    end(mitres[i]).min(end(mitres[(i + 1) % n]))
+                });
+                let grow = (r + SWEEP_EXACT_WITHIN_MM) * (1.0 / cos_half - 1.0);
                 Aabb::new(arr(a), arr(a))
                     .union(&Aabb::new(arr(b), arr(b)))
-                    .inflate(r)
+                    .inflate(r + grow)
             })
             .collect();
         let bvh = Bvh::new(&boxes);
         Sweep {
             frames,
+            mitres,
             section,
             bvh,
         }
@@ -323,15 +354,25 @@ impl Sweep {
         self.section
     }
 
-    /// Distance to the section extruded along segment `i` (from frame i to i + 1), with
-    /// round ends: the union over segments is the sweep.
     /// Distance from `p` to the piece of the sweep between frames `i` and `i + 1`, or
-    /// infinity when it is known not to be below `best`: a point beyond the segment's end by
-    /// `along` is at least `along` from that piece whatever the section, so the section's
-    /// distance (the costly part) is skipped.
+    /// infinity when it is known not to be below `best`: the union over segments is the
+    /// sweep.
+    ///
+    /// The piece is the section extruded along the segment, with square ends, together with
+    /// its continuation up to the mitre planes that bisect the turns at its frames. Square
+    /// ends alone leave a thin wedge open on the outer side of every turn, at every frame:
+    /// a point there is beyond both segments' ends and came out just outside the solid
+    /// however deep in it, and where a grid point fell into a wedge the mesher cut a pit
+    /// up to the section's depth (seen on the 0.4 mm driver of half-turn-2to1 as hundreds
+    /// of dark specks on the bands' faces).
+    ///
+    /// A point beyond the square end by `along` (and outside the mitres) is at least `along`
+    /// from the piece whatever the section, so the section's distance (the costly part) is
+    /// skipped when that cannot win.
     fn segment_dist(&self, i: usize, p: Vec3, best: f64) -> f64 {
         let n = self.frames.len();
-        let (f0, f1) = (&self.frames[i], &self.frames[(i + 1) % n]);
+        let j = (i + 1) % n;
+        let (f0, f1) = (&self.frames[i], &self.frames[j]);
         let e = f1.o - f0.o;
         let len2 = e.norm_squared();
         if len2 <= 0.0 {
@@ -341,12 +382,18 @@ impl Sweep {
         let t = e / len;
         let raw = (p - f0.o).dot(&t);
         let s = (raw / len).clamp(0.0, 1.0);
-        let along = if raw < 0.0 {
-            -raw
-        } else if raw > len {
-            raw - len
-        } else {
+        // A joint without a mitre ends the segment square.
+        let plane = |m: Vec3| if m == Vec3::zeros() { t } else { m };
+        let within_mitres = || {
+            (p - f0.o).dot(&plane(self.mitres[i])) >= 0.0
+                && (p - f1.o).dot(&plane(self.mitres[j])) <= 0.0
+        };
+        let along = if (0.0..=len).contains(&raw) || within_mitres() {
             0.0
+        } else if raw < 0.0 {
+            -raw
+        } else {
+            raw - len
         };
         if along > 0.0 && along >= best {
             return f64::INFINITY;
@@ -502,6 +549,51 @@ mod tests {
             }
         }
         assert!(compared > 100, "only {compared} points near the surface");
+    }
+
+    /// Points on the outer side of a turn, where two segments' square ends leave a wedge
+    /// between them, are inside the sweep at their distance from the segment's axis (with
+    /// square ends alone they came out at +ρ·sin α, outside); beyond the surface the pruned
+    /// distance still equals the minimum over all segments.
+    #[test]
+    fn the_outer_side_of_a_turn_is_closed() {
+        let (big, r, n) = (20.0, 3.0, 24);
+        let at = |i: usize| i as f64 / n as f64 * std::f64::consts::TAU;
+        let frames: Vec<Frame> = (0..n)
+            .map(|i| Frame {
+                o: Vec3::new(big * at(i).cos(), big * at(i).sin(), 0.0),
+                u: Vec3::new(at(i).cos(), at(i).sin(), 0.0),
+            })
+            .collect();
+        let s = Sweep::new(
+            frames,
+            Section::RoundedRect {
+                u_min: -r,
+                u_max: r,
+                half_width: r,
+                round: r,
+            },
+        );
+        // Each chord is off the radial plane at its frames by half the 15° turn.
+        let half_turn = std::f64::consts::PI / n as f64;
+        for i in 0..n {
+            let out = Vec3::new(at(i).cos(), at(i).sin(), 0.0);
+            for rho in [0.5, 1.5, 2.5, 3.5, 5.0, 9.0] {
+                let p = out * (big + rho);
+                let d = s.dist(p);
+                let full = (0..n)
+                    .map(|k| s.segment_dist(k, p, f64::INFINITY))
+                    .fold(f64::INFINITY, f64::min);
+                assert!(
+                    (d - full).abs() < 1e-12,
+                    "frame {i}, ρ {rho}: {d} vs {full}"
+                );
+                if rho < r {
+                    let want = rho * half_turn.cos() - r;
+                    assert!((d - want).abs() < 1e-9, "frame {i}, ρ {rho}: {d} vs {want}");
+                }
+            }
+        }
     }
 
     /// A circle of radius R swept by a rounded rectangle that is in fact a disc of radius r
