@@ -244,15 +244,17 @@ pub fn write(
         files.push(path);
     }
 
+    // After the renders, the last large allocations of a build.
+    let peak_mb = peak_resident_mb();
     let json_path = out.join("build.json");
-    let doc = summary_json(built, mechanism, opts, bed_mm, bed_note.as_deref());
+    let doc = summary_json(built, mechanism, opts, bed_mm, bed_note.as_deref(), peak_mb);
     let text = serde_json::to_string_pretty(&doc).expect("a JSON value always serializes");
     write_text(&json_path, &(text + "\n"))?;
     files.push(json_path);
     let md_path = out.join("build.md");
     write_text(
         &md_path,
-        &summary_md(built, mechanism, opts, bed_mm, bed_note.as_deref()),
+        &summary_md(built, mechanism, opts, bed_mm, bed_note.as_deref(), peak_mb),
     )?;
     files.push(md_path);
     Ok(Written {
@@ -260,6 +262,21 @@ pub fn write(
         bed_mm,
         bed_note,
     })
+}
+
+/// The process's peak resident memory so far, MB (`VmHWM` of `/proc/self/status`); `None`
+/// where the system does not say (not Linux). In `demo` it includes what ran before the build.
+fn peak_resident_mb() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let kb: f64 = status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmHWM:"))?
+        .trim()
+        .trim_end_matches("kB")
+        .trim()
+        .parse()
+        .ok()?;
+    Some(kb / 1024.0)
 }
 
 fn write_text(path: &Path, text: &str) -> Result<(), OutputError> {
@@ -275,6 +292,7 @@ fn summary_json(
     opts: &BuildOptions,
     bed_mm: [f64; 2],
     bed_note: Option<&str>,
+    peak_mb: Option<f64>,
 ) -> serde_json::Value {
     let kin = &built.design.kin;
     let f = &built.figures;
@@ -330,6 +348,7 @@ fn summary_json(
             "failure": f.failure(),
         },
         "timings_s": built.timings.iter().map(|(w, s)| json!({"stage": w, "seconds": s})).collect::<Vec<_>>(),
+        "peak_memory_mb": peak_mb,
     })
 }
 
@@ -397,6 +416,7 @@ fn summary_md(
     opts: &BuildOptions,
     bed_mm: [f64; 2],
     bed_note: Option<&str>,
+    peak_mb: Option<f64>,
 ) -> String {
     let kin = &built.design.kin;
     let f = &built.figures;
@@ -534,6 +554,12 @@ fn summary_md(
     let _ = writeln!(s, "\n## Time\n");
     for (w, t) in &built.timings {
         let _ = writeln!(s, "- {w}: {t:.1} s");
+    }
+    if let Some(mb) = peak_mb {
+        let _ = writeln!(
+            s,
+            "\nPeak memory: {mb:.0} MB (resident, the whole process)."
+        );
     }
     s
 }

@@ -1,0 +1,158 @@
+//! Build benchmark (issue 14): for every example in `data/motions/`, a printable design
+//! (`mpc-rig synth MOTION --band-gap 1.5 --axis-room 1.0 --printed-rim`, the layout
+//! docs/build.md says the parts need) and its parts (`mpc-rig build`), each in a child
+//! process as a user runs them. Prints per example: class, K, d_x, the synthesis seconds,
+//! the build's seconds per stage, its peak resident memory, the triangles per part and the
+//! verdict (printable, not printable and why, or where the command stopped).
+//!
+//! Run with `cargo bench --bench build`. Designs are kept in `BUILD_BENCH_DIR` (default
+//! `target/build-bench`) and reused, so a second run times the builds alone; delete the
+//! folder to synthesize again. `BUILD_BENCH_FILTER=<substring>` runs only matching motion
+//! files; `BUILD_BENCH_CELL_MM=<mm>` sets the mesher cell (default: the build's own, 0.4 mm,
+//! the one its check's tolerances are set for).
+//!
+//! Target (issue 14): each build under 60 s and 4 GiB on this 2-core machine, at a cell
+//! that keeps geometric error below 0.1 mm. Figures taken on a loaded machine are not
+//! comparable: say the load with them.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+use serde_json::Value;
+
+/// The synthesis options that leave the parts room (docs/build.md, "Printable designs").
+const PRINTABLE_SYNTH: [&str; 5] = ["--band-gap", "1.5", "--axis-room", "1.0", "--printed-rim"];
+
+fn main() {
+    let filter = std::env::var("BUILD_BENCH_FILTER").unwrap_or_default();
+    let cell = std::env::var("BUILD_BENCH_CELL_MM").ok();
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let work = std::env::var("BUILD_BENCH_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|_| root.join("target/build-bench"));
+    let exe = env!("CARGO_BIN_EXE_mpc-rig");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(root.join("data/motions"))
+        .expect("data/motions exists")
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .filter(|p| p.to_string_lossy().contains(&filter))
+        .collect();
+    files.sort();
+    println!(
+        "cell: {} mm; designs and parts in {}",
+        cell.as_deref().unwrap_or("0.4 (default)"),
+        work.display()
+    );
+    println!(
+        "{:<20} {:<5} {:>2} {:>5} {:>7} {:>8} {:>7} {:>7} {:>7} {:>6} {:>6} {:>7}  {:>20}  result",
+        "motion",
+        "class",
+        "K",
+        "d_x",
+        "synth s",
+        "build s",
+        "design",
+        "driver",
+        "follow",
+        "supp",
+        "check",
+        "peak MB",
+        "triangles d/f/s"
+    );
+    for f in files {
+        let name = f.file_stem().unwrap().to_string_lossy().into_owned();
+        let dir = work.join(&name);
+        let mech = dir.join("mechanism.json");
+        let synth_s = if mech.exists() {
+            "kept".to_string()
+        } else {
+            let t0 = Instant::now();
+            let out = Command::new(exe)
+                .arg("synth")
+                .arg(&f)
+                .args(PRINTABLE_SYNTH)
+                .arg("-q")
+                .arg("-o")
+                .arg(&dir)
+                .output()
+                .expect("mpc-rig runs");
+            let s = t0.elapsed().as_secs_f64();
+            if !mech.exists() {
+                println!(
+                    "{name:<20} no printable design ({s:.0} s): {}",
+                    first_line(&out.stderr)
+                );
+                continue;
+            }
+            format!("{s:.0}")
+        };
+        let design = read_json(&mech);
+        let parts = dir.join(format!("parts-{}", cell.as_deref().unwrap_or("default")));
+        let mut cmd = Command::new(exe);
+        cmd.arg("build").arg(&mech).arg("-q").arg("-o").arg(&parts);
+        if let Some(c) = &cell {
+            cmd.args(["--cell-mm", c]);
+        }
+        // A build.json left by an earlier run must not pass for this one.
+        let _ = std::fs::remove_file(parts.join("build.json"));
+        let t0 = Instant::now();
+        let out = cmd.output().expect("mpc-rig runs");
+        let build_s = t0.elapsed().as_secs_f64();
+        let head = format!(
+            "{name:<20} {:<5} {:>2} {:>5.2} {synth_s:>7} {build_s:>8.0}",
+            design["class"].as_str().unwrap_or("?"),
+            design["curve_pairs"].as_array().map_or(0, Vec::len),
+            design["driver_offset"].as_f64().unwrap_or(f64::NAN),
+        );
+        let report = parts.join("build.json");
+        if !report.exists() {
+            println!("{head}  stopped: {}", first_line(&out.stderr));
+            continue;
+        }
+        let b = read_json(&report);
+        let stage = |s: &str| {
+            b["timings_s"]
+                .as_array()
+                .and_then(|a| a.iter().find(|t| t["stage"] == s))
+                .and_then(|t| t["seconds"].as_f64())
+                .map_or("–".to_string(), |v| format!("{v:.0}"))
+        };
+        let triangles: Vec<String> = b["parts"]
+            .as_array()
+            .map(|ps| ps.iter().map(|p| p["triangles"].to_string()).collect())
+            .unwrap_or_default();
+        let verdict = if b["printable"] == true {
+            "printable, check passes".to_string()
+        } else {
+            let first = b["problems"][0].as_str().unwrap_or("no reason given");
+            format!("NOT PRINTABLE: {first}")
+        };
+        println!(
+            "{head} {:>7} {:>7} {:>7} {:>6} {:>6} {:>7}  {:>20}  {verdict}",
+            stage("design"),
+            stage("mesh driver"),
+            stage("mesh follower"),
+            stage("mesh support"),
+            stage("check"),
+            b["peak_memory_mb"]
+                .as_f64()
+                .map_or("–".to_string(), |m| format!("{m:.0}")),
+            triangles.join("/"),
+        );
+    }
+}
+
+fn read_json(path: &Path) -> Value {
+    let text = std::fs::read_to_string(path).expect("the command wrote it");
+    serde_json::from_str(&text).expect("the command writes valid JSON")
+}
+
+/// The first line of a command's error output, for the table.
+fn first_line(stderr: &[u8]) -> String {
+    String::from_utf8_lossy(stderr)
+        .lines()
+        .find(|l| !l.trim().is_empty())
+        .unwrap_or("(no message)")
+        .to_string()
+}
