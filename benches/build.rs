@@ -21,6 +21,9 @@ use std::time::Instant;
 
 use serde_json::Value;
 
+#[path = "support/examples.rs"]
+mod examples;
+
 /// The synthesis options that leave the parts room (docs/build.md, "Printable designs").
 const PRINTABLE_SYNTH: [&str; 5] = ["--band-gap", "1.5", "--axis-room", "1.0", "--printed-rim"];
 
@@ -32,13 +35,7 @@ fn main() {
         .map(PathBuf::from)
         .unwrap_or_else(|_| root.join("target/build-bench"));
     let exe = env!("CARGO_BIN_EXE_mpc-rig");
-    let mut files: Vec<PathBuf> = std::fs::read_dir(root.join("data/motions"))
-        .expect("data/motions exists")
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
-        .filter(|p| p.to_string_lossy().contains(&filter))
-        .collect();
-    files.sort();
+    let files = examples::example_motions(&filter);
     println!(
         "cell: {} mm; designs and parts in {}",
         cell.as_deref().unwrap_or("0.4 (default)"),

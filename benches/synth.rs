@@ -12,12 +12,14 @@
 //! quarter-turn-dwell at most 5), every example ≤ 30 s on this 2-core machine, closed at
 //! every instant of the 4× check (paper and robust).
 
-use std::path::PathBuf;
 use std::time::Instant;
 
 use mpc_rig::motion::Motion;
 use mpc_rig::synth::closure::NormalCone;
 use mpc_rig::synth::{synthesize, NoProgress, Outcome, SynthOptions};
+
+#[path = "support/examples.rs"]
+mod examples;
 
 fn main() {
     let filter = std::env::var("SYNTH_BENCH_FILTER").unwrap_or_default();
@@ -30,14 +32,7 @@ fn main() {
         _ => NormalCone::Tangent,
     };
     println!("3R normal cone: {}", cone.label());
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data/motions");
-    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
-        .expect("data/motions exists")
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
-        .filter(|p| p.to_string_lossy().contains(&filter))
-        .collect();
-    files.sort();
+    let files = examples::example_motions(&filter);
     println!(
         "{:<22} {:<5} {:>2} {:>5} {:>8} {:>9} {:>8} {:>9} {:>9} {:>8} {:>8}  result; tried",
         "motion",

@@ -551,6 +551,29 @@ mod tests {
         assert!(compared > 100, "only {compared} points near the surface");
     }
 
+    /// A circle of radius `big` about z sampled by `n` frames, swept by a rounded rectangle
+    /// that is in fact a disc of radius `r` (u and v half-extents = round = r): a torus.
+    fn torus_sweep(big: f64, r: f64, n: usize) -> Sweep {
+        let frames: Vec<Frame> = (0..n)
+            .map(|i| {
+                let a = i as f64 / n as f64 * std::f64::consts::TAU;
+                Frame {
+                    o: Vec3::new(big * a.cos(), big * a.sin(), 0.0),
+                    u: Vec3::new(a.cos(), a.sin(), 0.0),
+                }
+            })
+            .collect();
+        Sweep::new(
+            frames,
+            Section::RoundedRect {
+                u_min: -r,
+                u_max: r,
+                half_width: r,
+                round: r,
+            },
+        )
+    }
+
     /// Points on the outer side of a turn, where two segments' square ends leave a wedge
     /// between them, are inside the sweep at their distance from the segment's axis (with
     /// square ends alone they came out at +ρ·sin α, outside); beyond the surface the pruned
@@ -559,21 +582,7 @@ mod tests {
     fn the_outer_side_of_a_turn_is_closed() {
         let (big, r, n) = (20.0, 3.0, 24);
         let at = |i: usize| i as f64 / n as f64 * std::f64::consts::TAU;
-        let frames: Vec<Frame> = (0..n)
-            .map(|i| Frame {
-                o: Vec3::new(big * at(i).cos(), big * at(i).sin(), 0.0),
-                u: Vec3::new(at(i).cos(), at(i).sin(), 0.0),
-            })
-            .collect();
-        let s = Sweep::new(
-            frames,
-            Section::RoundedRect {
-                u_min: -r,
-                u_max: r,
-                half_width: r,
-                round: r,
-            },
-        );
+        let s = torus_sweep(big, r, n);
         // Each chord is off the radial plane at its frames by half the 15° turn.
         let half_turn = std::f64::consts::PI / n as f64;
         for i in 0..n {
@@ -601,25 +610,7 @@ mod tests {
     #[test]
     fn sweep_of_a_circle_is_a_torus() {
         let (big, r) = (20.0, 3.0);
-        let n = 720;
-        let frames: Vec<Frame> = (0..n)
-            .map(|i| {
-                let a = i as f64 / n as f64 * std::f64::consts::TAU;
-                Frame {
-                    o: Vec3::new(big * a.cos(), big * a.sin(), 0.0),
-                    u: Vec3::new(a.cos(), a.sin(), 0.0),
-                }
-            })
-            .collect();
-        let s = Sweep::new(
-            frames,
-            Section::RoundedRect {
-                u_min: -r,
-                u_max: r,
-                half_width: r,
-                round: r,
-            },
-        );
+        let s = torus_sweep(big, r, 720);
         for k in 0..100 {
             let p = Vec3::new(
                 (k as f64 * 0.77).sin() * 30.0,
