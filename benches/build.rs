@@ -8,8 +8,8 @@
 //! Run with `cargo bench --bench build`. Designs are kept in `BUILD_BENCH_DIR` (default
 //! `target/build-bench`) and reused, so a second run times the builds alone; delete the
 //! folder to synthesize again. `BUILD_BENCH_FILTER=<substring>` runs only matching motion
-//! files; `BUILD_BENCH_CELL_MM=<mm>` sets the mesher cell (default: the build's own, 0.4 mm,
-//! the one its check's tolerances are set for).
+//! files; `BUILD_BENCH_CELL_MM=<mm>` sets the mesher cell (default: the build's own, the
+//! one its check's tolerances are set for).
 //!
 //! Target (issue 14): each build under 60 s and 4 GiB on this 2-core machine, at a cell
 //! that keeps geometric error below 0.1 mm. Figures taken on a loaded machine are not
@@ -19,6 +19,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
+use mpc_rig::build::dims;
 use serde_json::Value;
 
 #[path = "support/examples.rs"]
@@ -36,9 +37,10 @@ fn main() {
         .unwrap_or_else(|_| root.join("target/build-bench"));
     let exe = env!("CARGO_BIN_EXE_mpc-rig");
     let files = examples::example_motions(&filter);
+    let default_cell = format!("{} (the build's default)", dims::DEFAULT_CELL_MM);
     println!(
         "cell: {} mm; designs and parts in {}",
-        cell.as_deref().unwrap_or("0.4 (default)"),
+        cell.as_deref().unwrap_or(&default_cell),
         work.display()
     );
     println!(

@@ -9,7 +9,7 @@
 //! | `assembly.glb` | the assembled parts moving over one period (animated glTF) |
 //! | `assembly-isometric.png`, `assembly-front.png` | the assembly at t = 0 |
 //! | `driver.png`, `follower.png`, `support.png` | each part alone, isometric |
-//! | `build.json` | format [`BUILD_FORMAT`]: options, bench, per-part and check figures |
+//! | `build.json` | format [`BUILD_FORMAT`]: options, bench, per-part and check figures, timings, peak memory |
 //! | `build.md` | the same for a person, with the pictures |
 //!
 //! It does not make or check the parts (see [`super::build`]), and writes each format
@@ -567,6 +567,20 @@ fn summary_md(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Guards the reading of the peak memory: after 64 MB were written to, the process's
+    /// peak is at least that (on Linux, where `/proc/self/status` says it).
+    #[test]
+    fn peak_memory_counts_what_was_touched() {
+        if !Path::new("/proc/self/status").exists() {
+            assert_eq!(peak_resident_mb(), None);
+            return;
+        }
+        let block = vec![1u8; 64 << 20];
+        std::hint::black_box(&block);
+        let mb = peak_resident_mb().expect("Linux says its peak");
+        assert!(mb >= 64.0, "{mb} MB");
+    }
 
     /// Guards the left-out line of `build.md`: pieces listed largest first with volumes,
     /// crumbs (slivers and the shells of tiny voids, volume about ±0) only counted.
