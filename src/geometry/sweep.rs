@@ -4,9 +4,9 @@
 //! rims, a rounded rectangle for the driver's bands), [`Frame`] and [`Sweep`], whose
 //! distance is the union of the section extruded along each segment of the sampled loop
 //! (reaching to the mitre planes that bisect the turns, so that no wedge opens between
-//! segments), found through a bounding-volume hierarchy over the segments. The section lies in the
-//! plane normal to the loop; its coordinates are (u, v) along the frame's `u` and
-//! `v = t × u`. It does not know what the curves mean (contact curves are `build`'s).
+//! segments), found through a bounding-volume hierarchy over the segments. The section
+//! lies in the plane normal to the loop; its coordinates are (u, v) along the frame's `u`
+//! and `v = t × u`. It does not know what the curves mean (contact curves are `build`'s).
 
 use super::mesh::Aabb;
 use super::sdf::{arr, Sdf, Vec3};
@@ -288,9 +288,10 @@ impl Bvh {
 #[derive(Clone, Debug)]
 pub struct Sweep {
     frames: Vec<Frame>,
-    /// At frame i, the unit normal of the plane that ends segment i − 1 and starts
-    /// segment i (see [`Sweep::segment_dist`]).
-    mitres: Vec<Vec3>,
+    /// For segment i, the unit normals of the planes that end its piece at frame i and at
+    /// frame i + 1: the mitres of those joints, or the segment's own direction where a
+    /// joint has none (see [`Sweep::segment_dist`]).
+    ends: Vec<[Vec3; 2]>,
     section: Section,
     bvh: Bvh,
 }
@@ -307,12 +308,19 @@ impl Sweep {
         let n = frames.len();
         let tangent = |i: usize| (frames[(i + 1) % n].o - frames[i].o).try_normalize(0.0);
         let cos_max = MITRE_MAX_TURN_DEG.to_radians().cos();
-        // A mitre bisects the turn; a joint too sharp (or next to an empty segment) gets
-        // a zero normal: its segments keep square ends.
-        let mitres: Vec<Vec3> = (0..n)
+        // A mitre bisects the turn; a joint too sharp (or next to an empty segment) has
+        // none, and its segments keep square ends there.
+        let mitres: Vec<Option<Vec3>> = (0..n)
             .map(|i| match (tangent((i + n - 1) % n), tangent(i)) {
-                (Some(a), Some(b)) if a.dot(&b) >= cos_max => (a + b).normalize(),
-                _ => Vec3::zeros(),
+                (Some(a), Some(b)) if a.dot(&b) >= cos_max => Some((a + b).normalize()),
+                _ => None,
+            })
+            .collect();
+        let ends: Vec<[Vec3; 2]> = (0..n)
+            .map(|i| {
+                // An empty segment is never measured (see `segment_dist`).
+                let t = tangent(i).unwrap_or_else(Vec3::zeros);
+                [mitres[i].unwrap_or(t), mitres[(i + 1) % n].unwrap_or(t)]
             })
             .collect();
         let r = section.extent();
@@ -325,10 +333,8 @@ impl Sweep {
                 // the distance (the hierarchy prunes by it), which holds for every ρ whose
                 // distance can matter (ρ < r + SWEEP_EXACT_WITHIN_MM) when the frame's
                 // ball grows by (r + SWEEP_EXACT_WITHIN_MM)(1 / cos α − 1).
-                let cos_half = tangent(i).map_or(1.0, |t| {
-                    let end = |m: Vec3| if m == Vec3::zeros() { 1.0 } else { m.dot(&t) };
-                    end(mitres[i]).min(end(mitres[(i + 1) % n]))
-                });
+                let cos_half =
+                    tangent(i).map_or(1.0, |t| ends[i][0].dot(&t).min(ends[i][1].dot(&t)));
                 let grow = (r + SWEEP_EXACT_WITHIN_MM) * (1.0 / cos_half - 1.0);
                 Aabb::new(arr(a), arr(a))
                     .union(&Aabb::new(arr(b), arr(b)))
@@ -338,7 +344,7 @@ impl Sweep {
         let bvh = Bvh::new(&boxes);
         Sweep {
             frames,
-            mitres,
+            ends,
             section,
             bvh,
         }
@@ -371,8 +377,7 @@ impl Sweep {
     /// skipped when that cannot win.
     fn segment_dist(&self, i: usize, p: Vec3, best: f64) -> f64 {
         let n = self.frames.len();
-        let j = (i + 1) % n;
-        let (f0, f1) = (&self.frames[i], &self.frames[j]);
+        let (f0, f1) = (&self.frames[i], &self.frames[(i + 1) % n]);
         let e = f1.o - f0.o;
         let len2 = e.norm_squared();
         if len2 <= 0.0 {
@@ -382,12 +387,8 @@ impl Sweep {
         let t = e / len;
         let raw = (p - f0.o).dot(&t);
         let s = (raw / len).clamp(0.0, 1.0);
-        // A joint without a mitre ends the segment square.
-        let plane = |m: Vec3| if m == Vec3::zeros() { t } else { m };
-        let within_mitres = || {
-            (p - f0.o).dot(&plane(self.mitres[i])) >= 0.0
-                && (p - f1.o).dot(&plane(self.mitres[j])) <= 0.0
-        };
+        let [m0, m1] = self.ends[i];
+        let within_mitres = || (p - f0.o).dot(&m0) >= 0.0 && (p - f1.o).dot(&m1) <= 0.0;
         let along = if (0.0..=len).contains(&raw) || within_mitres() {
             0.0
         } else if raw < 0.0 {
