@@ -347,14 +347,19 @@ impl Queryable {
         if self.occ[self.grid.index(v)] == 0 {
             return 0.0;
         }
-        if let Some(f) = self.fine.voxel_of(p) {
-            let at_centre = self.lower[self.fine.index(f)] as f64;
-            // NaN (no bound here) compares false and falls through to the query.
-            if at_centre - FINE_ROUNDING_MM > (p - self.fine.center(f)).norm() {
-                return 0.0;
-            }
+        if self.proved_outside(p) {
+            return 0.0;
         }
         (-self.signed(p)).max(0.0)
+    }
+
+    /// The fine grid's bound at `p`'s voxel centre exceeds `p`'s distance from it: `p` is
+    /// outside. False where there is no bound (NaN compares false).
+    fn proved_outside(&self, p: Vec3) -> bool {
+        self.fine.voxel_of(p).is_some_and(|f| {
+            self.lower[self.fine.index(f)] as f64 - FINE_ROUNDING_MM
+                > (p - self.fine.center(f)).norm()
+        })
     }
 
     fn signed(&self, p: Vec3) -> f64 {
@@ -636,8 +641,7 @@ mod tests {
             if want > 0.0 {
                 inside += 1;
             }
-            let f = q.fine.voxel_of(p).unwrap();
-            if (q.lower[q.fine.index(f)] as f64) > (p - q.fine.center(f)).norm() + 1e-5 {
+            if q.proved_outside(p) {
                 skipped += 1;
             }
         }
