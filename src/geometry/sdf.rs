@@ -20,6 +20,23 @@ pub type Vec3 = Vector3<f64>;
 pub trait Sdf: Send + Sync {
     /// Signed distance bound at `p`: negative inside, |value| ≤ distance to the surface.
     fn dist(&self, p: Vec3) -> f64;
+    /// The same bound, continuous inside as well as outside: a compound solid takes the
+    /// smallest value of every part that holds `p`, where [`Sdf::dist`] may stop at the
+    /// first (the sign is then settled, which is all a mesher needs, but the value jumps
+    /// where another part's turn comes first). Searches that bound a distance's change by
+    /// how far the point moved need it ([`crate::build::swept::ExactSweep`]: on the rims of
+    /// half-turn-2to1, [`Sdf::dist`] along a point's path jumped by up to 1 mm inside).
+    /// Where a solid gives a cheaper lower bound far out, the value may drop to it there;
+    /// such a search then errs low, never high.
+    fn dist_continuous(&self, p: Vec3) -> f64 {
+        self.dist(p)
+    }
+    /// A bound on how fast [`Sdf::dist_continuous`] changes, per mm moved: 1 for a true
+    /// distance, more for a solid whose value is measured in a frame that turns as the
+    /// point moves (a twisted sweep, [`crate::geometry::sweep::Sweep`]).
+    fn lipschitz(&self) -> f64 {
+        1.0
+    }
     /// A box holding the whole solid.
     fn bounds(&self) -> Aabb;
 }
@@ -27,6 +44,12 @@ pub trait Sdf: Send + Sync {
 impl<T: Sdf + ?Sized> Sdf for Box<T> {
     fn dist(&self, p: Vec3) -> f64 {
         (**self).dist(p)
+    }
+    fn dist_continuous(&self, p: Vec3) -> f64 {
+        (**self).dist_continuous(p)
+    }
+    fn lipschitz(&self) -> f64 {
+        (**self).lipschitz()
     }
     fn bounds(&self) -> Aabb {
         (**self).bounds()
@@ -36,6 +59,12 @@ impl<T: Sdf + ?Sized> Sdf for Box<T> {
 impl<T: Sdf + ?Sized> Sdf for std::sync::Arc<T> {
     fn dist(&self, p: Vec3) -> f64 {
         (**self).dist(p)
+    }
+    fn dist_continuous(&self, p: Vec3) -> f64 {
+        (**self).dist_continuous(p)
+    }
+    fn lipschitz(&self) -> f64 {
+        (**self).lipschitz()
     }
     fn bounds(&self) -> Aabb {
         (**self).bounds()
@@ -240,6 +269,8 @@ impl Sdf for HalfSpace {
 pub struct Union {
     children: Vec<Box<dyn Sdf>>,
     bounds: Aabb,
+    /// The children's largest.
+    lipschitz: f64,
 }
 
 impl Union {
@@ -248,33 +279,50 @@ impl Union {
         let bounds = children
             .iter()
             .fold(Aabb::EMPTY, |b, c| b.union(&c.bounds()));
-        Union { children, bounds }
+        let lipschitz = children.iter().map(|c| c.lipschitz()).fold(1.0, f64::max);
+        Union {
+            children,
+            bounds,
+            lipschitz,
+        }
     }
-}
 
-impl Sdf for Union {
-    fn dist(&self, p: Vec3) -> f64 {
+    /// The smallest `value` of the children, skipping those that cannot win: a child
+    /// cannot be nearer than its box, so it is skipped unless its box is within the best
+    /// distance so far. Inside a child already (best < 0) the sign is settled and, unless
+    /// `every_holder`, the rest are skipped; exactly on a child's face (best = 0) a child
+    /// whose box holds p may still hold p inside, so it is looked at: skipping it made a
+    /// plane of zeros where a face of one child lies inside another, and a mesher node on
+    /// that plane cut the part in two there (the 1R1T support's clamp ring came off the
+    /// base plate).
+    fn smallest(&self, p: Vec3, every_holder: bool, value: impl Fn(&dyn Sdf) -> f64) -> f64 {
         let pa = arr(p);
         let mut best = f64::INFINITY;
         for c in &self.children {
-            // A child cannot be nearer than its box: skip it unless its box is within the
-            // best distance so far. Inside a child already (best < 0) the sign is settled
-            // and the rest are skipped; exactly on a child's face (best = 0) a child whose
-            // box holds p may still hold p inside, so it is looked at: skipping it made a
-            // plane of zeros where a face of one child lies inside another, and a mesher
-            // node on that plane cut the part in two there (the 1R1T support's clamp
-            // ring came off the base plate).
             let d = c.bounds().distance(pa);
-            if best.is_finite() && d >= best.max(0.0) && (d > 0.0 || best < 0.0) {
+            let settled = best < 0.0 && !every_holder;
+            if best.is_finite() && d >= best.max(0.0) && (d > 0.0 || settled) {
                 continue;
             }
-            best = best.min(c.dist(p));
+            best = best.min(value(c.as_ref()));
         }
         if best.is_finite() {
             best
         } else {
             self.bounds.distance(pa).max(f64::MIN_POSITIVE)
         }
+    }
+}
+
+impl Sdf for Union {
+    fn dist(&self, p: Vec3) -> f64 {
+        self.smallest(p, false, |c| c.dist(p))
+    }
+    fn dist_continuous(&self, p: Vec3) -> f64 {
+        self.smallest(p, true, |c| c.dist_continuous(p))
+    }
+    fn lipschitz(&self) -> f64 {
+        self.lipschitz
     }
     fn bounds(&self) -> Aabb {
         self.bounds
@@ -425,12 +473,15 @@ impl ThickTriangles {
 
 impl Sdf for ThickTriangles {
     fn dist(&self, p: Vec3) -> f64 {
-        let v = self
-            .bvh
-            .min_over(arr(p), super::sweep::SWEEP_EXACT_WITHIN_MM, |i, _| {
+        let v = self.bvh.min_over(
+            arr(p),
+            super::sweep::SWEEP_EXACT_WITHIN_MM,
+            false,
+            |i, _| {
                 let [a, b, c] = self.tris[i];
                 (p - closest_on_triangle(p, a, b, c)).norm() - self.half_thickness
-            });
+            },
+        );
         if v < super::sweep::SWEEP_EXACT_WITHIN_MM {
             v
         } else {
@@ -472,6 +523,28 @@ impl<S: Sdf> Sdf for KeepClear<'_, S> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Guards [`Sdf::dist_continuous`] of a union: inside two overlapping balls it is the
+    /// smaller of the two values whichever ball comes first, where [`Sdf::dist`] may stop
+    /// at the first ball that holds the point (its sign is all a mesher needs).
+    #[test]
+    fn a_union_s_continuous_value_is_the_least_over_every_holder() {
+        let ball = |x: f64, r: f64| -> Box<dyn Sdf> {
+            Box::new(Sphere {
+                center: Vec3::new(x, 0.0, 0.0),
+                radius: r,
+            })
+        };
+        let p = Vec3::new(1.0, 0.0, 0.0);
+        for union in [
+            Union::new(vec![ball(0.0, 1.5), ball(2.0, 5.0)]),
+            Union::new(vec![ball(2.0, 5.0), ball(0.0, 1.5)]),
+        ] {
+            // Depths 0.5 and 4.
+            assert_eq!(union.dist_continuous(p), -4.0);
+            assert!(union.dist(p) < 0.0);
+        }
+    }
 
     /// Guards the union's pruning on a face: a point on one child's face inside another
     /// child is inside the union (it used to read 0, and a mesher node there split the part).
