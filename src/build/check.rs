@@ -31,8 +31,9 @@ use crate::geometry::sdf::Vec3;
 use crate::geometry::voxel::{distance_transform, VoxelGrid};
 use crate::synth::mechanism::Mechanism;
 
+use super::kinematics::Frame;
 use super::parts::Design;
-use super::swept::{transform, ExactSweep, Frame};
+use super::swept::{transform, ExactSweep};
 
 /// Times per period of the interference check. 720: twice the 360, so a part moves
 /// by less than 1.3 mm between checks at the examples' fastest points.

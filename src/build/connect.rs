@@ -16,8 +16,9 @@ use crate::geometry::sdf::{arr, Sdf, ThickPolyline, Vec3};
 use crate::geometry::voxel::{shortest_path, DistanceField, PathQuery, VoxelGrid};
 
 use super::dims::*;
+use super::kinematics::Frame;
 use super::kinematics::Kinematics;
-use super::swept::{swept_bounds, swept_field, Balls, Frame};
+use super::swept::{swept_bounds, swept_field, Balls};
 use super::BuildError;
 
 /// Extra room around a part's material in its planning grid, mm.

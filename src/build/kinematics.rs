@@ -2,10 +2,11 @@
 //!
 //! Owns [`Kinematics`]: the follower's pose M²(t) (the periodic law interpolating the
 //! mechanism's `follower_motion`, scaled to mm), the driver's pose (a turn of 2πt about the
-//! axis through (d_x, 0, 0)), the maps between the driver, follower and support (reference)
-//! frames, and bounds on how fast a point of one frame moves in another (mm per period),
-//! which the swept-volume code uses to sample time finely enough and to bound distances
-//! between samples. It does not know the parts' shapes.
+//! axis through (d_x, 0, 0)), the [`Frame`]s and the maps between them, and bounds on how
+//! fast a point of one frame moves in another (mm per period), over the whole period and
+//! over any interval of it ([`Kinematics::speed_within`]), which the swept-volume code uses
+//! to sample time finely enough and to bound distances between samples. It does not know
+//! the parts' shapes.
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
@@ -20,6 +21,29 @@ use super::BuildError;
 const SPEED_SAMPLES: usize = 4096;
 /// Factor on the sampled maximum speeds, covering peaks between samples. 1.05.
 const SPEED_SAFETY: f64 = 1.05;
+/// Time bins per period of the per-interval speed bounds ([`Kinematics::speed_within`]).
+/// 4096: 11 bins per key of the file's 360, so the law changes little within a bin, and
+/// each bin is sampled at its ends and middle.
+const SPEED_BINS: usize = 4096;
+
+/// A frame a body lives in or a grid is laid out in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Frame {
+    /// The driver's frame (turns with the driver).
+    Driver,
+    /// The follower's frame.
+    Follower,
+    /// The reference frame (the support's).
+    Reference,
+}
+
+impl Frame {
+    const ALL: [Frame; 3] = [Frame::Driver, Frame::Follower, Frame::Reference];
+
+    fn index(self) -> usize {
+        self as usize
+    }
+}
 
 /// Frames: D (driver), F (follower), R (reference = support). Poses map a frame into R.
 #[derive(Clone, Debug)]
@@ -34,6 +58,63 @@ pub struct Kinematics {
     vel_max: f64,
     /// Largest |T₂|, mm.
     trans_max: f64,
+    /// Per ordered pair of frames (`from.index() * 3 + to.index()`; empty when equal).
+    within: Vec<IntervalSpeed>,
+}
+
+/// How fast the points of one frame move in another over any interval of time: a point p
+/// moves no faster than `spin`·|p| + `drift`, each the largest over the interval's bins.
+#[derive(Clone, Debug, Default)]
+struct IntervalSpeed {
+    spin: BinMax,
+    drift: BinMax,
+}
+
+/// The largest of per-bin values over any run of bins of one period (a sparse table: level
+/// k holds the maxima of the runs of 2ᵏ bins that do not wrap).
+#[derive(Clone, Debug, Default)]
+struct BinMax {
+    levels: Vec<Vec<f64>>,
+}
+
+impl BinMax {
+    fn new(bins: Vec<f64>) -> BinMax {
+        let mut levels = vec![bins];
+        let mut run = 1;
+        while 2 * run <= levels[0].len() {
+            let prev = levels.last().expect("level 0 is there");
+            let next: Vec<f64> = (0..prev.len() - run)
+                .map(|i| prev[i].max(prev[i + run]))
+                .collect();
+            levels.push(next);
+            run *= 2;
+        }
+        BinMax { levels }
+    }
+
+    /// The largest value of bins `lo..=hi` (0 ≤ lo ≤ hi < bins).
+    fn run(&self, lo: usize, hi: usize) -> f64 {
+        let k = (hi - lo + 1).ilog2() as usize;
+        self.levels[k][lo].max(self.levels[k][hi + 1 - (1 << k)])
+    }
+
+    /// The largest value of the bins that meet [t0, t1] (fractions of a period, any reals;
+    /// the period wraps).
+    fn over(&self, t0: f64, t1: f64) -> f64 {
+        let n = self.levels[0].len();
+        let first = (t0 * n as f64).floor();
+        let last = ((t1 * n as f64).ceil() - 1.0).max(first);
+        if last - first + 1.0 >= n as f64 {
+            return self.run(0, n - 1);
+        }
+        let lo = first.rem_euclid(n as f64) as usize;
+        let hi = lo + (last - first) as usize;
+        if hi < n {
+            self.run(lo, hi)
+        } else {
+            self.run(lo, n - 1).max(self.run(0, hi - n))
+        }
+    }
 }
 
 fn class_of(c: Class) -> MotionClass {
@@ -71,7 +152,9 @@ impl Kinematics {
             omega_max: 0.0,
             vel_max: 0.0,
             trans_max: 0.0,
+            within: Vec::new(),
         };
+        k.within = k.interval_speeds();
         for i in 0..SPEED_SAMPLES {
             let s = k.law.sample(i as f64 / SPEED_SAMPLES as f64);
             k.omega_max = k.omega_max.max(s.angular_velocity.norm());
@@ -120,6 +203,77 @@ impl Kinematics {
         )
     }
 
+    /// A frame's angular velocity ω, origin T and the origin's velocity Ṫ, all in the
+    /// reference frame at time `t` (rad and mm per period).
+    fn rates(&self, f: Frame, t: f64) -> [Vector3<f64>; 3] {
+        match f {
+            Frame::Reference => [Vector3::zeros(); 3],
+            Frame::Driver => [
+                Vector3::z() * std::f64::consts::TAU,
+                Vector3::new(self.dx_mm, 0.0, 0.0),
+                Vector3::zeros(),
+            ],
+            Frame::Follower => {
+                let s = self.law.sample(t);
+                [
+                    s.angular_velocity,
+                    s.translation * self.scale_mm,
+                    s.velocity * self.scale_mm,
+                ]
+            }
+        }
+    }
+
+    /// The tables of [`Kinematics::speed_within`]: per ordered pair of frames, the spin and
+    /// drift of each bin, the largest of the bin's ends and middle raised by
+    /// [`SPEED_SAFETY`].
+    fn interval_speeds(&self) -> Vec<IntervalSpeed> {
+        let n = SPEED_BINS;
+        let rates: Vec<[[Vector3<f64>; 3]; 3]> = (0..=2 * n)
+            .map(|j| Frame::ALL.map(|f| self.rates(f, j as f64 / (2 * n) as f64)))
+            .collect();
+        let mut out = vec![IntervalSpeed::default(); 9];
+        for from in Frame::ALL {
+            for to in Frame::ALL.into_iter().filter(|&to| to != from) {
+                let (spin, drift): (Vec<f64>, Vec<f64>) = rates
+                    .iter()
+                    .map(|r| {
+                        let [wa, ta, va] = r[from.index()];
+                        let [wb, tb, vb] = r[to.index()];
+                        ((wa - wb).norm(), (va - vb - wb.cross(&(ta - tb))).norm())
+                    })
+                    .unzip();
+                let bins = |v: &[f64]| -> BinMax {
+                    BinMax::new(
+                        (0..n)
+                            .map(|i| v[2 * i].max(v[2 * i + 1]).max(v[2 * i + 2]) * SPEED_SAFETY)
+                            .collect(),
+                    )
+                };
+                out[from.index() * 3 + to.index()] = IntervalSpeed {
+                    spin: bins(&spin),
+                    drift: bins(&drift),
+                };
+            }
+        }
+        out
+    }
+
+    /// Bound on the speed (mm per period) of a point of frame `from` at distance `p_norm`
+    /// from its origin, seen from frame `to`, at any time of [t0, t1]. With poses (R, T)
+    /// into the reference frame, the point's place y = R_Bᵀ(R_A p + T_A − T_B) in B moves at
+    /// ẏ = R_Bᵀ((ω_A − ω_B) × R_A p + Ṫ_A − Ṫ_B − ω_B × (T_A − T_B)), so
+    /// |ẏ| ≤ |ω_A − ω_B|·|p| + |Ṫ_A − Ṫ_B − ω_B × (T_A − T_B)|, each term taken at its
+    /// largest over the interval's bins. Where the law is slow this is far below the
+    /// bounds over the whole period.
+    pub fn speed_within(&self, from: Frame, to: Frame, p_norm: f64, t0: f64, t1: f64) -> f64 {
+        if from == to {
+            return 0.0;
+        }
+        let s = &self.within[from.index() * 3 + to.index()];
+        s.spin.over(t0, t1) * p_norm + s.drift.over(t0, t1)
+    }
+
     /// D → F at time `t`.
     pub fn driver_to_follower(&self, t: f64) -> Isometry3<f64> {
         self.follower(t).inverse() * self.driver(t)
@@ -162,11 +316,101 @@ impl Kinematics {
 mod tests {
     use super::*;
     use nalgebra::Point3;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
 
     /// Contact points must coincide within this, mm: the file's own coincidence tolerance
     /// (1e-6 model units, conventions.md) at 10 mm per unit, widened for the law's spline
     /// between its 360 keys.
     const COINCIDENT_MM: f64 = 1e-3;
+
+    /// The test mechanism (half-turn-2to1) at 10 mm per unit.
+    fn half_turn() -> (Mechanism, Kinematics) {
+        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data/mechanism/half-turn-2to1/mechanism.json");
+        let mech = Mechanism::load(&file).expect("the test mechanism loads");
+        let kin = Kinematics::new(&mech, 10.0).expect("its law rebuilds");
+        (mech, kin)
+    }
+
+    /// Guards the sparse table behind the per-interval bounds: over seeded random intervals,
+    /// some wrapping past the period's end and some longer than it, the largest bin equals
+    /// the brute-force largest of the bins the interval meets.
+    #[test]
+    fn bin_maxima_are_the_largest_over_the_bins_met() {
+        let mut rng = ChaCha8Rng::seed_from_u64(31);
+        let bins: Vec<f64> = (0..37).map(|_| rng.random::<f64>()).collect();
+        let table = BinMax::new(bins.clone());
+        let n = bins.len() as f64;
+        for _ in 0..2000 {
+            let t0 = rng.random_range(-1.5..1.5);
+            let t1 = t0 + rng.random_range(0.0..1.2);
+            let first = (t0 * n).floor() as i64;
+            let last = (((t1 * n).ceil() as i64) - 1).max(first);
+            let brute = (first..=last)
+                .map(|i| bins[i.rem_euclid(bins.len() as i64) as usize])
+                .fold(f64::NEG_INFINITY, f64::max);
+            assert_eq!(table.over(t0, t1), brute, "[{t0}, {t1}]");
+        }
+    }
+
+    /// Guards the per-interval speed bounds the exact sweeps prune with: for every ordered
+    /// pair of frames, seeded random points and intervals, no point moves faster (by finite
+    /// differences of its place, at 40 instants of the interval) than
+    /// [`Kinematics::speed_within`] says; and over intervals of 1/64 period the bound of the
+    /// driver's points in the follower is on average well under the bound over the period
+    /// (the follower's speed varies fourfold over this law).
+    #[test]
+    fn interval_speeds_bound_the_motion_and_are_tighter_than_the_period_s() {
+        let (_, kin) = half_turn();
+        let pose = |f: Frame, t: f64| match f {
+            Frame::Driver => kin.driver(t),
+            Frame::Follower => kin.follower(t),
+            Frame::Reference => Isometry3::identity(),
+        };
+        let place = |from: Frame, to: Frame, p: &Point3<f64>, t: f64| {
+            (pose(to, t).inverse() * pose(from, t)) * p
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(32);
+        let e = 1e-7;
+        for from in Frame::ALL {
+            for to in Frame::ALL {
+                for _ in 0..50 {
+                    let p = Point3::new(
+                        rng.random_range(-60.0..60.0),
+                        rng.random_range(-60.0..60.0),
+                        rng.random_range(-30.0..30.0),
+                    );
+                    let t0 = rng.random_range(0.0..1.0);
+                    let t1 = t0 + rng.random_range(1e-4..0.3);
+                    let bound = kin.speed_within(from, to, p.coords.norm(), t0, t1);
+                    for i in 0..40 {
+                        let t = t0 + (t1 - t0) * (i as f64 + 0.5) / 40.0;
+                        let v = (place(from, to, &p, t + e) - place(from, to, &p, t - e)).norm()
+                            / (2.0 * e);
+                        assert!(
+                            v <= bound * (1.0 + 1e-6) + 1e-6,
+                            "{from:?} → {to:?} at {t}: {v} > {bound} mm per period"
+                        );
+                    }
+                }
+            }
+        }
+        let (mut within, mut period) = (0.0, 0.0);
+        for i in 0..64 {
+            let p = Vector3::new(30.0 * (i as f64).cos(), 30.0 * (i as f64).sin(), 5.0);
+            let t0 = i as f64 / 64.0;
+            within += kin.speed_within(
+                Frame::Driver,
+                Frame::Follower,
+                p.norm(),
+                t0,
+                t0 + 1.0 / 64.0,
+            );
+            period += kin.speed_driver_point_in_follower(p);
+        }
+        assert!(within < 0.5 * period, "{within} against {period}");
+    }
 
     /// Guards the frames every part is posed in: at each sample of each curve pair, the
     /// driver point c¹ posed by `driver(t)` and the follower point c² posed by

@@ -19,8 +19,9 @@ use crate::synth::closure::Class;
 
 use super::bench::{Bench, Coupling, Reading};
 use super::dims::*;
+use super::kinematics::Frame;
 use super::kinematics::Kinematics;
-use super::swept::{swept_bounds, Balls, Frame};
+use super::swept::{swept_bounds, Balls};
 
 /// Samples per period for the bounds of moving material. 720: the parts move by less than
 /// a millimetre between samples, and the bounds are grown by the largest such move.

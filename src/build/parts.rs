@@ -29,11 +29,12 @@ use crate::synth::mechanism::Mechanism;
 use super::bench::{Bench, Reading};
 use super::connect::{self, Joined};
 use super::dims::*;
+use super::kinematics::Frame;
 use super::kinematics::Kinematics;
 use super::layout::{cover_cylinder, Layout, Pieces};
 use super::segments::{self, Segment};
 use super::shapes;
-use super::swept::{Balls, Certificates, ExactSweep, Frame};
+use super::swept::{swept_of_each, Balls, Certificates, ExactSweep};
 use super::{BuildError, BuildOptions};
 
 /// A strut's root lies this far inside the piece it leaves from (behind the rim's flat
@@ -177,20 +178,18 @@ pub fn design(
         .fold(f64::NEG_INFINITY, f64::max);
     // The columns are checked against the other part's functional surfaces exactly: a
     // column on the axis is where the coarse fields are most pessimistic.
-    let rim_union = Union::new(rims.iter().cloned().map(boxed).collect());
-    let band_union = Arc::new(Union::new(bands.iter().cloned().map(boxed).collect()));
     let exact_cap = COLUMN_RADIUS_MM + STRUT_MARGIN_MM + 1.0;
     let driver_column = column(
         &|p| {
-            let rims = ExactSweep {
-                kin: &kin,
-                solid: &rim_union,
-                frame: Frame::Follower,
-                target: Frame::Driver,
-                cap: exact_cap,
-                coarse: None,
-            }
-            .value(p);
+            let rims = swept_of_each(
+                &kin,
+                &rims,
+                Frame::Follower,
+                Frame::Driver,
+                exact_cap,
+                None,
+                p,
+            );
             rims.min(d_others.sample(p))
         },
         layout.driver_hub.1,
@@ -200,15 +199,15 @@ pub fn design(
         let up_to = layout.cap.map_or(layout.z_hi, |c| c.0 + 1.0);
         column(
             &|p| {
-                let bands = ExactSweep {
-                    kin: &kin,
-                    solid: band_union.as_ref(),
-                    frame: Frame::Driver,
-                    target: Frame::Follower,
-                    cap: exact_cap,
-                    coarse: None,
-                }
-                .value(p);
+                let bands = swept_of_each(
+                    &kin,
+                    &bands,
+                    Frame::Driver,
+                    Frame::Follower,
+                    exact_cap,
+                    None,
+                    p,
+                );
                 bands.min(follower_other_field.sample(p))
             },
             top,
@@ -251,7 +250,7 @@ pub fn design(
     let band_pieces = carved_pieces(
         &kin,
         &bands,
-        &rim_union,
+        &rims,
         &driver_field,
         opts.clearance_mm,
         &pairs,
@@ -262,7 +261,7 @@ pub fn design(
             &kin,
             &layout,
             &bands,
-            &rim_union,
+            &rims,
             &driver_field,
             &driver_pieces,
             &pairs,
@@ -473,7 +472,7 @@ fn plan_follower_struts(
 fn carved_pieces(
     kin: &Kinematics,
     bands: &[Sweep],
-    rims: &Union,
+    rims: &[Sweep],
     field: &DistanceField,
     clearance: f64,
     pairs: &[(usize, &crate::synth::mechanism::CurvePair)],
@@ -481,16 +480,16 @@ fn carved_pieces(
 ) -> Vec<Vec<Segment>> {
     // What the carve leaves of each band: its swept distance less half the clearance.
     let carve = |p: Vec3| {
-        ExactSweep {
+        let cap = 0.5 * clearance + segments::BRIDGE_MM + 0.1;
+        swept_of_each(
             kin,
-            solid: rims,
-            frame: Frame::Follower,
-            target: Frame::Driver,
-            cap: 0.5 * clearance + segments::BRIDGE_MM + 0.1,
-            coarse: Some(field),
-        }
-        .value(p)
-            - 0.5 * clearance
+            rims,
+            Frame::Follower,
+            Frame::Driver,
+            cap,
+            Some(field),
+            p,
+        ) - 0.5 * clearance
     };
     bands
         .iter()
@@ -519,7 +518,7 @@ fn plan_driver_struts(
     kin: &Kinematics,
     layout: &Layout,
     bands: &[Sweep],
-    rims: &Union,
+    rims: &[Sweep],
     field: &DistanceField,
     pieces: &Pieces,
     pairs: &[(usize, &crate::synth::mechanism::CurvePair)],
@@ -532,15 +531,8 @@ fn plan_driver_struts(
     joined_mark_first(&mut joined, pieces);
     let hub = Vec3::new(0.0, 0.0, 0.5 * (layout.driver_hub.0 + layout.driver_hub.1));
     let rim_clearance = |p: Vec3| {
-        ExactSweep {
-            kin,
-            solid: rims,
-            frame: Frame::Follower,
-            target: Frame::Driver,
-            cap: STRUT_RADIUS_MM + STRUT_MARGIN_MM + 1.0,
-            coarse: None,
-        }
-        .value(p)
+        let cap = STRUT_RADIUS_MM + STRUT_MARGIN_MM + 1.0;
+        swept_of_each(kin, rims, Frame::Follower, Frame::Driver, cap, None, p)
     };
     // (band, piece number, piece), nearest the hub first.
     let mut items: Vec<(usize, usize, &Segment)> = Vec::new();
@@ -927,10 +919,19 @@ impl Design {
     pub fn driver_solid(&self) -> DriverSolid<'_> {
         DriverSolid {
             material: self.driver_material(),
-            rims: Union::new(self.rims.iter().cloned().map(boxed).collect()),
             design: self,
-            certificates: Certificates::new(CARVE_CERTIFICATE_CELL_MM),
+            certificates: self
+                .rims
+                .iter()
+                .map(|_| Certificates::new(CARVE_CERTIFICATE_CELL_MM, self.carve_cap()))
+                .collect(),
         }
+    }
+
+    /// The largest swept distance of the rims the carve computes exactly, mm: beyond it the
+    /// driver's value is more than [`CARVE_CAP_CELLS`] cells outside the groove.
+    fn carve_cap(&self) -> f64 {
+        CARVE_CAP_CELLS * self.cell_mm + 0.5 * self.clearance
     }
 
     /// The support (reference frame).
@@ -974,28 +975,38 @@ impl Sdf for KeptWeb {
 /// The driver as printed (see [`Design::driver_solid`]).
 pub struct DriverSolid<'a> {
     material: Union,
-    rims: Union,
     design: &'a Design,
-    certificates: Certificates,
+    /// One lattice per rim: each rim is swept on its own, so that the search's bound on
+    /// how fast the distance changes is that rim's (`Sdf::lipschitz`: the rims of
+    /// half-turn-2to1 range from 1.004 to 2.84, and a union would take the largest).
+    certificates: Vec<Certificates>,
 }
 
 impl Sdf for DriverSolid<'_> {
     fn dist(&self, p: Vec3) -> f64 {
         let m = self.material.dist(p);
-        let cap = CARVE_CAP_CELLS * self.design.cell_mm + 0.5 * self.design.clearance;
+        let cap = self.design.carve_cap();
+        let half = 0.5 * self.design.clearance;
         let v = if m >= cap {
             m
         } else {
-            let sweep = ExactSweep {
-                kin: &self.design.kin,
-                solid: &self.rims,
-                frame: Frame::Follower,
-                target: Frame::Driver,
-                cap,
-                coarse: Some(&self.design.driver_field),
-            };
-            let sweep = self.certificates.value(&sweep, p);
-            m.max(0.5 * self.design.clearance - sweep)
+            // max(m, half − s) is m wherever s ≥ half − m: the search need only tell that,
+            // and a lower cap rules out more of the period (outside the material, and
+            // just inside it, far more). Each rim's search is capped by the smallest
+            // distance found so far.
+            let mut swept = cap.min(half - m);
+            for (rim, certificates) in self.design.rims.iter().zip(&self.certificates) {
+                let sweep = ExactSweep {
+                    kin: &self.design.kin,
+                    solid: rim,
+                    frame: Frame::Follower,
+                    target: Frame::Driver,
+                    cap: swept,
+                    coarse: Some(&self.design.driver_field),
+                };
+                swept = swept.min(certificates.value(&sweep, p));
+            }
+            m.max(half - swept)
         };
         self.design
             .driver_pieces

@@ -20,7 +20,8 @@ use crate::geometry::sweep::{Frame as PathFrame, Section, Sweep};
 use crate::synth::mechanism::CurvePair;
 
 use super::dims::*;
-use super::swept::{Balls, Frame};
+use super::kinematics::Frame;
+use super::swept::Balls;
 
 /// The rims' section.
 pub const RIM: Section = Section::HalfEllipse {

@@ -9,7 +9,8 @@
 //!   struts and webs) and the quick rejection of the exact carve use it.
 //! - [`ExactSweep`]: the exact minimum over time of a solid's distance at a point, by branch
 //!   and bound over time intervals (the distance changes no faster than the point moves,
-//!   [`Kinematics`] bounds that speed) followed by a local refinement; the driver's groove
+//!   times the solid's [`Sdf::lipschitz`]; [`Kinematics`] bounds that speed over each
+//!   interval) followed by a local refinement; the driver's groove
 //!   is carved with it, so the groove is the true envelope of the follower's rims, without
 //!   the scallops a finite number of boolean subtractions would leave. [`Certificates`]
 //!   share the coarse part of that search between the grid points of one small cube (the
@@ -29,18 +30,7 @@ use crate::geometry::mesh::Aabb;
 use crate::geometry::sdf::{Sdf, Vec3};
 use crate::geometry::voxel::{distance_transform, DistanceField, VoxelGrid};
 
-use super::kinematics::Kinematics;
-
-/// A frame a body lives in or a grid is laid out in.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Frame {
-    /// The driver's frame (turns with the driver).
-    Driver,
-    /// The follower's frame.
-    Follower,
-    /// The reference frame (the support's).
-    Reference,
-}
+use super::kinematics::{Frame, Kinematics};
 
 /// A body given as balls of one radius in its frame (a conservative cover of a part).
 #[derive(Clone, Debug)]
@@ -194,6 +184,33 @@ pub struct ExactSweep<'a, S: Sdf> {
     pub coarse: Option<&'a DistanceField>,
 }
 
+/// The smallest swept distance of several solids of one frame at `p`, capped at `cap`:
+/// each solid is searched on its own, so that each search bounds the distance's change by
+/// that solid's [`Sdf::lipschitz`] (a union takes the largest of its parts'), and capped by
+/// the smallest value found so far.
+pub fn swept_of_each<S: Sdf>(
+    kin: &Kinematics,
+    solids: &[S],
+    frame: Frame,
+    target: Frame,
+    cap: f64,
+    coarse: Option<&DistanceField>,
+    p: Vec3,
+) -> f64 {
+    solids.iter().fold(cap, |best, solid| {
+        ExactSweep {
+            kin,
+            solid,
+            frame,
+            target,
+            cap: best,
+            coarse,
+        }
+        .value(p)
+        .min(best)
+    })
+}
+
 /// One interval of time a branch and bound ended on: its centre and half width, and either
 /// a lower bound of the distance over it (pruned) or the value at its centre (a basin, to
 /// be refined).
@@ -215,7 +232,7 @@ struct Leaf {
 struct Certificate {
     p: Vec3,
     reach: f64,
-    /// The cap of the sweep it was made for (it speaks for no other).
+    /// The cap it was made for (it speaks for sweeps capped at or below it).
     cap: f64,
     leaves: Vec<Leaf>,
 }
@@ -226,29 +243,35 @@ struct Certificate {
 /// covers the blocks the mesher has in flight and their neighbours along x and y.
 const CERTIFICATES_HELD: usize = 1 << 15;
 
-/// Certificates of one [`ExactSweep`] on a lattice of `cell` mm, made when first asked for:
-/// a point's value starts from the certificate of its lattice cell's centre. Each
-/// certificate depends only on its centre, so every value is the same whichever thread or
-/// order asked first.
+/// Certificates of one solid's [`ExactSweep`]s on a lattice of `cell` mm, made when first
+/// asked for: a point's value starts from the certificate of its lattice cell's centre.
+/// Each certificate is made for the lattice's cap and depends only on its centre, so every
+/// value is the same whichever thread or order asked first; it serves sweeps of the same
+/// solid capped at or below the lattice's cap (a lower cap only rules out more).
 pub struct Certificates {
     cell: f64,
+    cap: f64,
     map: Mutex<HashMap<[i64; 3], Arc<Certificate>>>,
 }
 
 impl Certificates {
-    /// An empty lattice of `cell` mm.
-    pub fn new(cell: f64) -> Certificates {
+    /// An empty lattice of `cell` mm for sweeps capped at `cap` or below.
+    pub fn new(cell: f64, cap: f64) -> Certificates {
         Certificates {
             cell,
+            cap,
             map: Mutex::new(HashMap::new()),
         }
     }
 
     /// `sweep`'s value at `p`, through the certificate of `p`'s cell. Use one lattice per
-    /// sweep: a certificate made for another cap is not used.
+    /// solid and motion; a sweep capped above the lattice's cap is searched on its own.
     pub fn value<S: Sdf>(&self, sweep: &ExactSweep<'_, S>, p: Vec3) -> f64 {
         if sweep.capped(p) {
             return sweep.cap;
+        }
+        if sweep.cap > self.cap {
+            return sweep.value(p);
         }
         let key = [p.x, p.y, p.z].map(|x| (x / self.cell).floor() as i64);
         let found = self
@@ -261,7 +284,8 @@ impl Certificates {
             let centre =
                 Vec3::new(key[0] as f64, key[1] as f64, key[2] as f64).add_scalar(0.5) * self.cell;
             // Two threads may make the same certificate; both are equal.
-            let c = Arc::new(sweep.certificate(centre, 0.5 * 3f64.sqrt() * self.cell));
+            let reach = 0.5 * 3f64.sqrt() * self.cell;
+            let c = Arc::new(sweep.certificate(centre, reach, self.cap));
             let mut map = self.map.lock().expect("no panics under the lock");
             if map.len() >= CERTIFICATES_HELD {
                 // Values never depend on what is held, only the time does.
@@ -277,7 +301,8 @@ impl Certificates {
 impl<S: Sdf> ExactSweep<'_, S> {
     fn at(&self, p: Vec3, t: f64) -> f64 {
         let x = transform(self.kin, self.target, self.frame, t) * nalgebra::Point3::from(p);
-        self.solid.dist(x.coords)
+        // The search bounds the change between instants by how far the point moved.
+        self.solid.dist_continuous(x.coords)
     }
 
     /// The coarse field's verdict: `p` is at or beyond the cap.
@@ -301,7 +326,7 @@ impl<S: Sdf> ExactSweep<'_, S> {
     /// certificate).
     fn value_near(&self, q: Vec3, cert: &Certificate) -> f64 {
         let d = (q - cert.p).norm();
-        if d > cert.reach || cert.cap != self.cap {
+        if d > cert.reach || cert.cap < self.cap {
             return self.value(q);
         }
         let mut open: Vec<(f64, f64, f64)> = Vec::with_capacity(cert.leaves.len());
@@ -322,11 +347,11 @@ impl<S: Sdf> ExactSweep<'_, S> {
             .min(self.cap)
     }
 
-    /// The search at `p` with every leaf kept that may matter within `reach` of it, for
-    /// [`ExactSweep::value_near`]. The coarse field is not consulted (it speaks for `p`
-    /// alone).
-    fn certificate(&self, p: Vec3, reach: f64) -> Certificate {
-        let cap = self.cap + reach;
+    /// The search at `p` with every leaf kept that may matter within `reach` of it to a
+    /// sweep capped at `cap_for` or below, for [`ExactSweep::value_near`]. The coarse field
+    /// is not consulted (it speaks for `p` alone), nor this sweep's own cap.
+    fn certificate(&self, p: Vec3, reach: f64, cap_for: f64) -> Certificate {
+        let cap = cap_for + reach;
         let mut leaves = Vec::new();
         // Leaves finer than the reach would only be reopened at the points it serves.
         self.search(
@@ -340,7 +365,7 @@ impl<S: Sdf> ExactSweep<'_, S> {
         Certificate {
             p,
             reach,
-            cap: self.cap,
+            cap: cap_for,
             leaves,
         }
     }
@@ -367,11 +392,21 @@ impl<S: Sdf> ExactSweep<'_, S> {
         basin_tol: f64,
         mut leaves: Option<&mut Vec<Leaf>>,
     ) -> f64 {
-        // How fast p moves in the solid's frame bounds how fast the distance can change.
-        let v = speed(self.kin, self.target, self.frame, p).max(1e-9);
+        // How fast p moves in the solid's frame, over the whole period and over each
+        // interval (often far less), times how fast the solid's value changes per mm,
+        // bounds how fast the value changes in time.
+        let lipschitz = self.solid.lipschitz();
+        let v_period = speed(self.kin, self.target, self.frame, p) * lipschitz;
+        let norm = p.norm();
         let mut best = open.iter().map(|o| o.2).fold(f64::INFINITY, f64::min);
         let mut basins: Vec<(f64, f64)> = Vec::new();
         while let Some((c, w, f)) = open.pop() {
+            let v = (self
+                .kin
+                .speed_within(self.target, self.frame, norm, c - w, c + w)
+                * lipschitz)
+                .min(v_period)
+                .max(1e-9);
             let lower = f - v * w;
             if lower >= best.min(cap) {
                 if let Some(l) = leaves.as_deref_mut() {
@@ -600,8 +635,9 @@ mod tests {
 
     /// Guards the carve's accuracy where a run of basins holds several minima (the union
     /// of the rims passes a point near a groove at many nearby instants): both the plain
-    /// search and the one through [`Certificates`] stay within [`EXACT_VS_BRUTE_MM`] of a
-    /// brute-force minimum at points near the driver's contact curves. With the basin
+    /// search and the one through [`Certificates`] (also for sweeps capped below the
+    /// lattice's cap) stay within [`EXACT_VS_BRUTE_MM`] of a brute-force minimum at points
+    /// near the driver's contact curves. With the basin
     /// tolerance of 1.5 mm used before 2026-12-03 the plain search failed it (0.026 mm
     /// above here; up to 0.26 mm at grid points of a build).
     #[test]
@@ -615,7 +651,7 @@ mod tests {
         );
         let cap = 2.0;
         let sweep = carving(&kin, &rims, cap);
-        let certificates = Certificates::new(1.0);
+        let certificates = Certificates::new(1.0, cap);
         let n = 200_000;
         let (mut checked, mut worst_plain, mut worst_cert) = (0, 0.0f64, 0.0f64);
         for k in 0..60 {
@@ -638,6 +674,13 @@ mod tests {
             checked += 1;
             worst_plain = worst_plain.max((sweep.value(p) - brute).abs());
             worst_cert = worst_cert.max((certificates.value(&sweep, p) - brute).abs());
+            // The carve lowers the cap point by point, through certificates made for the
+            // lattice's cap.
+            for low in [0.1, 0.8] {
+                let lower = carving(&kin, &rims, low);
+                let got = certificates.value(&lower, p);
+                worst_cert = worst_cert.max((got - brute.min(low)).abs());
+            }
         }
         assert!(checked >= 30, "only {checked} probes were below the cap");
         assert!(
@@ -660,9 +703,9 @@ mod tests {
         let points: Vec<Vec3> = (0..216)
             .map(|i| base + Vec3::new((i % 6) as f64, (i / 6 % 6) as f64, (i / 36) as f64) * 0.4)
             .collect();
-        let forward = Certificates::new(1.0);
+        let forward = Certificates::new(1.0, 2.0);
         let a: Vec<f64> = points.iter().map(|&p| forward.value(&sweep, p)).collect();
-        let backward = Certificates::new(1.0);
+        let backward = Certificates::new(1.0, 2.0);
         let mut b: Vec<f64> = points
             .iter()
             .rev()
