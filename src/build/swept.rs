@@ -298,11 +298,49 @@ impl Certificates {
     }
 }
 
+/// How fast the value of one point may change over an interval of time, per period: how
+/// fast the point moves in the solid's frame (over the whole period, and over the interval,
+/// often far less) times how fast the solid's value changes per mm.
+struct Pace<'a> {
+    kin: &'a Kinematics,
+    from: Frame,
+    to: Frame,
+    norm: f64,
+    lipschitz: f64,
+    period: f64,
+}
+
+impl Pace<'_> {
+    /// The bound over [c − w, c + w].
+    fn over(&self, c: f64, w: f64) -> f64 {
+        (self
+            .kin
+            .speed_within(self.from, self.to, self.norm, c - w, c + w)
+            * self.lipschitz)
+            .min(self.period)
+            .max(1e-9)
+    }
+}
+
 impl<S: Sdf> ExactSweep<'_, S> {
-    fn at(&self, p: Vec3, t: f64) -> f64 {
+    /// The solid's value at `p` at time `t`: exact below `limit`, some value between
+    /// `limit` and the exact one otherwise (continuous: the search bounds the change
+    /// between instants by how far the point moved).
+    fn at(&self, p: Vec3, t: f64, limit: f64) -> f64 {
         let x = transform(self.kin, self.target, self.frame, t) * nalgebra::Point3::from(p);
-        // The search bounds the change between instants by how far the point moved.
-        self.solid.dist_continuous(x.coords)
+        self.solid.dist_continuous(x.coords, limit)
+    }
+
+    fn pace(&self, p: Vec3) -> Pace<'_> {
+        let lipschitz = self.solid.lipschitz();
+        Pace {
+            kin: self.kin,
+            from: self.target,
+            to: self.frame,
+            norm: p.norm(),
+            lipschitz,
+            period: speed(self.kin, self.target, self.frame, p) * lipschitz,
+        }
     }
 
     /// The coarse field's verdict: `p` is at or beyond the cap.
@@ -315,8 +353,14 @@ impl<S: Sdf> ExactSweep<'_, S> {
         if self.capped(p) {
             return self.cap;
         }
-        self.search(p, self.start(p), self.cap, EXACT_BASIN_TOL_MM, None)
-            .min(self.cap)
+        self.search(
+            p,
+            self.start(p, self.cap),
+            self.cap,
+            EXACT_BASIN_TOL_MM,
+            None,
+        )
+        .min(self.cap)
     }
 
     /// The [`ExactSweep::value`] at `q`, starting from the certificate of a point within its
@@ -331,16 +375,18 @@ impl<S: Sdf> ExactSweep<'_, S> {
         }
         let mut open: Vec<(f64, f64, f64)> = Vec::with_capacity(cert.leaves.len());
         let mut best = f64::INFINITY;
-        for l in cert.leaves.iter().filter(|l| l.basin) {
-            let f = self.at(q, l.c);
-            best = best.min(f);
+        let pace = self.pace(q);
+        let mut reopen = |l: &Leaf, best: &mut f64| {
+            let f = self.at(q, l.c, best.min(self.cap) + pace.over(l.c, l.w) * l.w);
+            *best = best.min(f);
             open.push((l.c, l.w, f));
+        };
+        for l in cert.leaves.iter().filter(|l| l.basin) {
+            reopen(l, &mut best);
         }
         for l in cert.leaves.iter().filter(|l| !l.basin) {
             if l.f - d < best.min(self.cap) {
-                let f = self.at(q, l.c);
-                best = best.min(f);
-                open.push((l.c, l.w, f));
+                reopen(l, &mut best);
             }
         }
         self.search(q, open, self.cap, EXACT_BASIN_TOL_MM, None)
@@ -356,7 +402,7 @@ impl<S: Sdf> ExactSweep<'_, S> {
         // Leaves finer than the reach would only be reopened at the points it serves.
         self.search(
             p,
-            self.start(p),
+            self.start(p, cap),
             cap,
             reach.max(EXACT_BASIN_TOL_MM),
             Some(&mut leaves),
@@ -371,12 +417,14 @@ impl<S: Sdf> ExactSweep<'_, S> {
     }
 
     /// The starting intervals (centre, half width, value at the centre).
-    fn start(&self, p: Vec3) -> Vec<(f64, f64, f64)> {
+    /// Values at or above `cap` plus the interval's reach need not be exact.
+    fn start(&self, p: Vec3, cap: f64) -> Vec<(f64, f64, f64)> {
         let w0 = 0.5 / EXACT_START_INTERVALS as f64;
+        let pace = self.pace(p);
         (0..EXACT_START_INTERVALS)
             .map(|i| {
                 let c = (2 * i + 1) as f64 * w0;
-                (c, w0, self.at(p, c))
+                (c, w0, self.at(p, c, cap + pace.over(c, w0) * w0))
             })
             .collect()
     }
@@ -392,21 +440,11 @@ impl<S: Sdf> ExactSweep<'_, S> {
         basin_tol: f64,
         mut leaves: Option<&mut Vec<Leaf>>,
     ) -> f64 {
-        // How fast p moves in the solid's frame, over the whole period and over each
-        // interval (often far less), times how fast the solid's value changes per mm,
-        // bounds how fast the value changes in time.
-        let lipschitz = self.solid.lipschitz();
-        let v_period = speed(self.kin, self.target, self.frame, p) * lipschitz;
-        let norm = p.norm();
+        let pace = self.pace(p);
         let mut best = open.iter().map(|o| o.2).fold(f64::INFINITY, f64::min);
         let mut basins: Vec<(f64, f64)> = Vec::new();
         while let Some((c, w, f)) = open.pop() {
-            let v = (self
-                .kin
-                .speed_within(self.target, self.frame, norm, c - w, c + w)
-                * lipschitz)
-                .min(v_period)
-                .max(1e-9);
+            let v = pace.over(c, w);
             let lower = f - v * w;
             if lower >= best.min(cap) {
                 if let Some(l) = leaves.as_deref_mut() {
@@ -433,7 +471,10 @@ impl<S: Sdf> ExactSweep<'_, S> {
             }
             let h = 0.5 * w;
             for cc in [c - h, c + h] {
-                let fc = self.at(p, cc);
+                // A value at or above this is pruned when popped, whatever it is exactly
+                // (and cannot lower `best` below the cap): the solid need not find it.
+                let limit = best.min(cap) + pace.over(cc, h) * h;
+                let fc = self.at(p, cc, limit);
                 best = best.min(fc);
                 open.push((cc, h, fc));
             }
@@ -454,7 +495,8 @@ impl<S: Sdf> ExactSweep<'_, S> {
         }
         for (lo, hi) in runs {
             let pad = (hi - lo).min(0.01);
-            best = best.min(minimize(|t| self.at(p, t), lo - pad, hi + pad));
+            let exact = |t| self.at(p, t, f64::INFINITY);
+            best = best.min(minimize(exact, lo - pad, hi + pad));
         }
         best
     }
@@ -617,7 +659,7 @@ mod tests {
             ) * (0.5 + 0.2 * k as f64);
             let p = centre.coords + off;
             let brute = (0..n)
-                .map(|i| sweep.at(p, i as f64 / n as f64))
+                .map(|i| sweep.at(p, i as f64 / n as f64, f64::INFINITY))
                 .fold(f64::INFINITY, f64::min);
             let exact = sweep.value(p);
             if brute >= cap {
@@ -665,7 +707,7 @@ mod tests {
             ) * 0.6;
             let p = on + off;
             let brute = (0..n)
-                .map(|i| sweep.at(p, i as f64 / n as f64))
+                .map(|i| sweep.at(p, i as f64 / n as f64, f64::INFINITY))
                 .fold(f64::INFINITY, f64::min)
                 .min(cap);
             if brute >= cap {

@@ -28,7 +28,12 @@ pub trait Sdf: Send + Sync {
     /// half-turn-2to1, [`Sdf::dist`] along a point's path jumped by up to 1 mm inside).
     /// Where a solid gives a cheaper lower bound far out, the value may drop to it there;
     /// such a search then errs low, never high.
-    fn dist_continuous(&self, p: Vec3) -> f64 {
+    ///
+    /// The value is exact only below `limit`: at or above it, any value between `limit` and
+    /// the exact one may come back (a search that will discard it saves finding it; pass
+    /// infinity for the exact value).
+    fn dist_continuous(&self, p: Vec3, limit: f64) -> f64 {
+        let _ = limit;
         self.dist(p)
     }
     /// A bound on how fast [`Sdf::dist_continuous`] changes, per mm moved: 1 for a true
@@ -45,8 +50,8 @@ impl<T: Sdf + ?Sized> Sdf for Box<T> {
     fn dist(&self, p: Vec3) -> f64 {
         (**self).dist(p)
     }
-    fn dist_continuous(&self, p: Vec3) -> f64 {
-        (**self).dist_continuous(p)
+    fn dist_continuous(&self, p: Vec3, limit: f64) -> f64 {
+        (**self).dist_continuous(p, limit)
     }
     fn lipschitz(&self) -> f64 {
         (**self).lipschitz()
@@ -60,8 +65,8 @@ impl<T: Sdf + ?Sized> Sdf for std::sync::Arc<T> {
     fn dist(&self, p: Vec3) -> f64 {
         (**self).dist(p)
     }
-    fn dist_continuous(&self, p: Vec3) -> f64 {
-        (**self).dist_continuous(p)
+    fn dist_continuous(&self, p: Vec3, limit: f64) -> f64 {
+        (**self).dist_continuous(p, limit)
     }
     fn lipschitz(&self) -> f64 {
         (**self).lipschitz()
@@ -287,7 +292,8 @@ impl Union {
         }
     }
 
-    /// The smallest `value` of the children, skipping those that cannot win: a child
+    /// The smallest `value` of the children (each told the best so far, and the first told
+    /// `limit`; `limit` comes back when none is below it), skipping those that cannot win: a child
     /// cannot be nearer than its box, so it is skipped unless its box is within the best
     /// distance so far. Inside a child already (best < 0) the sign is settled and, unless
     /// `every_holder`, the rest are skipped; exactly on a child's face (best = 0) a child
@@ -295,16 +301,22 @@ impl Union {
     /// plane of zeros where a face of one child lies inside another, and a mesher node on
     /// that plane cut the part in two there (the 1R1T support's clamp ring came off the
     /// base plate).
-    fn smallest(&self, p: Vec3, every_holder: bool, value: impl Fn(&dyn Sdf) -> f64) -> f64 {
+    fn smallest(
+        &self,
+        p: Vec3,
+        every_holder: bool,
+        limit: f64,
+        value: impl Fn(&dyn Sdf, f64) -> f64,
+    ) -> f64 {
         let pa = arr(p);
-        let mut best = f64::INFINITY;
+        let mut best = limit;
         for c in &self.children {
             let d = c.bounds().distance(pa);
             let settled = best < 0.0 && !every_holder;
             if best.is_finite() && d >= best.max(0.0) && (d > 0.0 || settled) {
                 continue;
             }
-            best = best.min(value(c.as_ref()));
+            best = best.min(value(c.as_ref(), best));
         }
         if best.is_finite() {
             best
@@ -316,10 +328,10 @@ impl Union {
 
 impl Sdf for Union {
     fn dist(&self, p: Vec3) -> f64 {
-        self.smallest(p, false, |c| c.dist(p))
+        self.smallest(p, false, f64::INFINITY, |c, _| c.dist(p))
     }
-    fn dist_continuous(&self, p: Vec3) -> f64 {
-        self.smallest(p, true, |c| c.dist_continuous(p))
+    fn dist_continuous(&self, p: Vec3, limit: f64) -> f64 {
+        self.smallest(p, true, limit, |c, best| c.dist_continuous(p, best))
     }
     fn lipschitz(&self) -> f64 {
         self.lipschitz
@@ -541,7 +553,7 @@ mod tests {
             Union::new(vec![ball(2.0, 5.0), ball(0.0, 1.5)]),
         ] {
             // Depths 0.5 and 4.
-            assert_eq!(union.dist_continuous(p), -4.0);
+            assert_eq!(union.dist_continuous(p, f64::INFINITY), -4.0);
             assert!(union.dist(p) < 0.0);
         }
     }

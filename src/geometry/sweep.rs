@@ -465,13 +465,13 @@ pub const SWEEP_EXACT_WITHIN_MM: f64 = 8.0;
 
 impl Sweep {
     /// The distance over the pieces, the first that holds `p` ending the search unless
-    /// `every_holder` ([`Sdf::dist_continuous`]).
-    fn pieces_dist(&self, p: Vec3, every_holder: bool) -> f64 {
-        let v = self
-            .bvh
-            .min_over(arr(p), SWEEP_EXACT_WITHIN_MM, every_holder, |i, best| {
-                self.segment_dist(i, p, best)
-            });
+    /// `every_holder`, exact below `limit` ([`Sdf::dist_continuous`]; `limit` itself when
+    /// no piece is nearer).
+    fn pieces_dist(&self, p: Vec3, every_holder: bool, limit: f64) -> f64 {
+        let start = limit.min(SWEEP_EXACT_WITHIN_MM);
+        let v = self.bvh.min_over(arr(p), start, every_holder, |i, best| {
+            self.segment_dist(i, p, best)
+        });
         if v < SWEEP_EXACT_WITHIN_MM {
             v
         } else {
@@ -485,10 +485,10 @@ impl Sweep {
 
 impl Sdf for Sweep {
     fn dist(&self, p: Vec3) -> f64 {
-        self.pieces_dist(p, false)
+        self.pieces_dist(p, false, f64::INFINITY)
     }
-    fn dist_continuous(&self, p: Vec3) -> f64 {
-        self.pieces_dist(p, true)
+    fn dist_continuous(&self, p: Vec3, limit: f64) -> f64 {
+        self.pieces_dist(p, true, limit)
     }
     fn lipschitz(&self) -> f64 {
         self.lipschitz
@@ -599,8 +599,8 @@ mod tests {
                 rng.random_range(-1.0..1.0),
             ) * 0.02;
             let (f, g) = (
-                twisted.dist_continuous(p),
-                twisted.dist_continuous(p + step),
+                twisted.dist_continuous(p, f64::INFINITY),
+                twisted.dist_continuous(p + step, f64::INFINITY),
             );
             inside += usize::from(f < 0.0);
             if f.max(g) >= ELLIPSE_FAR {
