@@ -267,11 +267,19 @@ impl Kinematics {
     /// largest over the interval's bins. Where the law is slow this is far below the
     /// bounds over the whole period.
     pub fn speed_within(&self, from: Frame, to: Frame, p_norm: f64, t0: f64, t1: f64) -> f64 {
+        let (spin, drift) = self.spin_drift_within(from, to, t0, t1);
+        spin * p_norm + drift
+    }
+
+    /// The two terms of [`Kinematics::speed_within`] over [t0, t1]: the largest
+    /// |ω_A − ω_B| (rad per period) and the largest |Ṫ_A − Ṫ_B − ω_B × (T_A − T_B)| (mm per
+    /// period), for callers that bound many points of one interval.
+    pub fn spin_drift_within(&self, from: Frame, to: Frame, t0: f64, t1: f64) -> (f64, f64) {
         if from == to {
-            return 0.0;
+            return (0.0, 0.0);
         }
         let s = &self.within[from.index() * 3 + to.index()];
-        s.spin.over(t0, t1) * p_norm + s.drift.over(t0, t1)
+        (s.spin.over(t0, t1), s.drift.over(t0, t1))
     }
 
     /// D → F at time `t`.
