@@ -232,7 +232,7 @@ pub fn windows(flags: &[bool]) -> Vec<[f64; 2]> {
 /// voxel centre's distance to the nearest voxel holding a vertex, and, where the occupancy
 /// is not 0, a lower bound of the signed distance at the centres of a finer grid: exact
 /// within [`FINE_EXACT_WITHIN_MM`] of the surface, from the coarse voxel's centre farther
-/// out (NaN where there is none).
+/// out (NaN where there is none, and inside, where a bound proves nothing).
 struct Queryable {
     tri: MeshQuery,
     /// The mesh's bounding box.
@@ -322,14 +322,20 @@ impl Queryable {
         }
         // Signed distances at the coarse centres that may matter; far from the surface
         // they bound the fine centres in their voxel, near it the fine centres are queried.
+        // Deep inside by the parity (its centre farther from the surface than any fine
+        // centre in it is from the centre) they are not queried: the fine centres there
+        // are inside, and an inside value proves nothing outside (were the parity wrong,
+        // the vertices there would only be queried).
+        let half_diagonal = 0.5 * 3f64.sqrt() * grid.h;
         let coarse: Vec<f32> = (0..grid.len())
             .into_par_iter()
             .map(|i| {
                 let c = grid.center(grid.unflat(i));
-                if occ[i] == 0 {
-                    f32::NAN
-                } else {
-                    tri.signed([c.x, c.y, c.z]) as f32
+                let deep = to_vertex[i] as f64 > to_vertex_slack + half_diagonal;
+                match occ[i] {
+                    0 => f32::NAN,
+                    2 if deep => f32::NEG_INFINITY,
+                    _ => tri.signed([c.x, c.y, c.z]) as f32,
                 }
             })
             .collect();
@@ -341,10 +347,11 @@ impl Queryable {
                 let Some(v) = grid.voxel_of(c) else {
                     return f32::NAN;
                 };
-                let from_coarse = coarse[grid.index(v)] as f64 - (c - grid.center(v)).norm();
-                if from_coarse > FINE_EXACT_WITHIN_MM {
-                    from_coarse as f32
-                } else if from_coarse.is_nan() {
+                let (at_coarse, off) = (coarse[grid.index(v)] as f64, (c - grid.center(v)).norm());
+                if at_coarse - off > FINE_EXACT_WITHIN_MM {
+                    (at_coarse - off) as f32
+                } else if at_coarse.is_nan() || at_coarse + off < 0.0 {
+                    // No value, or inside: nothing to prove outside with.
                     f32::NAN
                 } else {
                     tri.signed([c.x, c.y, c.z]) as f32
