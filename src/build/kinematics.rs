@@ -323,6 +323,7 @@ impl Kinematics {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::build::tests::half_turn;
     use nalgebra::Point3;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
@@ -331,15 +332,6 @@ mod tests {
     /// (1e-6 model units, conventions.md) at 10 mm per unit, widened for the law's spline
     /// between its 360 keys.
     const COINCIDENT_MM: f64 = 1e-3;
-
-    /// The test mechanism (half-turn-2to1) at 10 mm per unit.
-    fn half_turn() -> (Mechanism, Kinematics) {
-        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("tests/data/mechanism/half-turn-2to1/mechanism.json");
-        let mech = Mechanism::load(&file).expect("the test mechanism loads");
-        let kin = Kinematics::new(&mech, 10.0).expect("its law rebuilds");
-        (mech, kin)
-    }
 
     /// Guards the sparse table behind the per-interval bounds: over seeded random intervals,
     /// some wrapping past the period's end and some longer than it, the largest bin equals
@@ -426,11 +418,8 @@ mod tests {
     /// says (R₂c² + T₂ = p = Rz(φ)c¹ + D).
     #[test]
     fn parts_posed_by_the_law_meet_at_the_contacts() {
-        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("tests/data/mechanism/half-turn-2to1/mechanism.json");
-        let mech = Mechanism::load(&file).expect("the test mechanism loads");
-        let s = 10.0;
-        let kin = Kinematics::new(&mech, s).expect("its law rebuilds");
+        let (mech, kin) = half_turn();
+        let s = kin.scale_mm();
         let mut worst: f64 = 0.0;
         for cp in &mech.curve_pairs {
             let n = cp.samples.p.len();

@@ -409,6 +409,13 @@ pub(crate) mod tests {
         Mechanism::load(&file).expect("the test mechanism loads")
     }
 
+    /// [`test_mechanism`] and its motion at 10 mm per unit.
+    pub(crate) fn half_turn() -> (Mechanism, kinematics::Kinematics) {
+        let mech = test_mechanism();
+        let kin = kinematics::Kinematics::new(&mech, 10.0).expect("its law rebuilds");
+        (mech, kin)
+    }
+
     /// Guards the option errors, whole: each names the option as typed and its range, and
     /// comes before any work.
     #[test]

@@ -601,8 +601,8 @@ pub fn swept_bounds(kin: &Kinematics, body: &Balls, target: Frame, samples: usiz
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::build::tests::half_turn;
     use crate::geometry::sdf::Sphere;
-    use crate::synth::mechanism::Mechanism;
 
     /// How close the exact sweep must come to a brute-force minimum over 200 000 instants,
     /// mm: the brute force itself is off by up to (fastest point speed ≈ 2 000 mm per
@@ -620,15 +620,6 @@ mod tests {
             cap,
             coarse: None,
         }
-    }
-
-    /// The test mechanism (half-turn-2to1) and its motion at 10 mm per unit.
-    fn half_turn() -> (Mechanism, Kinematics) {
-        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("tests/data/mechanism/half-turn-2to1/mechanism.json");
-        let mech = Mechanism::load(&file).expect("the test mechanism loads");
-        let kin = Kinematics::new(&mech, 10.0).expect("its law rebuilds");
-        (mech, kin)
     }
 
     /// Guards the groove: the swept distance of a ball on the follower, seen from the driver
