@@ -224,10 +224,11 @@ struct Leaf {
 }
 
 /// A point's branch and bound over time, kept so that points near it can start from it:
-/// the swept distance is 1-Lipschitz in space, so an interval whose lower bound at `p` is
-/// L holds nothing below L − |p − q| at `q`. Only the leaves that may matter within
-/// `reach` of `p` are kept (basins, and pruned leaves whose bound is below the cap plus
-/// the reach); the others are pruned at every such point.
+/// at each instant the solid's value changes by at most its Lipschitz bound λ per mm
+/// ([`Sdf::lipschitz`]: 1 for a true distance, more for a twisted sweep), so an interval
+/// whose lower bound at `p` is b holds nothing below b − λ|p − q| at `q`. Only the leaves
+/// that may matter within `reach` of `p` are kept (basins, and pruned leaves whose bound is
+/// below the cap plus λ·reach); the others are pruned at every such point.
 #[derive(Clone, Debug)]
 struct Certificate {
     p: Vec3,
@@ -376,6 +377,7 @@ impl<S: Sdf> ExactSweep<'_, S> {
         let mut open: Vec<(f64, f64, f64)> = Vec::with_capacity(cert.leaves.len());
         let mut best = f64::INFINITY;
         let pace = self.pace(q);
+        let moved = self.solid.lipschitz() * d;
         let mut reopen = |l: &Leaf, best: &mut f64| {
             let f = self.at(q, l.c, best.min(self.cap) + pace.over(l.c, l.w) * l.w);
             *best = best.min(f);
@@ -385,7 +387,7 @@ impl<S: Sdf> ExactSweep<'_, S> {
             reopen(l, &mut best);
         }
         for l in cert.leaves.iter().filter(|l| !l.basin) {
-            if l.f - d < best.min(self.cap) {
+            if l.f - moved < best.min(self.cap) {
                 reopen(l, &mut best);
             }
         }
@@ -397,7 +399,7 @@ impl<S: Sdf> ExactSweep<'_, S> {
     /// sweep capped at `cap_for` or below, for [`ExactSweep::value_near`]. The coarse field
     /// is not consulted (it speaks for `p` alone), nor this sweep's own cap.
     fn certificate(&self, p: Vec3, reach: f64, cap_for: f64) -> Certificate {
-        let cap = cap_for + reach;
+        let cap = cap_for + self.solid.lipschitz() * reach;
         let mut leaves = Vec::new();
         // Leaves finer than the reach would only be reopened at the points it serves.
         self.search(
@@ -719,6 +721,67 @@ mod tests {
         assert!(
             worst_plain < EXACT_VS_BRUTE_MM && worst_cert < EXACT_VS_BRUTE_MM,
             "off the brute force by {worst_plain} mm (plain) and {worst_cert} mm (certificates)"
+        );
+    }
+
+    /// A solid `k` times steeper than `inner`: its values change `k` times faster per mm.
+    struct Steep<S> {
+        inner: S,
+        k: f64,
+    }
+
+    impl<S: Sdf> Sdf for Steep<S> {
+        fn dist(&self, p: Vec3) -> f64 {
+            self.k * self.inner.dist(p)
+        }
+        fn dist_continuous(&self, p: Vec3, limit: f64) -> f64 {
+            self.k * self.inner.dist_continuous(p, limit / self.k)
+        }
+        fn lipschitz(&self) -> f64 {
+            self.k * self.inner.lipschitz()
+        }
+        fn bounds(&self) -> crate::geometry::mesh::Aabb {
+            self.inner.bounds()
+        }
+    }
+
+    /// Guards the certificates' reach for solids whose values change faster than a point
+    /// moves (twisted rims): through [`Certificates`] the value of the rims made four times
+    /// steeper is the plain search's, at points spread over many lattice cells.
+    #[test]
+    fn certificates_serve_solids_steeper_than_a_distance() {
+        let (mech, kin) = half_turn();
+        let k = 4.0;
+        let rims = Steep {
+            inner: crate::geometry::sdf::Union::new(
+                mech.curve_pairs
+                    .iter()
+                    .map(|cp| Box::new(crate::build::shapes::rim(cp, 10.0)) as Box<dyn Sdf>)
+                    .collect(),
+            ),
+            k,
+        };
+        let cap = 2.0 * k;
+        let sweep = carving(&kin, &rims, cap);
+        let certificates = Certificates::new(1.0, cap);
+        let (mut below, mut worst) = (0, 0.0f64);
+        for i in 0..240 {
+            let c1s = &mech.curve_pairs[i % mech.curve_pairs.len()].samples.c1;
+            let c1 = c1s[(i * 29) % c1s.len()];
+            let off = Vec3::new(
+                (i as f64 * 1.3).sin(),
+                (i as f64 * 0.7).cos(),
+                (i as f64 * 2.9).sin(),
+            ) * 0.8;
+            let p = Vec3::new(c1[0], c1[1], c1[2]) * 10.0 + off;
+            let plain = sweep.value(p);
+            below += usize::from(plain < cap);
+            worst = worst.max((certificates.value(&sweep, p) - plain).abs());
+        }
+        assert!(below >= 120, "only {below} points below the cap");
+        assert!(
+            worst < k * EXACT_VS_BRUTE_MM,
+            "off the plain search by {worst}"
         );
     }
 
