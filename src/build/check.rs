@@ -270,7 +270,8 @@ impl Queryable {
                 (a - b).norm().max((b - c).norm()).max((c - a).norm())
             })
             .fold(0.0, f64::max);
-        let to_vertex_slack = 0.5 * 3f64.sqrt() * grid.h + longest_edge;
+        let half_diagonal = 0.5 * 3f64.sqrt() * grid.h;
+        let to_vertex_slack = half_diagonal + longest_edge;
         let mut occ: Vec<u8> = to_vertex
             .iter()
             .map(|&x| u8::from((x as f64) <= NEAR_MM + grid.h))
@@ -326,7 +327,6 @@ impl Queryable {
         // centre in it is from the centre) they are not queried: the fine centres there
         // are inside, and an inside value proves nothing outside (were the parity wrong,
         // the vertices there would only be queried).
-        let half_diagonal = 0.5 * 3f64.sqrt() * grid.h;
         let coarse: Vec<f32> = (0..grid.len())
             .into_par_iter()
             .map(|i| {
