@@ -26,6 +26,11 @@ pub const CHECK_TOL: f64 = 1e-6;
 /// candidates' feasibility tolerance ([`FEAS_TOL`](super::candidate::FEAS_TOL)): the file's
 /// samples are the instants at which every constraint was checked to that tolerance.
 pub const AXIS_ROOM_TOL: f64 = 1e-6;
+/// How far a stored normal's length may be from 1 when a file is loaded. 0.01: the
+/// synthesis writes unit vectors to full precision, so this passes hand-rounded values (to
+/// three decimals) and refuses what is no direction at all, such as a zero vector, before
+/// `build` or `simulate` divides by it. The tighter `--check` uses [`CHECK_TOL`].
+pub const NORMAL_LENGTH_TOL: f64 = 0.01;
 /// Tolerance when comparing the stored dist(t) with the recomputed one. Default 1e-9.
 pub const DIST_TOL: f64 = 1e-9;
 
@@ -449,6 +454,21 @@ impl Mechanism {
                         format!("curve_pairs[{k}].samples.{name}[{i}]"),
                         "not a finite number".into(),
                     ));
+                }
+                if name.starts_with('n') {
+                    let length = |v: &[f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                    if let Some(i) = arr
+                        .iter()
+                        .position(|v| (length(v) - 1.0).abs() > NORMAL_LENGTH_TOL)
+                    {
+                        return Err(bad(
+                            format!("curve_pairs[{k}].samples.{name}[{i}]"),
+                            format!(
+                                "a normal must be a unit vector, found length {:.4}",
+                                length(&arr[i])
+                            ),
+                        ));
+                    }
                 }
             }
             if cp.slab[0].partial_cmp(&cp.slab[1]) != Some(std::cmp::Ordering::Less) {
