@@ -33,7 +33,7 @@ use super::kinematics::{Frame, Kinematics};
 use super::layout::{cover_cylinder, Layout, Pieces};
 use super::segments::{self, Segment};
 use super::shapes;
-use super::swept::{swept_of_each, Balls, Certificates, ExactSweep};
+use super::swept::{Balls, Certificates, ExactSweep, SweptEach};
 use super::{BuildError, BuildOptions};
 
 /// A strut's root lies this far inside the piece it leaves from (behind the rim's flat
@@ -180,15 +180,8 @@ pub fn design(
     let exact_cap = COLUMN_RADIUS_MM + STRUT_MARGIN_MM + 1.0;
     let driver_column = column(
         &|p| {
-            let rims = swept_of_each(
-                &kin,
-                &rims,
-                Frame::Follower,
-                Frame::Driver,
-                exact_cap,
-                None,
-                p,
-            );
+            let rims =
+                SweptEach::new(&kin, &rims, Frame::Follower, Frame::Driver).value(p, exact_cap);
             rims.min(d_others.sample(p))
         },
         layout.driver_hub.1,
@@ -198,15 +191,8 @@ pub fn design(
         let up_to = layout.cap.map_or(layout.z_hi, |c| c.0 + 1.0);
         column(
             &|p| {
-                let bands = swept_of_each(
-                    &kin,
-                    &bands,
-                    Frame::Driver,
-                    Frame::Follower,
-                    exact_cap,
-                    None,
-                    p,
-                );
+                let bands = SweptEach::new(&kin, &bands, Frame::Driver, Frame::Follower)
+                    .value(p, exact_cap);
                 bands.min(follower_other_field.sample(p))
             },
             top,
@@ -478,18 +464,9 @@ fn carved_pieces(
     progress: &dyn Fn(&str),
 ) -> Vec<Vec<Segment>> {
     // What the carve leaves of each band: its swept distance less half the clearance.
-    let carve = |p: Vec3| {
-        let cap = 0.5 * clearance + segments::BRIDGE_MM + 0.1;
-        swept_of_each(
-            kin,
-            rims,
-            Frame::Follower,
-            Frame::Driver,
-            cap,
-            Some(field),
-            p,
-        ) - 0.5 * clearance
-    };
+    let swept = SweptEach::new(kin, rims, Frame::Follower, Frame::Driver).with_coarse(field);
+    let cap = 0.5 * clearance + segments::BRIDGE_MM + 0.1;
+    let carve = |p: Vec3| swept.value(p, cap) - 0.5 * clearance;
     bands
         .iter()
         .enumerate()
@@ -529,10 +506,8 @@ fn plan_driver_struts(
     let mut joined = Joined::new(field.grid);
     joined_mark_first(&mut joined, pieces);
     let hub = Vec3::new(0.0, 0.0, 0.5 * (layout.driver_hub.0 + layout.driver_hub.1));
-    let rim_clearance = |p: Vec3| {
-        let cap = STRUT_RADIUS_MM + STRUT_MARGIN_MM + 1.0;
-        swept_of_each(kin, rims, Frame::Follower, Frame::Driver, cap, None, p)
-    };
+    let rims_swept = SweptEach::new(kin, rims, Frame::Follower, Frame::Driver);
+    let rim_clearance = |p: Vec3| rims_swept.value(p, STRUT_RADIUS_MM + STRUT_MARGIN_MM + 1.0);
     // (band, piece number, piece), nearest the hub first.
     let mut items: Vec<(usize, usize, &Segment)> = Vec::new();
     for (k, segs) in band_pieces.iter().enumerate() {
@@ -993,18 +968,15 @@ impl Sdf for DriverSolid<'_> {
             // and a lower cap rules out more of the period (outside the material, and
             // just inside it, far more). Each rim's search is capped by the smallest
             // distance found so far.
-            let mut swept = cap.min(half - m);
-            for (rim, certificates) in self.design.rims.iter().zip(&self.certificates) {
-                let sweep = ExactSweep {
-                    kin: &self.design.kin,
-                    solid: rim,
-                    frame: Frame::Follower,
-                    target: Frame::Driver,
-                    cap: swept,
-                    coarse: Some(&self.design.driver_field),
-                };
-                swept = swept.min(certificates.value(&sweep, p));
-            }
+            let swept = SweptEach::new(
+                &self.design.kin,
+                &self.design.rims,
+                Frame::Follower,
+                Frame::Driver,
+            )
+            .with_coarse(&self.design.driver_field)
+            .with_certificates(&self.certificates)
+            .value(p, cap.min(half - m));
             m.max(half - swept)
         };
         self.design

@@ -184,31 +184,68 @@ pub struct ExactSweep<'a, S: Sdf> {
     pub coarse: Option<&'a DistanceField>,
 }
 
-/// The smallest swept distance of several solids of one frame at `p`, capped at `cap`:
-/// each solid is searched on its own, so that each search bounds the distance's change by
-/// that solid's [`Sdf::lipschitz`] (a union takes the largest of its parts'), and capped by
-/// the smallest value found so far.
-pub fn swept_of_each<S: Sdf>(
-    kin: &Kinematics,
-    solids: &[S],
+/// Several solids of one frame swept through another: the smallest of their swept
+/// distances at a point ([`SweptEach::value`]). Each solid is searched on its own, so that
+/// each search bounds the distance's change by that solid's [`Sdf::lipschitz`] (a union
+/// takes the largest of its parts'), and capped by the smallest value found so far.
+pub struct SweptEach<'a, S: Sdf> {
+    kin: &'a Kinematics,
+    solids: &'a [S],
     frame: Frame,
     target: Frame,
-    cap: f64,
-    coarse: Option<&DistanceField>,
-    p: Vec3,
-) -> f64 {
-    solids.iter().fold(cap, |best, solid| {
-        ExactSweep {
+    coarse: Option<&'a DistanceField>,
+    certificates: Option<&'a [Certificates]>,
+}
+
+impl<'a, S: Sdf> SweptEach<'a, S> {
+    /// `solids` (of `frame`) swept through `target`, each value searched from scratch.
+    pub fn new(kin: &'a Kinematics, solids: &'a [S], frame: Frame, target: Frame) -> Self {
+        SweptEach {
             kin,
-            solid,
+            solids,
             frame,
             target,
-            cap: best,
-            coarse,
+            coarse: None,
+            certificates: None,
         }
-        .value(p)
-        .min(best)
-    })
+    }
+
+    /// Skip the points this lower bound of the same swept distance puts at or beyond the
+    /// cap ([`ExactSweep::coarse`]).
+    pub fn with_coarse(mut self, coarse: &'a DistanceField) -> Self {
+        self.coarse = Some(coarse);
+        self
+    }
+
+    /// Start each solid's search from its own lattice of certificates: `certificates[k]`
+    /// serves `solids[k]` alone (a lattice is made for one solid and motion).
+    pub fn with_certificates(mut self, certificates: &'a [Certificates]) -> Self {
+        debug_assert_eq!(certificates.len(), self.solids.len());
+        self.certificates = Some(certificates);
+        self
+    }
+
+    /// The smallest swept distance at `p`, or `cap` if it is not below `cap`.
+    pub fn value(&self, p: Vec3, cap: f64) -> f64 {
+        self.solids
+            .iter()
+            .enumerate()
+            .fold(cap, |best, (k, solid)| {
+                let sweep = ExactSweep {
+                    kin: self.kin,
+                    solid,
+                    frame: self.frame,
+                    target: self.target,
+                    cap: best,
+                    coarse: self.coarse,
+                };
+                let v = match self.certificates {
+                    Some(lattices) => lattices[k].value(&sweep, p),
+                    None => sweep.value(p),
+                };
+                v.min(best)
+            })
+    }
 }
 
 /// One interval of time a branch and bound ended on: its centre and half width, and either
