@@ -46,6 +46,7 @@ use std::time::Instant;
 use crate::geometry::mesh::Mesh;
 use crate::geometry::mesher::{mesh_solid, MesherError};
 use crate::geometry::sdf::{Sdf, Vec3};
+use crate::geometry::sweep::SweepError;
 use crate::synth::closure::Class;
 use crate::synth::mechanism::Mechanism;
 
@@ -86,6 +87,20 @@ pub enum BuildError {
         what: String,
         /// Why.
         detail: String,
+    },
+    /// A curve pair's samples cannot be swept into its rim or band.
+    #[error(
+        "the {what} of curve pair {pair} cannot be swept (frame i is sample i of the pair's \
+         curve and normal): {source}"
+    )]
+    Sweep {
+        /// `rim` (c², n²) or `band` (c¹, n¹).
+        what: &'static str,
+        /// The pair, from 1.
+        pair: usize,
+        /// Why.
+        #[source]
+        source: SweepError,
     },
     /// Meshing failed.
     #[error("meshing the {part}: {source}")]

@@ -108,8 +108,21 @@ pub fn design(
         .enumerate()
         .filter(|(k, _)| Some(*k) != opts.without_pair)
         .collect();
-    let rims: Vec<Sweep> = pairs.iter().map(|(_, cp)| shapes::rim(cp, s)).collect();
-    let bands: Vec<Sweep> = pairs.iter().map(|(_, cp)| shapes::band(cp, s)).collect();
+    let sweep_err = |what: &'static str, k: usize| {
+        move |source| BuildError::Sweep {
+            what,
+            pair: k + 1,
+            source,
+        }
+    };
+    let rims: Vec<Sweep> = pairs
+        .iter()
+        .map(|(k, cp)| shapes::rim(cp, s).map_err(sweep_err("rim", *k)))
+        .collect::<Result<_, _>>()?;
+    let bands: Vec<Sweep> = pairs
+        .iter()
+        .map(|(k, cp)| shapes::band(cp, s).map_err(sweep_err("band", *k)))
+        .collect::<Result<_, _>>()?;
     let webs_tris: Vec<(ThickTriangles, Vec<[Vec3; 3]>)> = rims.iter().map(shapes::web).collect();
     let rim_covers: Vec<Balls> = rims
         .iter()

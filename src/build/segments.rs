@@ -178,7 +178,7 @@ mod tests {
                 Frame { o: d * 30.0, u: d }
             })
             .collect();
-        Sweep::new(frames, BAND)
+        Sweep::new(frames, BAND).unwrap()
     }
 
     /// Guards the piece count: an uncut band is one segment with every frame; two slots

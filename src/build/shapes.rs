@@ -16,7 +16,7 @@
 //! It does not place hubs or supports, and does not carve.
 
 use crate::geometry::sdf::{ThickTriangles, Vec3};
-use crate::geometry::sweep::{Frame as PathFrame, Section, Sweep};
+use crate::geometry::sweep::{Frame as PathFrame, Section, Sweep, SweepError};
 use crate::synth::mechanism::CurvePair;
 
 use super::dims::*;
@@ -47,8 +47,8 @@ fn unit(p: [f64; 3]) -> Vec3 {
     Vec3::new(p[0], p[1], p[2]).normalize()
 }
 
-/// The rim of pair `cp` in the follower frame, mm.
-pub fn rim(cp: &CurvePair, scale_mm: f64) -> Sweep {
+/// The rim of pair `cp` in the follower frame, mm (frame i is sample i of c², n²).
+pub fn rim(cp: &CurvePair, scale_mm: f64) -> Result<Sweep, SweepError> {
     let frames = cp
         .samples
         .c2
@@ -62,8 +62,8 @@ pub fn rim(cp: &CurvePair, scale_mm: f64) -> Sweep {
     Sweep::new(frames, RIM)
 }
 
-/// The band of pair `cp` in the driver frame, mm.
-pub fn band(cp: &CurvePair, scale_mm: f64) -> Sweep {
+/// The band of pair `cp` in the driver frame, mm (frame i is sample i of c¹, n¹).
+pub fn band(cp: &CurvePair, scale_mm: f64) -> Result<Sweep, SweepError> {
     let frames = cp
         .samples
         .c1
@@ -196,7 +196,7 @@ mod tests {
                 }
             })
             .collect();
-        let r = Sweep::new(frames.clone(), RIM);
+        let r = Sweep::new(frames.clone(), RIM).unwrap();
         for f in frames.iter().step_by(37) {
             assert!(r.dist(f.o).abs() < 1e-3, "apex at {:?}", f.o);
             assert!((r.dist(f.o + f.u * 0.5) - 0.5).abs() < 1e-3);

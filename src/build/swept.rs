@@ -718,7 +718,7 @@ mod tests {
         let rims = crate::geometry::sdf::Union::new(
             mech.curve_pairs
                 .iter()
-                .map(|cp| Box::new(crate::build::shapes::rim(cp, 10.0)) as Box<dyn Sdf>)
+                .map(|cp| Box::new(crate::build::shapes::rim(cp, 10.0).unwrap()) as Box<dyn Sdf>)
                 .collect(),
         );
         let cap = 2.0;
@@ -793,7 +793,9 @@ mod tests {
             inner: crate::geometry::sdf::Union::new(
                 mech.curve_pairs
                     .iter()
-                    .map(|cp| Box::new(crate::build::shapes::rim(cp, 10.0)) as Box<dyn Sdf>)
+                    .map(|cp| {
+                        Box::new(crate::build::shapes::rim(cp, 10.0).unwrap()) as Box<dyn Sdf>
+                    })
                     .collect(),
             ),
             k,
@@ -828,7 +830,7 @@ mod tests {
     #[test]
     fn certificate_values_do_not_depend_on_the_order_asked() {
         let (mech, kin) = half_turn();
-        let rim = crate::build::shapes::rim(&mech.curve_pairs[0], 10.0);
+        let rim = crate::build::shapes::rim(&mech.curve_pairs[0], 10.0).unwrap();
         let sweep = carving(&kin, &rim, 2.0);
         let c1 = mech.curve_pairs[0].samples.c1[5];
         let base = Vec3::new(c1[0], c1[1], c1[2]) * 10.0;

@@ -505,7 +505,7 @@ mod tests {
                 }
             })
             .collect();
-        let s = Sweep::new(frames, Section::HalfEllipse { a, b });
+        let s = Sweep::new(frames, Section::HalfEllipse { a, b }).unwrap();
         let m = mesh_solid(&|p| s.dist(p), s.bounds(), 0.25).unwrap();
         let c = m.check();
         assert!(c.is_closed_manifold(), "{}", c.summary());

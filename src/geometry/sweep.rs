@@ -301,6 +301,38 @@ pub struct Sweep {
     lipschitz: f64,
 }
 
+/// Why a loop of frames cannot be swept ([`Sweep::new`]). Frames are numbered from 0.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum SweepError {
+    /// Fewer than three frames.
+    #[error("{frames} frames: a closed loop needs at least 3")]
+    TooFewFrames {
+        /// How many there are.
+        frames: usize,
+    },
+    /// A frame's `u` lies along the loop, so the section's plane has no orientation there.
+    #[error("frame {frame}: its u axis lies along the loop, so the cross-section has no orientation there")]
+    AxisAlongLoop {
+        /// The frame.
+        frame: usize,
+    },
+    /// Two neighbouring frames' `u` axes are opposite: the section would turn through 180°
+    /// at one point between them.
+    #[error("frames {segment} and {next}: their u axes are opposite, so the cross-section would turn through 180° between them")]
+    OppositeAxes {
+        /// The first frame of the segment.
+        segment: usize,
+        /// The next frame.
+        next: usize,
+    },
+}
+
+/// Below this fraction of its length, the part of a `u` axis normal to its segment (or of
+/// the axis interpolated between two frames) leaves the section without an orientation:
+/// far above round-off, and far below what a sampled curve's normals give (they make tens
+/// of degrees with the curve at least).
+const AXIS_MIN_NORMAL: f64 = 1e-9;
+
 /// Largest turn between two segments that is joined by a mitre, degrees; sharper joints
 /// keep the segments' square ends (a mitre's reach beyond the frame grows as 1/cos of
 /// half the turn). The parts' loops turn by at most 11° per segment.
@@ -308,9 +340,14 @@ const MITRE_MAX_TURN_DEG: f64 = 60.0;
 
 impl Sweep {
     /// Sweep `section` along the closed loop `frames` (at least 3; `u` need not be exactly
-    /// normal to the loop: each segment re-orthogonalizes it).
-    pub fn new(frames: Vec<Frame>, section: Section) -> Sweep {
+    /// normal to the loop: each segment re-orthogonalizes it). Refused where the section's
+    /// orientation is undefined: a `u` along the loop, or two neighbours' `u` opposite
+    /// (the section would turn through 180° at one point of the segment between them).
+    pub fn new(frames: Vec<Frame>, section: Section) -> Result<Sweep, SweepError> {
         let n = frames.len();
+        if n < 3 {
+            return Err(SweepError::TooFewFrames { frames: n });
+        }
         let tangent = |i: usize| (frames[(i + 1) % n].o - frames[i].o).try_normalize(0.0);
         let cos_max = MITRE_MAX_TURN_DEG.to_radians().cos();
         // A mitre bisects the turn; a joint too sharp (or next to an empty segment) has
@@ -353,33 +390,54 @@ impl Sweep {
         // the section, n its normal), so moving one mm changes the value by at most
         // √(1 + (r·ω)²). For the nlerp of the u axes a, b (made normal to the segment),
         // dφ/ds = |a × b| / |a(1 − s) + b s|², largest where the denominator is least.
-        let lipschitz = (0..n)
-            .map(|i| {
-                let (f0, f1) = (&frames[i], &frames[(i + 1) % n]);
-                let Some(t) = tangent(i) else { return 1.0 };
-                let len = (f1.o - f0.o).norm();
-                let (a, b) = (f0.u - t * f0.u.dot(&t), f1.u - t * f1.u.dot(&t));
-                let d = a - b;
-                let s = if d.norm_squared() > 0.0 {
-                    (a.dot(&d) / d.norm_squared()).clamp(0.0, 1.0)
-                } else {
-                    0.0
-                };
-                let least = (a * (1.0 - s) + b * s).norm_squared();
-                if least <= 0.0 {
-                    return f64::INFINITY;
+        // The part of each frame's u normal to the segments on either side (the frames
+        // first, so that a u along the loop is named as such rather than as a turn).
+        let normal_parts = |i: usize| {
+            let t = tangent(i)?;
+            let (f0, f1) = (&frames[i], &frames[(i + 1) % n]);
+            Some((f0.u - t * f0.u.dot(&t), f1.u - t * f1.u.dot(&t)))
+        };
+        for i in 0..n {
+            let Some((a, b)) = normal_parts(i) else {
+                continue;
+            };
+            for (frame, normal) in [(i, a), ((i + 1) % n, b)] {
+                // Written so that a NaN (a u of NaN) is refused too.
+                let enough = normal.norm() > AXIS_MIN_NORMAL * frames[frame].u.norm();
+                if !enough {
+                    return Err(SweepError::AxisAlongLoop { frame });
                 }
-                let omega = a.cross(&b).norm() / least / len;
-                (1.0 + (r * omega).powi(2)).sqrt()
-            })
-            .fold(1.0, f64::max);
-        Sweep {
+            }
+        }
+        let mut lipschitz = 1.0f64;
+        for i in 0..n {
+            let Some((a, b)) = normal_parts(i) else {
+                continue;
+            };
+            let len = (frames[(i + 1) % n].o - frames[i].o).norm();
+            let d = a - b;
+            let s = if d.norm_squared() > 0.0 {
+                (a.dot(&d) / d.norm_squared()).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let least = (a * (1.0 - s) + b * s).norm();
+            if least <= AXIS_MIN_NORMAL * a.norm().max(b.norm()) {
+                return Err(SweepError::OppositeAxes {
+                    segment: i,
+                    next: (i + 1) % n,
+                });
+            }
+            let omega = a.cross(&b).norm() / (least * least) / len;
+            lipschitz = lipschitz.max((1.0 + (r * omega).powi(2)).sqrt());
+        }
+        Ok(Sweep {
             frames,
             ends,
             section,
             bvh,
             lipschitz,
-        }
+        })
     }
 
     /// The frames.
@@ -583,8 +641,8 @@ mod tests {
                 })
                 .collect()
         };
-        let twisted = Sweep::new(frames(0.5), Section::HalfEllipse { a: 3.0, b: 1.6 });
-        let straight = Sweep::new(frames(0.0), Section::HalfEllipse { a: 3.0, b: 1.6 });
+        let twisted = Sweep::new(frames(0.5), Section::HalfEllipse { a: 3.0, b: 1.6 }).unwrap();
+        let straight = Sweep::new(frames(0.0), Section::HalfEllipse { a: 3.0, b: 1.6 }).unwrap();
         assert!(twisted.lipschitz() > 1.5, "bound {}", twisted.lipschitz());
         assert!((straight.lipschitz() - 1.0).abs() < 1e-9);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(33);
@@ -635,7 +693,7 @@ mod tests {
                 }
             })
             .collect();
-        let sweep = Sweep::new(frames, Section::HalfEllipse { a: 3.0, b: 1.6 });
+        let sweep = Sweep::new(frames, Section::HalfEllipse { a: 3.0, b: 1.6 }).unwrap();
         let mut compared = 0;
         for k in 0..400 {
             let a = k as f64 * 0.137;
@@ -678,6 +736,56 @@ mod tests {
                 round: r,
             },
         )
+        .unwrap()
+    }
+
+    /// Guards the refusal of loops whose section has no orientation somewhere (the
+    /// distance would be undefined there, and the search's Lipschitz bound infinite):
+    /// each refusal names the frame, and a loop that merely turns fast is accepted.
+    #[test]
+    fn loops_without_a_section_orientation_are_refused() {
+        let section = Section::HalfEllipse { a: 3.0, b: 1.6 };
+        let ring = |u: &dyn Fn(usize, Vec3) -> Vec3| -> Vec<Frame> {
+            (0..12)
+                .map(|i| {
+                    let a = i as f64 / 12.0 * std::f64::consts::TAU;
+                    let radial = Vec3::new(a.cos(), a.sin(), 0.0);
+                    Frame {
+                        o: radial * 20.0,
+                        u: u(i, radial),
+                    }
+                })
+                .collect()
+        };
+        let ok = Sweep::new(ring(&|_, r| r), section);
+        assert!(ok.is_ok());
+        let short: Vec<Frame> = ring(&|_, r| r).into_iter().take(2).collect();
+        assert_eq!(
+            Sweep::new(short, section).unwrap_err(),
+            SweepError::TooFewFrames { frames: 2 }
+        );
+        // Frame 5's u along its segment (the chord to frame 6).
+        let frames = ring(&|_, r| r);
+        let chord = (frames[6].o - frames[5].o).normalize();
+        let mut along = frames.clone();
+        along[5].u = chord;
+        assert_eq!(
+            Sweep::new(along, section).unwrap_err(),
+            SweepError::AxisAlongLoop { frame: 5 }
+        );
+        // Frame 8's u flipped: opposite to frame 7's.
+        let flipped = ring(&|i, r| if i == 8 { -r } else { r });
+        assert_eq!(
+            Sweep::new(flipped, section).unwrap_err(),
+            SweepError::OppositeAxes {
+                segment: 7,
+                next: 8
+            }
+        );
+        // A quarter turn per segment is steep but defined.
+        let twisting = ring(&|i, r| if i % 2 == 0 { r } else { Vec3::z() });
+        let steep = Sweep::new(twisting, section).unwrap();
+        assert!(steep.lipschitz().is_finite() && steep.lipschitz() > 1.0);
     }
 
     /// Points on the outer side of a turn, where two segments' square ends leave a wedge
