@@ -70,12 +70,18 @@ impl Aabb {
 
     /// Euclidean distance from `p` to the box, 0 inside.
     pub fn distance(&self, p: [f64; 3]) -> f64 {
+        self.distance_squared(p).sqrt()
+    }
+
+    /// The square of [`Aabb::distance`] (no square root: for comparisons).
+    #[inline]
+    pub fn distance_squared(&self, p: [f64; 3]) -> f64 {
         let mut s = 0.0;
         for (k, &x) in p.iter().enumerate() {
             let d = (self.min[k] - x).max(x - self.max[k]).max(0.0);
             s += d * d;
         }
-        s.sqrt()
+        s
     }
 
     /// Centre.

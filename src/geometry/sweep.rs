@@ -124,10 +124,15 @@ impl Section {
         }
     }
 
-    /// A lower bound of [`Section::dist`] outside the section: the distance to its bounding
-    /// rectangle (the half ellipse lies in u ∈ [−a, 0], |v| ≤ b). Cheap, so a segment that
-    /// cannot win is skipped before the ellipse's closest-point iteration.
-    pub fn box_dist(&self, u: f64, v: f64) -> f64 {
+    /// A lower bound of [`Section::dist`] outside the section (0 inside). Cheap, so a
+    /// segment that cannot win is skipped before the ellipse's closest-point iteration: the
+    /// distance to the section's bounding rectangle (the half ellipse lies in u ∈ [−a, 0],
+    /// |v| ≤ b), and for the half ellipse also (g − 1)·min(a, b) with
+    /// g = √((x/a)² + (y/b)²) about its centre: g changes by at most 1/min(a, b) per mm, and
+    /// the whole ellipse (which holds the half) is where g ≤ 1. It bounds the exact
+    /// distance; beyond [`ELLIPSE_FAR`], where `dist` gives a lower bound itself, it may
+    /// be the larger of the two (both stay below the exact distance).
+    pub fn lower_bound(&self, u: f64, v: f64) -> f64 {
         let (u_lo, u_hi, hv) = match *self {
             Section::HalfEllipse { a, b } => (-a, 0.0, b),
             Section::RoundedRect {
@@ -137,7 +142,14 @@ impl Section {
                 ..
             } => (u_min, u_max, half_width),
         };
-        norm2((u_lo - u).max(u - u_hi).max(0.0), (v.abs() - hv).max(0.0))
+        let rect = norm2((u_lo - u).max(u - u_hi).max(0.0), (v.abs() - hv).max(0.0));
+        match *self {
+            Section::HalfEllipse { a, b } => {
+                let g = norm2((u + a) / a, v / b);
+                rect.max((g - 1.0) * a.min(b))
+            }
+            Section::RoundedRect { .. } => rect,
+        }
     }
 
     /// Largest distance of the section from the origin (for bounding boxes). The half
@@ -258,11 +270,17 @@ impl Bvh {
         if self.nodes.is_empty() {
             return best;
         }
-        let mut stack: Vec<(usize, f64)> = Vec::with_capacity(64);
-        stack.push((0, self.nodes[0].bounds.distance(p)));
-        while let Some((i, d)) = stack.pop() {
-            let holder_wanted = every_holder && d <= 0.0;
-            if d >= best.max(0.0) && best.is_finite() && !holder_wanted {
+        // Squared box distances throughout (no root per node). The tree is balanced (median
+        // splits), so the stack never holds more than its depth plus one entries.
+        let mut stack = [(0usize, 0.0f64); BVH_STACK];
+        stack[0] = (0, self.nodes[0].bounds.distance_squared(p));
+        let mut len = 1;
+        while len > 0 {
+            len -= 1;
+            let (i, d2) = stack[len];
+            let holder_wanted = every_holder && d2 <= 0.0;
+            let reach = best.max(0.0);
+            if d2 >= reach * reach && best.is_finite() && !holder_wanted {
                 continue;
             }
             let n = &self.nodes[i];
@@ -271,21 +289,26 @@ impl Bvh {
                 continue;
             }
             let (dl, dr) = (
-                self.nodes[n.left].bounds.distance(p),
-                self.nodes[n.right].bounds.distance(p),
+                self.nodes[n.left].bounds.distance_squared(p),
+                self.nodes[n.right].bounds.distance_squared(p),
             );
             // Push the farther first so the nearer is visited first.
-            if dl <= dr {
-                stack.push((n.right, dr));
-                stack.push((n.left, dl));
+            let (first, second) = if dl <= dr {
+                ((n.right, dr), (n.left, dl))
             } else {
-                stack.push((n.left, dl));
-                stack.push((n.right, dr));
-            }
+                ((n.left, dl), (n.right, dr))
+            };
+            stack[len] = first;
+            stack[len + 1] = second;
+            len += 2;
         }
         best
     }
 }
+
+/// Entries of [`Bvh::min_over`]'s stack: a balanced tree over n items is ⌈log₂ n⌉ deep and
+/// the stack holds at most one more entry than that, so 64 serves any number of items.
+const BVH_STACK: usize = 64;
 
 /// A section swept along a closed loop of frames (the last frame joins the first).
 #[derive(Clone, Debug)]
@@ -295,6 +318,8 @@ pub struct Sweep {
     /// frame i + 1: the mitres of those joints, or the segment's own direction where a
     /// joint has none (see [`Sweep::segment_dist`]).
     ends: Vec<[Vec3; 2]>,
+    /// Per segment, what [`Sweep::segment_dist`] needs of its frames, computed once.
+    segs: Vec<Segment>,
     section: Section,
     bvh: Bvh,
     /// [`Sdf::lipschitz`]: see [`Sweep::new`].
@@ -332,6 +357,26 @@ pub enum SweepError {
 /// far above round-off, and far below what a sampled curve's normals give (they make tens
 /// of degrees with the curve at least).
 const AXIS_MIN_NORMAL: f64 = 1e-9;
+
+/// How far beyond its mitre plane a point still counts as within a piece, mm: far below
+/// any resolution, far above the round-off of the plane test (a point on the plane shared
+/// by two pieces once fell in neither, and came out outside the sweep, by 1e-16).
+const MITRE_SLACK_MM: f64 = 1e-9;
+
+/// One segment of a [`Sweep`]'s loop, from frame i to frame i + 1.
+#[derive(Clone, Copy, Debug)]
+struct Segment {
+    /// Frame i's origin.
+    o: Vec3,
+    /// Unit direction, or zero when the two frames' origins coincide (never measured).
+    t: Vec3,
+    /// Length, mm.
+    len: f64,
+    /// The two frames' u axes made normal to the segment: the section's u at parameter s
+    /// is `a (1 − s) + b s`, normalized.
+    a: Vec3,
+    b: Vec3,
+}
 
 /// Largest turn between two segments that is joined by a mitre, degrees; sharper joints
 /// keep the segments' square ends (a mitre's reach beyond the frame grows as 1/cos of
@@ -390,18 +435,24 @@ impl Sweep {
         // the section, n its normal), so moving one mm changes the value by at most
         // √(1 + (r·ω)²). For the nlerp of the u axes a, b (made normal to the segment),
         // dφ/ds = |a × b| / |a(1 − s) + b s|², largest where the denominator is least.
-        // The part of each frame's u normal to the segments on either side (the frames
-        // first, so that a u along the loop is named as such rather than as a turn).
-        let normal_parts = |i: usize| {
-            let t = tangent(i)?;
-            let (f0, f1) = (&frames[i], &frames[(i + 1) % n]);
-            Some((f0.u - t * f0.u.dot(&t), f1.u - t * f1.u.dot(&t)))
-        };
-        for i in 0..n {
-            let Some((a, b)) = normal_parts(i) else {
-                continue;
-            };
-            for (frame, normal) in [(i, a), ((i + 1) % n, b)] {
+        // Each segment with its frames' u made normal to it; the frames are checked first,
+        // so that a u along the loop is named as such rather than as a turn.
+        let segs: Vec<Segment> = (0..n)
+            .map(|i| {
+                let (f0, f1) = (&frames[i], &frames[(i + 1) % n]);
+                let t = tangent(i).unwrap_or_else(Vec3::zeros);
+                Segment {
+                    o: f0.o,
+                    t,
+                    len: (f1.o - f0.o).norm(),
+                    a: f0.u - t * f0.u.dot(&t),
+                    b: f1.u - t * f1.u.dot(&t),
+                }
+            })
+            .collect();
+        let measured = |i: usize| segs[i].len > 0.0;
+        for i in (0..n).filter(|&i| measured(i)) {
+            for (frame, normal) in [(i, segs[i].a), ((i + 1) % n, segs[i].b)] {
                 // Written so that a NaN (a u of NaN) is refused too.
                 let enough = normal.norm() > AXIS_MIN_NORMAL * frames[frame].u.norm();
                 if !enough {
@@ -410,11 +461,8 @@ impl Sweep {
             }
         }
         let mut lipschitz = 1.0f64;
-        for i in 0..n {
-            let Some((a, b)) = normal_parts(i) else {
-                continue;
-            };
-            let len = (frames[(i + 1) % n].o - frames[i].o).norm();
+        for i in (0..n).filter(|&i| measured(i)) {
+            let Segment { a, b, len, .. } = segs[i];
             let d = a - b;
             let s = if d.norm_squared() > 0.0 {
                 (a.dot(&d) / d.norm_squared()).clamp(0.0, 1.0)
@@ -434,6 +482,7 @@ impl Sweep {
         Ok(Sweep {
             frames,
             ends,
+            segs,
             section,
             bvh,
             lipschitz,
@@ -466,19 +515,20 @@ impl Sweep {
     /// from the piece whatever the section, so the section's distance (the costly part) is
     /// skipped when that cannot win.
     fn segment_dist(&self, i: usize, p: Vec3, best: f64) -> f64 {
-        let n = self.frames.len();
-        let (f0, f1) = (&self.frames[i], &self.frames[(i + 1) % n]);
-        let e = f1.o - f0.o;
-        let len2 = e.norm_squared();
-        if len2 <= 0.0 {
+        let seg = &self.segs[i];
+        let len = seg.len;
+        if len <= 0.0 {
             return f64::INFINITY;
         }
-        let len = len2.sqrt();
-        let t = e / len;
-        let raw = (p - f0.o).dot(&t);
+        let t = seg.t;
+        let from = p - seg.o;
+        let raw = from.dot(&t);
         let s = (raw / len).clamp(0.0, 1.0);
         let [m0, m1] = self.ends[i];
-        let within_mitres = || (p - f0.o).dot(&m0) >= 0.0 && (p - f1.o).dot(&m1) <= 0.0;
+        // Both pieces that share a mitre plane count the plane as theirs, so round-off can
+        // never leave a point on it in neither.
+        let within_mitres =
+            || from.dot(&m0) >= -MITRE_SLACK_MM && (from - t * len).dot(&m1) <= MITRE_SLACK_MM;
         let along = if (0.0..=len).contains(&raw) || within_mitres() {
             0.0
         } else if raw < 0.0 {
@@ -489,17 +539,16 @@ impl Sweep {
         if along > 0.0 && along >= best {
             return f64::INFINITY;
         }
-        let mut u = f0.u * (1.0 - s) + f1.u * s;
-        u -= t * u.dot(&t);
+        let mut u = seg.a * (1.0 - s) + seg.b * s;
         let ul = u.norm();
         if ul <= 0.0 {
             return f64::INFINITY;
         }
         u /= ul;
         let v = t.cross(&u);
-        let d = p - (f0.o + e * s);
+        let d = from - t * (len * s);
         let (du, dv) = (d.dot(&u), d.dot(&v));
-        let lower = norm2(self.section.box_dist(du, dv), along);
+        let lower = norm2(self.section.lower_bound(du, dv), along);
         if lower > 0.0 && lower >= best {
             return f64::INFINITY;
         }
@@ -559,6 +608,47 @@ impl Sdf for Sweep {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Guards the segment pruning's premise: [`Section::lower_bound`] is never above the
+    /// section's distance, outside it or in, for both sections, and is near it on the
+    /// flanks of the half ellipse, where the bounding rectangle alone says 0.
+    #[test]
+    fn section_lower_bounds_never_exceed_the_distance() {
+        let sections = [
+            Section::HalfEllipse { a: 3.0, b: 1.6 },
+            Section::HalfEllipse { a: 1.0, b: 2.5 },
+            Section::RoundedRect {
+                u_min: -3.5,
+                u_max: 1.5,
+                half_width: 1.6,
+                round: 0.5,
+            },
+        ];
+        for section in sections {
+            for i in 0..4000 {
+                let (u, v) = (
+                    (i as f64 * 0.618).sin() * 7.0,
+                    (i as f64 * 1.303).cos() * 5.0,
+                );
+                // Beyond ELLIPSE_FAR `dist` is itself a lower bound; compare where it is exact.
+                if let Section::HalfEllipse { a, b } = section {
+                    if norm2(u + a, v) > a.max(b) + ELLIPSE_FAR {
+                        continue;
+                    }
+                }
+                let (lb, d) = (section.lower_bound(u, v), section.dist(u, v));
+                assert!(
+                    lb <= d.max(0.0) + 1e-12,
+                    "{section:?} at ({u}, {v}): {lb} > {d}"
+                );
+            }
+        }
+        // Beside the apex, inside the rectangle but 0.42 mm off the ellipse.
+        let rim = Section::HalfEllipse { a: 3.0, b: 1.6 };
+        let (u, v) = (-0.5, 1.5);
+        assert!(rim.dist(u, v) > 0.3);
+        assert!(rim.lower_bound(u, v) > 0.2, "{}", rim.lower_bound(u, v));
+    }
 
     /// The ellipse distance agrees with a brute-force distance to a dense polygon of the
     /// ellipse, inside and outside, for flat and round ellipses.
