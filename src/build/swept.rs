@@ -163,6 +163,11 @@ const EXACT_START_INTERVALS: usize = 32;
 /// own error (0.007 mm). The cost (about 1.7 times the evaluations) is taken back in the
 /// carve by [`Certificates`].
 const EXACT_BASIN_TOL_MM: f64 = 0.1;
+/// How far above the best value so far, in basin tolerances, the local refinement asks
+/// for exact values ([`ExactSweep::search`]): the basins it refines hold values less than
+/// two tolerances above the best the branch and bound ended with, and nothing more than one
+/// tolerance below it, so the refinement of earlier runs lowers the best by one at most.
+const RUN_EXACT_ABOVE_BEST: f64 = 3.0;
 /// Time tolerance of the local refinement (fraction of a period): 1e-6 of a period moves
 /// the fastest point of the examples by less than 2 µm.
 const EXACT_TIME_TOL: f64 = 1e-6;
@@ -481,7 +486,8 @@ impl<S: Sdf> ExactSweep<'_, S> {
     ) -> f64 {
         let pace = self.pace(p);
         let mut best = open.iter().map(|o| o.2).fold(f64::INFINITY, f64::min);
-        let mut basins: Vec<(f64, f64)> = Vec::new();
+        // (centre, half width, lower bound over the interval).
+        let mut basins: Vec<(f64, f64, f64)> = Vec::new();
         while let Some((c, w, f)) = open.pop() {
             let v = pace.over(c, w);
             let lower = f - v * w;
@@ -497,7 +503,7 @@ impl<S: Sdf> ExactSweep<'_, S> {
                 continue;
             }
             if v * w <= basin_tol || w < EXACT_TIME_TOL {
-                basins.push((c, w));
+                basins.push((c, w, lower));
                 if let Some(l) = leaves.as_deref_mut() {
                     l.push(Leaf {
                         c,
@@ -523,18 +529,35 @@ impl<S: Sdf> ExactSweep<'_, S> {
             return best;
         }
         // Merge touching basins into runs, then find each run's minimum over the run
-        // widened by one interval on each side.
+        // widened by one interval on each side. A basin whose lower bound is not below the
+        // best found since it was kept holds nothing that matters: left out, so that every
+        // basin refined holds values within two tolerances above the best (its centre
+        // value is within one of its lower bound, and its values within one of that).
+        basins.retain(|b| b.2 < best.min(cap));
         basins.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let mut runs: Vec<(f64, f64)> = Vec::new();
-        for (c, w) in basins {
+        // (start, end, lowest lower bound).
+        let mut runs: Vec<(f64, f64, f64)> = Vec::new();
+        for (c, w, lower) in basins {
             match runs.last_mut() {
-                Some(r) if c - w <= r.1 + 1e-12 => r.1 = r.1.max(c + w),
-                _ => runs.push((c - w, c + w)),
+                Some(r) if c - w <= r.1 + 1e-12 => {
+                    r.1 = r.1.max(c + w);
+                    r.2 = r.2.min(lower);
+                }
+                _ => runs.push((c - w, c + w, lower)),
             }
         }
-        for (lo, hi) in runs {
+        for (lo, hi, lower) in runs {
+            if lower >= best.min(cap) {
+                // An earlier run's refinement found a value this one cannot beat.
+                continue;
+            }
             let pad = (hi - lo).min(0.01);
-            let exact = |t| self.at(p, t, f64::INFINITY);
+            // Exact values only below a limit, which makes each one cheaper (the solid's
+            // hierarchy prunes by it): every value inside the run is below it (see above),
+            // so Brent's steps there are those of unlimited values; only the padding
+            // beyond the run may see values at the limit, above every value inside.
+            let limit = best.min(cap) + RUN_EXACT_ABOVE_BEST * basin_tol;
+            let exact = |t| self.at(p, t, limit);
             best = best.min(minimize(exact, lo - pad, hi + pad));
         }
         best
