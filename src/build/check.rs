@@ -643,6 +643,8 @@ fn culprits(
                                 frame: Frame::Follower,
                                 target: Frame::Driver,
                                 cap: 0.0,
+                                // Only whether it is this deep matters.
+                                floor: -GAP_TOL_MM,
                                 coarse: None,
                             }
                             .value(p)

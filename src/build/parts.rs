@@ -484,8 +484,14 @@ fn carved_pieces(
     progress: &dyn Fn(&str),
 ) -> Vec<Vec<Segment>> {
     // What the carve leaves of each band: its swept distance less half the clearance.
-    let swept = SweptEach::new(kin, rims, Frame::Follower, Frame::Driver).with_coarse(field);
-    let cap = 0.5 * clearance + segments::BRIDGE_MM + 0.1;
+    // Material survives at a sample where the swept distance is at least `bridge`; a
+    // floor just below that gives the same verdicts and ends each search at the first
+    // instant that removes the sample.
+    let bridge = 0.5 * clearance + segments::BRIDGE_MM;
+    let swept = SweptEach::new(kin, rims, Frame::Follower, Frame::Driver)
+        .with_coarse(field)
+        .with_floor(bridge - 1e-9);
+    let cap = bridge + 0.1;
     let carve = |p: Vec3| swept.value(p, cap) - 0.5 * clearance;
     bands
         .iter()
@@ -637,6 +643,7 @@ impl BandClearance {
                 frame: Frame::Driver,
                 target: Frame::Follower,
                 cap: bound,
+                floor: f64::NEG_INFINITY,
                 coarse: None,
             }
             .value(p);
@@ -987,7 +994,9 @@ impl Sdf for DriverSolid<'_> {
             // max(m, half − s) is m wherever s ≥ half − m: the search need only tell that,
             // and a lower cap rules out more of the period (outside the material, and
             // just inside it, far more). Each rim's search is capped by the smallest
-            // distance found so far.
+            // distance found so far. Where s ≤ half − cap the point lies in the groove's
+            // air at least the cap from its surface, a value that is capped as well: the
+            // search stops at the first instant that shows it.
             let swept = SweptEach::new(
                 &self.design.kin,
                 &self.design.rims,
@@ -996,6 +1005,7 @@ impl Sdf for DriverSolid<'_> {
             )
             .with_coarse(&self.design.driver_field)
             .with_certificates(&self.certificates)
+            .with_floor(half - cap)
             .value(p, cap.min(half - m));
             m.max(half - swept)
         };

@@ -185,6 +185,10 @@ pub struct ExactSweep<'a, S: Sdf> {
     pub target: Frame,
     /// Values at or above this are reported as `cap` (only nearby values matter).
     pub cap: f64,
+    /// The search stops as soon as it finds a value at or below this and reports that value
+    /// (`f64::NEG_INFINITY`: never): a caller that only needs to know that the point is this
+    /// deep inside the swept volume is spared the search for the exact minimum.
+    pub floor: f64,
     /// A lower bound of the same swept distance (the coarse field), to skip far points.
     pub coarse: Option<&'a DistanceField>,
 }
@@ -200,6 +204,7 @@ pub struct SweptEach<'a, S: Sdf> {
     target: Frame,
     coarse: Option<&'a DistanceField>,
     certificates: Option<&'a [Certificates]>,
+    floor: f64,
 }
 
 impl<'a, S: Sdf> SweptEach<'a, S> {
@@ -212,6 +217,7 @@ impl<'a, S: Sdf> SweptEach<'a, S> {
             target,
             coarse: None,
             certificates: None,
+            floor: f64::NEG_INFINITY,
         }
     }
 
@@ -230,26 +236,38 @@ impl<'a, S: Sdf> SweptEach<'a, S> {
         self
     }
 
-    /// The smallest swept distance at `p`, or `cap` if it is not below `cap`.
+    /// Only tell that a point is at least this deep inside the swept volume: values at or
+    /// below `floor` are reported as `floor`, and each search stops at the first such value
+    /// it finds ([`ExactSweep::floor`]). Values above it are the same as without.
+    pub fn with_floor(mut self, floor: f64) -> Self {
+        self.floor = floor;
+        self
+    }
+
+    /// The smallest swept distance at `p`, or `cap` if it is not below `cap`, or the floor
+    /// ([`SweptEach::with_floor`]) if it is not above it.
     pub fn value(&self, p: Vec3, cap: f64) -> f64 {
-        self.solids
-            .iter()
-            .enumerate()
-            .fold(cap, |best, (k, solid)| {
-                let sweep = ExactSweep {
-                    kin: self.kin,
-                    solid,
-                    frame: self.frame,
-                    target: self.target,
-                    cap: best,
-                    coarse: self.coarse,
-                };
-                let v = match self.certificates {
-                    Some(lattices) => lattices[k].value(&sweep, p),
-                    None => sweep.value(p),
-                };
-                v.min(best)
-            })
+        let mut best = cap;
+        for (k, solid) in self.solids.iter().enumerate() {
+            if best <= self.floor {
+                break;
+            }
+            let sweep = ExactSweep {
+                kin: self.kin,
+                solid,
+                frame: self.frame,
+                target: self.target,
+                cap: best,
+                floor: self.floor,
+                coarse: self.coarse,
+            };
+            let v = match self.certificates {
+                Some(lattices) => lattices[k].value(&sweep, p),
+                None => sweep.value(p),
+            };
+            best = best.min(v);
+        }
+        best.max(self.floor)
     }
 }
 
@@ -398,7 +416,7 @@ impl<S: Sdf> ExactSweep<'_, S> {
         }
         self.search(
             p,
-            self.start(p, self.cap),
+            self.start(p, self.cap, self.floor),
             self.cap,
             EXACT_BASIN_TOL_MM,
             None,
@@ -420,17 +438,19 @@ impl<S: Sdf> ExactSweep<'_, S> {
         let mut best = f64::INFINITY;
         let pace = self.pace(q);
         let moved = self.solid.lipschitz() * d;
-        let mut reopen = |l: &Leaf, best: &mut f64| {
+        // Basins first: they hold the certificate's minimum, so the best is low early and
+        // rules out more of the rest.
+        let basins = cert.leaves.iter().filter(|l| l.basin);
+        let pruned = cert.leaves.iter().filter(|l| !l.basin);
+        for l in basins.chain(pruned) {
+            if !l.basin && l.f - moved >= best.min(self.cap) {
+                continue;
+            }
             let f = self.at(q, l.c, best.min(self.cap) + pace.over(l.c, l.w) * l.w);
-            *best = best.min(f);
+            best = best.min(f);
             open.push((l.c, l.w, f));
-        };
-        for l in cert.leaves.iter().filter(|l| l.basin) {
-            reopen(l, &mut best);
-        }
-        for l in cert.leaves.iter().filter(|l| !l.basin) {
-            if l.f - moved < best.min(self.cap) {
-                reopen(l, &mut best);
+            if best <= self.floor {
+                return best;
             }
         }
         self.search(q, open, self.cap, EXACT_BASIN_TOL_MM, None)
@@ -446,7 +466,7 @@ impl<S: Sdf> ExactSweep<'_, S> {
         // Leaves finer than the reach would only be reopened at the points it serves.
         self.search(
             p,
-            self.start(p, cap),
+            self.start(p, cap, f64::NEG_INFINITY),
             cap,
             reach.max(EXACT_BASIN_TOL_MM),
             Some(&mut leaves),
@@ -461,21 +481,28 @@ impl<S: Sdf> ExactSweep<'_, S> {
     }
 
     /// The starting intervals (centre, half width, value at the centre).
-    /// Values at or above `cap` plus the interval's reach need not be exact.
-    fn start(&self, p: Vec3, cap: f64) -> Vec<(f64, f64, f64)> {
+    /// Values at or above `cap` plus the interval's reach need not be exact. Ends early,
+    /// after the first value at or below `floor`.
+    fn start(&self, p: Vec3, cap: f64, floor: f64) -> Vec<(f64, f64, f64)> {
         let w0 = 0.5 / EXACT_START_INTERVALS as f64;
         let pace = self.pace(p);
-        (0..EXACT_START_INTERVALS)
-            .map(|i| {
-                let c = (2 * i + 1) as f64 * w0;
-                (c, w0, self.at(p, c, cap + pace.over(c, w0) * w0))
-            })
-            .collect()
+        let mut open = Vec::with_capacity(EXACT_START_INTERVALS);
+        for i in 0..EXACT_START_INTERVALS {
+            let c = (2 * i + 1) as f64 * w0;
+            let f = self.at(p, c, cap + pace.over(c, w0) * w0);
+            open.push((c, w0, f));
+            if f <= floor {
+                break;
+            }
+        }
+        open
     }
 
     /// Branch and bound over `open` (intervals with the value at their centre), pruning
     /// against `cap`, then a local refinement of each run of basins. Records the leaves
-    /// when asked. Returns the smallest value found (not capped).
+    /// when asked (a certificate, which must be whole: the floor is then not used).
+    /// Returns the smallest value found (not capped), or the first found at or below the
+    /// floor.
     fn search(
         &self,
         p: Vec3,
@@ -485,7 +512,15 @@ impl<S: Sdf> ExactSweep<'_, S> {
         mut leaves: Option<&mut Vec<Leaf>>,
     ) -> f64 {
         let pace = self.pace(p);
+        let floor = if leaves.is_some() {
+            f64::NEG_INFINITY
+        } else {
+            self.floor
+        };
         let mut best = open.iter().map(|o| o.2).fold(f64::INFINITY, f64::min);
+        if best <= floor {
+            return best;
+        }
         // (centre, half width, lower bound over the interval).
         let mut basins: Vec<(f64, f64, f64)> = Vec::new();
         while let Some((c, w, f)) = open.pop() {
@@ -523,6 +558,9 @@ impl<S: Sdf> ExactSweep<'_, S> {
                 best = best.min(fc);
                 open.push((cc, h, fc));
             }
+            if best <= floor {
+                return best;
+            }
         }
         if leaves.is_some() {
             // A certificate: the points it serves refine for themselves.
@@ -558,7 +596,10 @@ impl<S: Sdf> ExactSweep<'_, S> {
             // beyond the run may see values at the limit, above every value inside.
             let limit = best.min(cap) + RUN_EXACT_ABOVE_BEST * basin_tol;
             let exact = |t| self.at(p, t, limit);
-            best = best.min(minimize(exact, lo - pad, hi + pad));
+            best = best.min(minimize(exact, lo - pad, hi + pad, floor));
+            if best <= floor {
+                return best;
+            }
         }
         best
     }
@@ -566,10 +607,11 @@ impl<S: Sdf> ExactSweep<'_, S> {
 
 /// The smallest value of `f` on [a, b] by Brent's method: parabolic steps through the three
 /// best points where they stay inside the bracket and shrink it, golden-section steps
-/// otherwise, until the bracket is [`EXACT_TIME_TOL`] wide around the best point. Exact
-/// for a unimodal `f`; on a run with several minima it may stop in one that is not the
-/// lowest, which the caller's basin tolerance bounds.
-fn minimize(f: impl Fn(f64) -> f64, mut a: f64, mut b: f64) -> f64 {
+/// otherwise, until the bracket is [`EXACT_TIME_TOL`] wide around the best point, or a
+/// value at or below `floor` is found (then that value). Exact for a unimodal `f`; on a
+/// run with several minima it may stop in one that is not the lowest, which the caller's
+/// basin tolerance bounds.
+fn minimize(f: impl Fn(f64) -> f64, mut a: f64, mut b: f64, floor: f64) -> f64 {
     const GOLD: f64 = 0.381_966_011_250_105_1; // (3 − √5) / 2
     let mut x = a + GOLD * (b - a);
     let (mut w, mut v) = (x, x);
@@ -580,7 +622,7 @@ fn minimize(f: impl Fn(f64) -> f64, mut a: f64, mut b: f64) -> f64 {
     loop {
         let m = 0.5 * (a + b);
         let tol = 0.5 * EXACT_TIME_TOL;
-        if (x - m).abs() <= 2.0 * tol - 0.5 * (b - a) {
+        if (x - m).abs() <= 2.0 * tol - 0.5 * (b - a) || fx <= floor {
             return fx;
         }
         let mut golden = true;
@@ -680,6 +722,7 @@ mod tests {
             frame: Frame::Follower,
             target: Frame::Driver,
             cap,
+            floor: f64::NEG_INFINITY,
             coarse: None,
         }
     }
@@ -844,6 +887,113 @@ mod tests {
         assert!(
             worst < k * EXACT_VS_BRUTE_MM,
             "off the plain search by {worst}"
+        );
+    }
+
+    /// A solid that counts how often its value is asked for.
+    struct Counted<S> {
+        inner: S,
+        asked: std::sync::atomic::AtomicUsize,
+    }
+
+    impl<S: Sdf> Sdf for Counted<S> {
+        fn dist(&self, p: Vec3) -> f64 {
+            self.asked
+                .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            self.inner.dist(p)
+        }
+        fn dist_continuous(&self, p: Vec3, limit: f64) -> f64 {
+            self.asked
+                .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            self.inner.dist_continuous(p, limit)
+        }
+        fn lipschitz(&self) -> f64 {
+            self.inner.lipschitz()
+        }
+        fn bounds(&self) -> crate::geometry::mesh::Aabb {
+            self.inner.bounds()
+        }
+    }
+
+    /// Guards the carve's floor ([`SweptEach::with_floor`]): through certificates, as the
+    /// carve asks, every value above the floor is exactly the one without it, every value at
+    /// or below it is reported as the floor, and the points deep in the rims' sweep cost
+    /// fewer evaluations of the rims (what the floor is for).
+    #[test]
+    fn a_floor_ends_the_search_and_changes_no_value_above_it() {
+        let (mech, kin) = half_turn();
+        let rims: Vec<Counted<crate::geometry::sweep::Sweep>> = mech
+            .curve_pairs
+            .iter()
+            .map(|cp| Counted {
+                inner: crate::build::shapes::rim(cp, 10.0).unwrap(),
+                asked: Default::default(),
+            })
+            .collect();
+        let asked = |rims: &[Counted<_>]| {
+            rims.iter()
+                .map(|r| r.asked.load(std::sync::atomic::Ordering::Relaxed))
+                .sum::<usize>()
+        };
+        let (cap, floor) = (0.9, -0.7);
+        let points: Vec<Vec3> = (0..300)
+            .map(|i| {
+                let c1s = &mech.curve_pairs[i % mech.curve_pairs.len()].samples.c1;
+                let c1 = c1s[(i * 31) % c1s.len()];
+                let off = Vec3::new(
+                    (i as f64 * 1.1).sin(),
+                    (i as f64 * 0.6).cos(),
+                    (i as f64 * 2.7).sin(),
+                ) * 2.0;
+                Vec3::new(c1[0], c1[1], c1[2]) * 10.0 + off
+            })
+            .collect();
+        let lattices = || {
+            (0..rims.len())
+                .map(|_| Certificates::new(1.0, cap))
+                .collect::<Vec<_>>()
+        };
+        let (whole_lattices, floored_lattices) = (lattices(), lattices());
+        let whole = || SweptEach::new(&kin, &rims, Frame::Follower, Frame::Driver);
+        let floored = || whole().with_floor(floor);
+        // As the carve asks: through certificates.
+        let exact: Vec<f64> = {
+            let whole = whole().with_certificates(&whole_lattices);
+            points.iter().map(|&p| whole.value(p, cap)).collect()
+        };
+        let got: Vec<f64> = {
+            let floored = floored().with_certificates(&floored_lattices);
+            points.iter().map(|&p| floored.value(p, cap)).collect()
+        };
+        let deep: Vec<Vec3> = points
+            .iter()
+            .zip(&exact)
+            .filter(|(_, &v)| v <= floor)
+            .map(|(&p, _)| p)
+            .collect();
+        let between = exact.iter().filter(|&&v| v > floor && v < cap).count();
+        assert!(
+            deep.len() >= 30 && between >= 30,
+            "{} points deep, {between} between",
+            deep.len()
+        );
+        for ((e, g), p) in exact.iter().zip(&got).zip(&points) {
+            let want = if *e <= floor { floor } else { *e };
+            assert_eq!(*g, want, "at {p:?}");
+        }
+        // The cost at the deep points, searched from scratch (a certificate is made whole).
+        let cost = |sweep: &SweptEach<'_, _>| {
+            let before = asked(&rims);
+            for &p in &deep {
+                sweep.value(p, cap);
+            }
+            asked(&rims) - before
+        };
+        let (cost_whole, cost_floored) = (cost(&whole()), cost(&floored()));
+        assert!(
+            (cost_floored as f64) < 0.5 * cost_whole as f64,
+            "{cost_floored} evaluations with the floor, {cost_whole} without, at {} points",
+            deep.len()
         );
     }
 
