@@ -18,15 +18,17 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+use rayon::prelude::*;
 use serde_json::json;
 
 use super::kinematics::Kinematics;
 use super::{BuildOptions, Built, Part};
-use crate::geometry::io::gltf::{write_glb, GltfError};
+use crate::geometry::io::gltf::{write_glb_shaded, GltfError};
 use crate::geometry::io::stl::{write_stl, StlError};
 use crate::geometry::io::threemf::{self, Bed, LayoutError, ThreeMfError};
 use crate::geometry::render::{RenderError, RenderOptions, Renderer, View};
 use crate::geometry::scene::{Pose, Scene, ScenePart};
+use crate::geometry::shading::{shade_scene, ShadedMesh};
 
 /// The `format` of `build.json`.
 pub const BUILD_FORMAT: &str = "mpcmech-build/2";
@@ -218,31 +220,46 @@ pub fn write(
     let (bed_mm, bed_note) = write_package(&package, &built.parts)?;
     files.push(package);
     let scene = scene(&built.design.kin, &built.parts);
+    // One shading of each part serves the GLB and every picture.
+    let shaded = shade_scene(&scene);
     let glb = out.join("assembly.glb");
-    write_glb(&glb, &scene)?;
+    write_glb_shaded(&glb, &scene, &shaded)?;
     files.push(glb);
 
     progress("rendering pictures");
-    let renderer = Renderer::new(&scene, RenderOptions::default())?;
-    for view in [View::Isometric, View::Front] {
-        let path = out.join(format!("assembly-{}.png", view.name()));
-        renderer.render(0, view)?.write_png(&path)?;
-        files.push(path);
-    }
-    for part in &scene.parts {
-        let alone = Scene {
+    let alone: Vec<Scene> = scene
+        .parts
+        .iter()
+        .map(|part| Scene {
             parts: vec![ScenePart {
                 poses: vec![Pose::IDENTITY],
                 ..part.clone()
             }],
             times_s: vec![0.0],
-        };
-        let path = out.join(format!("{}.png", part.name));
-        Renderer::new(&alone, RenderOptions::default())?
-            .render(0, View::Isometric)?
-            .write_png(&path)?;
-        files.push(path);
+        })
+        .collect();
+    // (file, scene, its shading, view): the assembly from two sides, each part alone.
+    let mut pictures: Vec<(PathBuf, &Scene, &[ShadedMesh], View)> = [View::Isometric, View::Front]
+        .into_iter()
+        .map(|view| {
+            let path = out.join(format!("assembly-{}.png", view.name()));
+            (path, &scene, &shaded[..], view)
+        })
+        .collect();
+    for (k, one) in alone.iter().enumerate() {
+        let path = out.join(format!("{}.png", one.parts[0].name));
+        pictures.push((path, one, std::slice::from_ref(&shaded[k]), View::Isometric));
     }
+    pictures
+        .par_iter()
+        .map(|(path, scene, shaded, view)| -> Result<(), OutputError> {
+            Renderer::with_shading(scene, shaded, RenderOptions::default())?
+                .render(0, *view)?
+                .write_png(path)?;
+            Ok(())
+        })
+        .collect::<Result<(), OutputError>>()?;
+    files.extend(pictures.into_iter().map(|p| p.0));
 
     // After the renders, the last large allocations of a build.
     let peak_mb = peak_resident_mb();
@@ -307,7 +324,7 @@ fn summary_json(
         "without_pair": opts.without_pair.map(|k| k + 1),
         "bench": built.design.layout.bench.to_string(),
         "parts": built.parts.iter().map(|p| {
-            let c = p.mesh.check();
+            let c = &p.check;
             let b = p.mesh.aabb();
             json!({
                 "name": p.name,
@@ -451,7 +468,7 @@ fn summary_md(
     let _ = writeln!(s, "| part | triangles | volume mm³ | size mm | mesh |");
     let _ = writeln!(s, "|---|---:|---:|---|---|");
     for p in &built.parts {
-        let c = p.mesh.check();
+        let c = &p.check;
         let b = p.mesh.aabb().size();
         let _ = writeln!(
             s,
@@ -614,12 +631,16 @@ mod tests {
     fn parts_larger_than_the_bed_get_a_larger_bed_and_a_note() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("mechanism.3mf");
-        let part = |name, w| Part {
-            name,
-            mesh: primitive_meshes::cuboid([0.0; 3], [w, 40.0, 10.0]),
-            dropped: Vec::new(),
-            pieces: Vec::new(),
-            seconds: 0.0,
+        let part = |name, w| {
+            let mesh = primitive_meshes::cuboid([0.0; 3], [w, 40.0, 10.0]);
+            Part {
+                name,
+                check: mesh.check(),
+                mesh,
+                dropped: Vec::new(),
+                pieces: Vec::new(),
+                seconds: 0.0,
+            }
         };
         let parts = [
             part("driver", 250.0),
@@ -648,6 +669,7 @@ mod tests {
             .map(|name| Part {
                 name,
                 mesh: mesh.clone(),
+                check: mesh.check(),
                 dropped: Vec::new(),
                 pieces: Vec::new(),
                 seconds: 0.0,

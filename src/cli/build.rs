@@ -71,7 +71,7 @@ pub fn run(args: BuildArgs) -> anyhow::Result<ExitCode> {
     });
     let written = output::write(&built, &file, &opts, &out, &|s| eprintln!("  {s}"))?;
     for p in &built.parts {
-        let c = p.mesh.check();
+        let c = &p.check;
         let b = p.mesh.aabb().size();
         println!(
             "{:<9} {:>8} triangles  {:>9.0} mm³  {:.0} × {:.0} × {:.0} mm  {}  {:.1} s",

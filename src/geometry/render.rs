@@ -23,11 +23,12 @@
 //! byte-identical pictures. It does not choose which key times or views a report shows
 //! (that is `build`'s job) and draws no text.
 
+use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use crate::geometry::scene::{Pose, Scene};
-use crate::geometry::shading::{ShadedMesh, CREASE_ANGLE_DEG};
+use crate::geometry::shading::{shade_scene, ShadedMesh};
 
 /// Default picture size, pixels (width, height): large enough to see a groove, small enough
 /// for a report page (≈ 100–300 kB as PNG).
@@ -46,7 +47,7 @@ pub const FRAME_MARGIN: f64 = 0.06;
 pub const OUTLINE_DEPTH_SAMPLES: f64 = 2.0;
 
 /// Normals of neighbouring samples turning by more than this mark an outline (a crease).
-/// Below [`CREASE_ANGLE_DEG`], so every edge the shading splits is drawn; far above the
+/// Below [`CREASE_ANGLE_DEG`](crate::geometry::shading::CREASE_ANGLE_DEG), so every edge the shading splits is drawn; far above the
 /// turn between neighbouring samples of a smooth surface (well under a degree).
 pub const OUTLINE_NORMAL_DEG: f64 = 30.0;
 
@@ -230,7 +231,7 @@ impl Image {
 /// once, any number of pictures.
 pub struct Renderer<'a> {
     scene: &'a Scene,
-    shaded: Vec<ShadedMesh>,
+    shaded: Cow<'a, [ShadedMesh]>,
     options: RenderOptions,
     /// The camera of each of [`View::ALL`], fitted on first use.
     cameras: [OnceLock<Camera>; View::ALL.len()],
@@ -254,6 +255,41 @@ const NONE: u16 = u16::MAX;
 impl<'a> Renderer<'a> {
     /// Check the options and the scene's meshes, and build the shading meshes.
     pub fn new(scene: &'a Scene, options: RenderOptions) -> Result<Renderer<'a>, RenderError> {
+        Self::check(scene, &options)?;
+        Ok(Renderer {
+            scene,
+            shaded: Cow::Owned(shade_scene(scene)),
+            options,
+            cameras: Default::default(),
+        })
+    }
+
+    /// [`Renderer::new`] with the shading made already ([`shade_scene`] of `scene`, or of
+    /// a scene whose parts these are): each shading must fit its part's mesh.
+    pub fn with_shading(
+        scene: &'a Scene,
+        shaded: &'a [ShadedMesh],
+        options: RenderOptions,
+    ) -> Result<Renderer<'a>, RenderError> {
+        Self::check(scene, &options)?;
+        for (i, part) in scene.parts.iter().enumerate() {
+            if !shaded.get(i).is_some_and(|s| s.fits(&part.mesh)) {
+                return Err(RenderError::BadMesh {
+                    part: part.name.clone(),
+                    what: "no shading made from its mesh was given for it".into(),
+                });
+            }
+        }
+        Ok(Renderer {
+            scene,
+            shaded: Cow::Borrowed(shaded),
+            options,
+            cameras: Default::default(),
+        })
+    }
+
+    /// The options in range, and every part's mesh indexable and finite.
+    fn check(scene: &Scene, options: &RenderOptions) -> Result<(), RenderError> {
         let [w, h] = options.size_px;
         let ok_side = |s: u32| (1..=MAX_SIZE_PX).contains(&s);
         if !ok_side(w) || !ok_side(h) || !(1..=MAX_SUPERSAMPLE).contains(&options.supersample) {
@@ -290,17 +326,7 @@ impl<'a> Renderer<'a> {
                 return Err(bad(format!("vertex {i} is not finite")));
             }
         }
-        let shaded = scene
-            .parts
-            .iter()
-            .map(|p| ShadedMesh::new(&p.mesh, CREASE_ANGLE_DEG))
-            .collect();
-        Ok(Renderer {
-            scene,
-            shaded,
-            options,
-            cameras: Default::default(),
-        })
+        Ok(())
     }
 
     /// The picture of the scene at key `key` seen along `view`.
@@ -329,7 +355,7 @@ impl<'a> Renderer<'a> {
             normal: vec![[0; 3]; w * h],
             part: vec![NONE; w * h],
         };
-        for (i, (part, shaded)) in self.scene.parts.iter().zip(&self.shaded).enumerate() {
+        for (i, (part, shaded)) in self.scene.parts.iter().zip(self.shaded.iter()).enumerate() {
             let pose = part.pose(key);
             let screen: Vec<[f64; 3]> = shaded
                 .positions
@@ -744,6 +770,53 @@ mod tests {
             }
         }
         assert_eq!(inside, [84 * 84; 2]);
+    }
+
+    /// Guards shading made once for several uses (`build` shades each part once for the GLB
+    /// and five pictures): the picture is the one [`Renderer::new`] draws, also for a part
+    /// taken alone with its own shading, and shading made from another mesh is refused,
+    /// naming the part.
+    #[test]
+    fn shading_made_once_draws_the_same_and_must_fit() {
+        let big = part("big", [0.0; 3], [20.0; 3], BLUE);
+        let small = part("small", [5.0, -5.0, 5.0], [15.0, 0.0, 15.0], RED);
+        let scene = Scene {
+            parts: vec![big, small],
+            times_s: vec![0.0],
+        };
+        let shaded = shade_scene(&scene);
+        let draw = |r: Renderer<'_>| r.render(0, View::Isometric).unwrap();
+        assert_eq!(
+            draw(Renderer::with_shading(&scene, &shaded, options(120, 120, 2, true)).unwrap()),
+            draw(Renderer::new(&scene, options(120, 120, 2, true)).unwrap())
+        );
+        let alone = Scene {
+            parts: vec![scene.parts[1].clone()],
+            times_s: vec![0.0],
+        };
+        assert_eq!(
+            draw(
+                Renderer::with_shading(
+                    &alone,
+                    std::slice::from_ref(&shaded[1]),
+                    options(120, 120, 2, true)
+                )
+                .unwrap()
+            ),
+            draw(Renderer::new(&alone, options(120, 120, 2, true)).unwrap())
+        );
+        let sphere = crate::geometry::primitive_meshes::uv_sphere([0.0; 3], 3.0, 16, 8);
+        let wrong = [ShadedMesh::new(&sphere, 40.0), shaded[1].clone()];
+        // Another mesh's shading, then none at all for the second part.
+        for (given, part) in [(&wrong[..], "big"), (&shaded[..1], "small")] {
+            let e = Renderer::with_shading(&scene, given, options(120, 120, 2, true))
+                .err()
+                .expect("refused");
+            assert_eq!(
+                e.to_string(),
+                format!("part {part:?}: no shading made from its mesh was given for it")
+            );
+        }
     }
 
     /// Guards the z-buffer and culling: a small cube in front of a large one shows over it

@@ -2,7 +2,7 @@
 //!
 //! Owns the GLB container and the glTF document we write:
 //! - **one mesh per part**: positions, unit normals and `u32` indices of the part's
-//!   [`ShadedMesh`] (split at [`CREASE_ANGLE_DEG`], so freeform contact surfaces shade
+//!   [`ShadedMesh`] (split at [`CREASE_ANGLE_DEG`](crate::geometry::shading::CREASE_ANGLE_DEG), so freeform contact surfaces shade
 //!   smoothly and printed edges stay crisp);
 //! - **one material per part**: its colour as the PBR base colour (linear RGBA, as
 //!   [`ScenePart::color`](crate::geometry::ScenePart::color) is), non-metallic, roughness
@@ -29,7 +29,7 @@ use std::path::{Path, PathBuf};
 use serde_json::{json, Value};
 
 use crate::geometry::scene::{Pose, Scene};
-use crate::geometry::shading::{ShadedMesh, CREASE_ANGLE_DEG};
+use crate::geometry::shading::{shade_scene, ShadedMesh};
 
 /// PBR roughness of every material: 0.55 looks like printed PLA/PETG (satin, soft
 /// highlights) under a viewer's default environment light.
@@ -162,6 +162,12 @@ pub enum SceneError {
         /// Distance between their translations, mm.
         offset_mm: f64,
     },
+    /// No shading made from a part's mesh was given for it.
+    #[error("part {part:?}: no shading made from its mesh was given for it")]
+    Shading {
+        /// The part.
+        part: String,
+    },
     /// The binary data would exceed what a GLB can address (4 GiB).
     #[error("the scene needs {0} bytes of binary data, more than a GLB can hold")]
     TooLarge(u64),
@@ -169,7 +175,20 @@ pub enum SceneError {
 
 /// Write `scene` as a GLB file at `path`.
 pub fn write_glb(path: &Path, scene: &Scene) -> Result<(), GltfError> {
-    let bytes = glb_bytes(scene).map_err(|source| GltfError::Scene {
+    write_bytes(path, glb_bytes(scene))
+}
+
+/// [`write_glb`] with the shading made already ([`shade_scene`] of `scene`).
+pub fn write_glb_shaded(
+    path: &Path,
+    scene: &Scene,
+    shaded: &[ShadedMesh],
+) -> Result<(), GltfError> {
+    write_bytes(path, glb_bytes_shaded(scene, shaded))
+}
+
+fn write_bytes(path: &Path, bytes: Result<Vec<u8>, SceneError>) -> Result<(), GltfError> {
+    let bytes = bytes.map_err(|source| GltfError::Scene {
         path: path.to_path_buf(),
         source,
     })?;
@@ -183,13 +202,26 @@ pub fn write_glb(path: &Path, scene: &Scene) -> Result<(), GltfError> {
 
 /// The bytes of a GLB file of `scene` (see the module doc).
 pub fn glb_bytes(scene: &Scene) -> Result<Vec<u8>, SceneError> {
+    // Checked before shading, which indexes the meshes' vertices.
     check_scene(scene)?;
+    glb_bytes_shaded(scene, &shade_scene(scene))
+}
+
+/// [`glb_bytes`] with the shading made already ([`shade_scene`] of `scene`).
+pub fn glb_bytes_shaded(scene: &Scene, shaded: &[ShadedMesh]) -> Result<Vec<u8>, SceneError> {
+    check_scene(scene)?;
+    for (i, part) in scene.parts.iter().enumerate() {
+        if !shaded.get(i).is_some_and(|s| s.fits(&part.mesh)) {
+            return Err(SceneError::Shading {
+                part: part.name.clone(),
+            });
+        }
+    }
     let mut bin = Bin::default();
     let mut meshes = Vec::new();
     let mut materials = Vec::new();
     let mut nodes = vec![Value::Null]; // the root, filled in below
-    for (i, part) in scene.parts.iter().enumerate() {
-        let shaded = ShadedMesh::new(&part.mesh, CREASE_ANGLE_DEG);
+    for (i, (part, shaded)) in scene.parts.iter().zip(shaded).enumerate() {
         let positions: Vec<f32> = shaded
             .positions
             .iter()
@@ -552,6 +584,23 @@ mod tests {
             ],
             times_s,
         }
+    }
+
+    /// Guards shading made once (`build` shares it with the pictures): the bytes are those
+    /// [`glb_bytes`] writes, and shading of another mesh is refused, naming the part.
+    #[test]
+    fn shading_made_once_gives_the_same_bytes_and_must_fit() {
+        let s = scene(12);
+        let shaded = shade_scene(&s);
+        assert_eq!(
+            glb_bytes_shaded(&s, &shaded).unwrap(),
+            glb_bytes(&s).unwrap()
+        );
+        let swapped = [shaded[1].clone(), shaded[0].clone()];
+        assert_eq!(
+            glb_bytes_shaded(&s, &swapped).unwrap_err().to_string(),
+            "part \"support\": no shading made from its mesh was given for it"
+        );
     }
 
     /// The container is a GLB 2 whose length fields add up, with a JSON chunk that names the
