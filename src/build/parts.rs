@@ -416,7 +416,8 @@ fn plan_follower_struts(
     };
     order.sort_by(|&a, &b| nearest(a).total_cmp(&nearest(b)));
     let mut struts = Vec::new();
-    let band_clearance = |p: Vec3| web_clear.below(p, STRUT_RADIUS_MM + ROOT_MARGIN_MM);
+    let band_clearance =
+        |p: Vec3| web_clear.below(p, STRUT_RADIUS_MM + ROOT_MARGIN_MM, f64::NEG_INFINITY);
     for &k in &order {
         // Struts leave a rim from behind it, along −n², where the driver's band is not.
         let st = strut_from_behind(
@@ -626,12 +627,16 @@ pub struct BandClearance {
 }
 
 impl BandClearance {
-    /// The clearance at `p`, exact (for the bands) whenever it is below `need`; some value
-    /// not below `need` otherwise. A band's exact sweep runs only where its coarse field
-    /// (a lower bound) does not already settle the question.
-    pub fn below(&self, p: Vec3, need: f64) -> f64 {
+    /// The clearance at `p`, exact (for the bands) whenever it is below `need` and above
+    /// `floor`; some value not below `need` otherwise, or `floor` where it is not above
+    /// that (found at the first band and instant that show it). A band's exact sweep runs
+    /// only where its coarse field (a lower bound) does not already settle the question.
+    pub fn below(&self, p: Vec3, need: f64, floor: f64) -> f64 {
         let mut c = self.others.sample(p);
         for (band, field) in self.bands.iter().zip(&self.band_fields) {
+            if c <= floor {
+                return floor;
+            }
             let bound = need.min(c);
             let coarse = field.sample(p);
             if coarse >= bound {
@@ -643,13 +648,13 @@ impl BandClearance {
                 frame: Frame::Driver,
                 target: Frame::Follower,
                 cap: bound,
-                floor: f64::NEG_INFINITY,
+                floor,
                 coarse: None,
             }
             .value(p);
             c = c.min(exact);
         }
-        c
+        c.max(floor)
     }
 }
 
@@ -887,6 +892,7 @@ impl Design {
             add.push(Box::new(KeptWeb {
                 web: w.clone(),
                 clear: self.band_clearance.clone(),
+                far: CARVE_CAP_CELLS * self.cell_mm,
             }));
         }
         for s in &self.follower_struts {
@@ -953,10 +959,16 @@ impl Design {
     }
 }
 
-/// A web kept clear of the driver's swept bands.
+/// A web kept clear of the driver's swept bands, for the mesher: inside the web, values
+/// more than `far` from zero are only said to be that far.
 struct KeptWeb {
     web: Arc<ThickTriangles>,
     clear: Arc<BandClearance>,
+    /// Beyond this, mm, a value needs no more than its sign and that it is this far: the
+    /// mesher reads magnitudes only near the surface (as the driver's carve,
+    /// [`CARVE_CAP_CELLS`] cells), and the union, difference and offset the web enters
+    /// keep a value that is at least this far (in either direction) at least this far.
+    far: f64,
 }
 
 impl Sdf for KeptWeb {
@@ -965,8 +977,11 @@ impl Sdf for KeptWeb {
         if v > 0.0 {
             return v;
         }
-        // max(v, margin − clearance) differs from v only when clearance < margin − v.
-        v.max(WEB_MARGIN_MM - self.clear.below(p, WEB_MARGIN_MM - v))
+        // max(v, margin − clearance) differs from v only when clearance < margin − v, and
+        // is at most −far wherever both are; it is at least far wherever the clearance is
+        // at most margin − far, which the search stops at.
+        let need = (WEB_MARGIN_MM - v).min(WEB_MARGIN_MM + self.far);
+        v.max(WEB_MARGIN_MM - self.clear.below(p, need, WEB_MARGIN_MM - self.far))
     }
     fn bounds(&self) -> Aabb {
         self.web.bounds()
@@ -1017,5 +1032,78 @@ impl Sdf for DriverSolid<'_> {
     }
     fn bounds(&self) -> Aabb {
         self.material.bounds()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::build::tests::half_turn;
+
+    /// Guards the follower's floor ([`BandClearance::below`], which [`KeptWeb`] asks with
+    /// one): the clearance from the driver's swept bands is the one without a floor wherever
+    /// that is above the floor, and the floor wherever it is not, at points around the
+    /// follower's curves (in and out of the bands' sweep).
+    #[test]
+    fn band_clearance_above_its_floor_is_the_one_without() {
+        let (mech, kin) = half_turn();
+        let kin = Arc::new(kin);
+        let bands: Vec<Sweep> = mech
+            .curve_pairs
+            .iter()
+            .map(|cp| shapes::band(cp, 10.0).unwrap())
+            .collect();
+        let rims: Vec<Sweep> = mech
+            .curve_pairs
+            .iter()
+            .map(|cp| shapes::rim(cp, 10.0).unwrap())
+            .collect();
+        let rim_covers: Vec<Balls> = rims
+            .iter()
+            .map(|r| shapes::sweep_cover(r, Frame::Follower))
+            .collect();
+        let grid = connect::grid_around(
+            &kin,
+            &rim_covers.iter().collect::<Vec<_>>(),
+            Frame::Follower,
+        );
+        let band_fields = bands
+            .iter()
+            .map(|b| {
+                let cover = shapes::sweep_cover(b, Frame::Driver);
+                connect::clearance(&kin, std::slice::from_ref(&cover), Frame::Follower, grid)
+            })
+            .collect();
+        let clear = BandClearance {
+            kin: kin.clone(),
+            bands,
+            band_fields,
+            others: Arc::new(connect::clearance(&kin, &[], Frame::Follower, grid)),
+        };
+        let (need, floor) = (2.0, 0.0);
+        let (mut deep, mut between) = (0, 0);
+        for i in 0..200 {
+            let c2s = &mech.curve_pairs[i % mech.curve_pairs.len()].samples.c2;
+            let c2 = c2s[(i * 23) % c2s.len()];
+            let off = Vec3::new(
+                (i as f64 * 1.9).sin(),
+                (i as f64 * 0.8).cos(),
+                (i as f64 * 2.3).sin(),
+            ) * 3.0;
+            let p = Vec3::new(c2[0], c2[1], c2[2]) * 10.0 + off;
+            let whole = clear.below(p, need, f64::NEG_INFINITY);
+            let floored = clear.below(p, need, floor);
+            if whole <= floor {
+                deep += 1;
+                assert_eq!(floored, floor, "at {p:?}: {whole} without the floor");
+            } else {
+                between += usize::from(whole < need);
+                assert_eq!(floored, whole, "at {p:?}");
+            }
+        }
+        assert!(
+            deep >= 20 && between >= 20,
+            "{deep} points deep, {between} between"
+        );
     }
 }
