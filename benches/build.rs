@@ -44,7 +44,7 @@ fn main() {
         work.display()
     );
     println!(
-        "{:<20} {:<5} {:>2} {:>5} {:>7} {:>8} {:>7} {:>7} {:>7} {:>6} {:>6} {:>7}  {:>20}  result",
+        "{:<20} {:<5} {:>2} {:>5} {:>7} {:>8} {:>7} {:>7} {:>7} {:>6} {:>6} {:>6} {:>7}  {:>20}  result",
         "motion",
         "class",
         "K",
@@ -56,6 +56,7 @@ fn main() {
         "follow",
         "supp",
         "check",
+        "files",
         "peak MB",
         "triangles d/f/s"
     );
@@ -128,12 +129,13 @@ fn main() {
             format!("NOT PRINTABLE: {first}")
         };
         println!(
-            "{head} {:>7} {:>7} {:>7} {:>6} {:>6} {:>7}  {:>20}  {verdict}",
+            "{head} {:>7} {:>7} {:>7} {:>6} {:>6} {:>6} {:>7}  {:>20}  {verdict}",
             stage("design"),
             stage("mesh driver"),
             stage("mesh follower"),
             stage("mesh support"),
             stage("check"),
+            stage("files"),
             b["peak_memory_mb"]
                 .as_f64()
                 .map_or("–".to_string(), |m| format!("{m:.0}")),

@@ -82,6 +82,9 @@ pub struct Written {
     pub bed_mm: [f64; 2],
     /// Why the default bed was not used, when it was not.
     pub bed_note: Option<String>,
+    /// Seconds spent writing the files and rendering the pictures (`files` in
+    /// `build.json`'s timings).
+    pub files_s: f64,
 }
 
 fn color(name: &str) -> [f32; 4] {
@@ -209,6 +212,7 @@ pub fn write(
         path: out.to_path_buf(),
         source,
     })?;
+    let started = std::time::Instant::now();
     let mut files = Vec::new();
     progress("writing STL, 3MF and GLB");
     for p in &built.parts {
@@ -263,21 +267,41 @@ pub fn write(
 
     // After the renders, the last large allocations of a build.
     let peak_mb = peak_resident_mb();
+    let files_s = started.elapsed().as_secs_f64();
+    let mut timings = built.timings.clone();
+    timings.push(("files".to_string(), files_s));
     let json_path = out.join("build.json");
-    let doc = summary_json(built, mechanism, opts, bed_mm, bed_note.as_deref(), peak_mb);
+    let doc = summary_json(
+        built,
+        mechanism,
+        opts,
+        bed_mm,
+        bed_note.as_deref(),
+        &timings,
+        peak_mb,
+    );
     let text = serde_json::to_string_pretty(&doc).expect("a JSON value always serializes");
     write_text(&json_path, &(text + "\n"))?;
     files.push(json_path);
     let md_path = out.join("build.md");
     write_text(
         &md_path,
-        &summary_md(built, mechanism, opts, bed_mm, bed_note.as_deref(), peak_mb),
+        &summary_md(
+            built,
+            mechanism,
+            opts,
+            bed_mm,
+            bed_note.as_deref(),
+            &timings,
+            peak_mb,
+        ),
     )?;
     files.push(md_path);
     Ok(Written {
         files,
         bed_mm,
         bed_note,
+        files_s,
     })
 }
 
@@ -309,6 +333,7 @@ fn summary_json(
     opts: &BuildOptions,
     bed_mm: [f64; 2],
     bed_note: Option<&str>,
+    timings: &[(String, f64)],
     peak_mb: Option<f64>,
 ) -> serde_json::Value {
     let kin = &built.design.kin;
@@ -364,7 +389,7 @@ fn summary_json(
             },
             "failure": f.failure(),
         },
-        "timings_s": built.timings.iter().map(|(w, s)| json!({"stage": w, "seconds": s})).collect::<Vec<_>>(),
+        "timings_s": timings.iter().map(|(w, s)| json!({"stage": w, "seconds": s})).collect::<Vec<_>>(),
         "peak_memory_mb": peak_mb,
     })
 }
@@ -433,6 +458,7 @@ fn summary_md(
     opts: &BuildOptions,
     bed_mm: [f64; 2],
     bed_note: Option<&str>,
+    timings: &[(String, f64)],
     peak_mb: Option<f64>,
 ) -> String {
     let kin = &built.design.kin;
@@ -569,7 +595,7 @@ fn summary_md(
         let _ = writeln!(s, "![{n}]({n}.png)", n = p.name);
     }
     let _ = writeln!(s, "\n## Time\n");
-    for (w, t) in &built.timings {
+    for (w, t) in timings {
         let _ = writeln!(s, "- {w}: {t:.1} s");
     }
     if let Some(mb) = peak_mb {

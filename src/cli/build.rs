@@ -111,6 +111,7 @@ pub fn run(args: BuildArgs) -> anyhow::Result<ExitCode> {
     for (what, s) in &built.timings {
         println!("{what}: {s:.1} s");
     }
+    println!("files: {:.1} s", written.files_s);
     if let Some(note) = &written.bed_note {
         println!("note: {note}");
     }
