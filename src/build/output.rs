@@ -270,32 +270,22 @@ pub fn write(
     let files_s = started.elapsed().as_secs_f64();
     let mut timings = built.timings.clone();
     timings.push(("files".to_string(), files_s));
-    let json_path = out.join("build.json");
-    let doc = summary_json(
+    let summary = Summary {
         built,
         mechanism,
         opts,
         bed_mm,
-        bed_note.as_deref(),
-        &timings,
+        bed_note: bed_note.as_deref(),
+        timings,
         peak_mb,
-    );
-    let text = serde_json::to_string_pretty(&doc).expect("a JSON value always serializes");
+    };
+    let json_path = out.join("build.json");
+    let text = serde_json::to_string_pretty(&summary_json(&summary))
+        .expect("a JSON value always serializes");
     write_text(&json_path, &(text + "\n"))?;
     files.push(json_path);
     let md_path = out.join("build.md");
-    write_text(
-        &md_path,
-        &summary_md(
-            built,
-            mechanism,
-            opts,
-            bed_mm,
-            bed_note.as_deref(),
-            &timings,
-            peak_mb,
-        ),
-    )?;
+    write_text(&md_path, &summary_md(&summary))?;
     files.push(md_path);
     Ok(Written {
         files,
@@ -327,15 +317,28 @@ fn write_text(path: &Path, text: &str) -> Result<(), OutputError> {
     })
 }
 
-fn summary_json(
-    built: &Built,
-    mechanism: &Path,
-    opts: &BuildOptions,
+/// What `build.json` and `build.md` report: the build and what writing its files found.
+struct Summary<'a> {
+    built: &'a Built,
+    mechanism: &'a Path,
+    opts: &'a BuildOptions,
     bed_mm: [f64; 2],
-    bed_note: Option<&str>,
-    timings: &[(String, f64)],
+    bed_note: Option<&'a str>,
+    /// The build's stages and the files'.
+    timings: Vec<(String, f64)>,
     peak_mb: Option<f64>,
-) -> serde_json::Value {
+}
+
+fn summary_json(summary: &Summary) -> serde_json::Value {
+    let &Summary {
+        built,
+        mechanism,
+        opts,
+        bed_mm,
+        bed_note,
+        ref timings,
+        peak_mb,
+    } = summary;
     let kin = &built.design.kin;
     let f = &built.figures;
     json!({
@@ -452,15 +455,16 @@ fn finite(x: f64) -> Option<f64> {
     x.is_finite().then_some(x)
 }
 
-fn summary_md(
-    built: &Built,
-    mechanism: &Path,
-    opts: &BuildOptions,
-    bed_mm: [f64; 2],
-    bed_note: Option<&str>,
-    timings: &[(String, f64)],
-    peak_mb: Option<f64>,
-) -> String {
+fn summary_md(summary: &Summary) -> String {
+    let &Summary {
+        built,
+        mechanism,
+        opts,
+        bed_mm,
+        bed_note,
+        ref timings,
+        peak_mb,
+    } = summary;
     let kin = &built.design.kin;
     let f = &built.figures;
     let mut s = String::new();
