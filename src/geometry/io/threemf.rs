@@ -351,6 +351,11 @@ pub fn threemf_bytes(placed: &[(Part<'_>, [f64; 3])]) -> Result<Vec<u8>, ThreeMf
     Ok(buf.into_inner())
 }
 
+/// Deflate level of the package's entries. 3: on the 0.4 mm parts of half-turn-2to1
+/// (5.4 M triangles) the package took 3.8 s and 70.3 MB, against 9.3 s and 66.0 MB at the
+/// library's default 6 and 2.4 s and 113 MB at 1; the model's XML is most of both.
+const MODEL_DEFLATE_LEVEL: i64 = 3;
+
 fn write_package<W: Write + Seek>(
     out: W,
     placed: &[(Part<'_>, [f64; 3])],
@@ -358,6 +363,7 @@ fn write_package<W: Write + Seek>(
     let mut zip = ZipWriter::new(out);
     let small = SimpleFileOptions::default()
         .compression_method(CompressionMethod::Deflated)
+        .compression_level(Some(MODEL_DEFLATE_LEVEL))
         .last_modified_time(DateTime::default());
     zip.start_file("[Content_Types].xml", small)?;
     zip.write_all(CONTENT_TYPES.as_bytes())?;
