@@ -28,7 +28,7 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use crate::geometry::scene::{Pose, Scene};
-use crate::geometry::shading::{shade_scene, ShadedMesh};
+use crate::geometry::shading::{first_unfit, shade_scene, ShadedMesh};
 
 /// Default picture size, pixels (width, height): large enough to see a groove, small enough
 /// for a report page (≈ 100–300 kB as PNG).
@@ -47,8 +47,9 @@ pub const FRAME_MARGIN: f64 = 0.06;
 pub const OUTLINE_DEPTH_SAMPLES: f64 = 2.0;
 
 /// Normals of neighbouring samples turning by more than this mark an outline (a crease).
-/// Below [`CREASE_ANGLE_DEG`](crate::geometry::shading::CREASE_ANGLE_DEG), so every edge the shading splits is drawn; far above the
-/// turn between neighbouring samples of a smooth surface (well under a degree).
+/// Below [`CREASE_ANGLE_DEG`](crate::geometry::shading::CREASE_ANGLE_DEG), so every edge
+/// the shading splits is drawn; far above the turn between neighbouring samples of a smooth
+/// surface (well under a degree).
 pub const OUTLINE_NORMAL_DEG: f64 = 30.0;
 
 /// Most keys of a part whose vertices the camera fit looks at (evenly spread). A part
@@ -272,13 +273,11 @@ impl<'a> Renderer<'a> {
         options: RenderOptions,
     ) -> Result<Renderer<'a>, RenderError> {
         Self::check(scene, &options)?;
-        for (i, part) in scene.parts.iter().enumerate() {
-            if !shaded.get(i).is_some_and(|s| s.fits(&part.mesh)) {
-                return Err(RenderError::BadMesh {
-                    part: part.name.clone(),
-                    what: "no shading made from its mesh was given for it".into(),
-                });
-            }
+        if let Some(part) = first_unfit(scene, shaded) {
+            return Err(RenderError::BadMesh {
+                part: part.name.clone(),
+                what: "no shading made from its mesh was given for it".into(),
+            });
         }
         Ok(Renderer {
             scene,

@@ -14,7 +14,7 @@ use std::collections::HashMap;
 use rayon::prelude::*;
 
 use super::mesh::Mesh;
-use super::scene::Scene;
+use super::scene::{Scene, ScenePart};
 
 /// Dihedral angle above which an edge is drawn sharp (normals split), degrees. 40°: a
 /// freeform surface meshed at the build's resolution turns by a few degrees between
@@ -113,6 +113,18 @@ impl ShadedMesh {
             && self.positions.len() >= mesh.vertices.len()
             && self.normals.len() == self.positions.len()
     }
+}
+
+/// The first part of `scene` that `shaded` (one shading per part, in order) has no fitting
+/// shading for ([`ShadedMesh::fits`]), if any: what a writer or renderer handed shading
+/// made elsewhere refuses.
+pub fn first_unfit<'s>(scene: &'s Scene, shaded: &[ShadedMesh]) -> Option<&'s ScenePart> {
+    scene
+        .parts
+        .iter()
+        .enumerate()
+        .find(|(i, part)| !shaded.get(*i).is_some_and(|s| s.fits(&part.mesh)))
+        .map(|(_, part)| part)
 }
 
 /// The shading of every part of `scene` at [`CREASE_ANGLE_DEG`], in the parts' order, the

@@ -2,8 +2,9 @@
 //!
 //! Owns the GLB container and the glTF document we write:
 //! - **one mesh per part**: positions, unit normals and `u32` indices of the part's
-//!   [`ShadedMesh`] (split at [`CREASE_ANGLE_DEG`](crate::geometry::shading::CREASE_ANGLE_DEG), so freeform contact surfaces shade
-//!   smoothly and printed edges stay crisp);
+//!   [`ShadedMesh`] (split at
+//!   [`CREASE_ANGLE_DEG`](crate::geometry::shading::CREASE_ANGLE_DEG), so freeform contact
+//!   surfaces shade smoothly and printed edges stay crisp);
 //! - **one material per part**: its colour as the PBR base colour (linear RGBA, as
 //!   [`ScenePart::color`](crate::geometry::ScenePart::color) is), non-metallic, roughness
 //!   [`ROUGHNESS`]; `BLEND` when the colour is translucent;
@@ -29,7 +30,7 @@ use std::path::{Path, PathBuf};
 use serde_json::{json, Value};
 
 use crate::geometry::scene::{Pose, Scene};
-use crate::geometry::shading::{shade_scene, ShadedMesh};
+use crate::geometry::shading::{first_unfit, shade_scene, ShadedMesh};
 
 /// PBR roughness of every material: 0.55 looks like printed PLA/PETG (satin, soft
 /// highlights) under a viewer's default environment light.
@@ -204,19 +205,22 @@ fn write_bytes(path: &Path, bytes: Result<Vec<u8>, SceneError>) -> Result<(), Gl
 pub fn glb_bytes(scene: &Scene) -> Result<Vec<u8>, SceneError> {
     // Checked before shading, which indexes the meshes' vertices.
     check_scene(scene)?;
-    glb_bytes_shaded(scene, &shade_scene(scene))
+    encode(scene, &shade_scene(scene))
 }
 
 /// [`glb_bytes`] with the shading made already ([`shade_scene`] of `scene`).
 pub fn glb_bytes_shaded(scene: &Scene, shaded: &[ShadedMesh]) -> Result<Vec<u8>, SceneError> {
     check_scene(scene)?;
-    for (i, part) in scene.parts.iter().enumerate() {
-        if !shaded.get(i).is_some_and(|s| s.fits(&part.mesh)) {
-            return Err(SceneError::Shading {
-                part: part.name.clone(),
-            });
-        }
+    if let Some(part) = first_unfit(scene, shaded) {
+        return Err(SceneError::Shading {
+            part: part.name.clone(),
+        });
     }
+    encode(scene, shaded)
+}
+
+/// The GLB of a checked scene and its shading.
+fn encode(scene: &Scene, shaded: &[ShadedMesh]) -> Result<Vec<u8>, SceneError> {
     let mut bin = Bin::default();
     let mut meshes = Vec::new();
     let mut materials = Vec::new();
