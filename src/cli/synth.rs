@@ -93,6 +93,11 @@ pub struct SynthArgs {
     /// does not count towards closure. Costs curve pairs (see docs/synthesis.md).
     #[arg(long)]
     pub printed_rim: bool,
+    /// The layout `mpc-rig build` can turn into parts, as `demo` synthesizes it:
+    /// `--band-gap 1.5 --axis-room 1.0 --printed-rim` with 60 candidates per band (unless
+    /// `--candidates` says otherwise). Costs curve pairs and time (see docs/synthesis.md).
+    #[arg(long, conflicts_with_all = ["band_gap", "axis_room", "printed_rim"])]
+    pub printable: bool,
 }
 
 /// Command-line names of [`synth::closure::NormalCone`].
@@ -330,6 +335,17 @@ pub fn run(args: SynthArgs) -> anyhow::Result<ExitCode> {
         axis_room: args.axis_room,
         printed_rim: args.printed_rim,
         ..SynthOptions::default()
+    };
+    let opts = if args.printable {
+        let candidates = args
+            .candidates
+            .unwrap_or(synth::search::CANDIDATES_PRINTED_RIM);
+        SynthOptions {
+            candidates,
+            ..opts.printable()
+        }
+    } else {
+        opts
     };
     let progress = Bar::new();
     let result = synth::synthesize(&motion, &opts, &progress);

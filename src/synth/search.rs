@@ -214,6 +214,33 @@ impl Default for SynthOptions {
     }
 }
 
+/// Gap between bands of the printable layout ([`SynthOptions::printable`]), model units:
+/// 1.5 (15 mm at the default scale) leaves a follower plate (2.4 mm) and its rim (3 mm
+/// deep) room between two driver bands with their lips; the default 0.5 does not
+/// (docs/build.md, "Printable designs").
+pub const PRINTABLE_BAND_GAP: f64 = 1.5;
+/// Room around each part's axis of the printable layout ([`SynthOptions::printable`]),
+/// model units: 1.0 (10 mm) keeps the other part's swept curves off a hub column and its
+/// shaft (docs/build.md, "Printable designs").
+pub const PRINTABLE_AXIS_ROOM: f64 = 1.0;
+
+impl SynthOptions {
+    /// These options with the layout that `mpc-rig build` can turn into parts
+    /// (`synth --printable`): [`PRINTABLE_BAND_GAP`] between bands,
+    /// [`PRINTABLE_AXIS_ROOM`] around each axis, closure judged on the contacts the printed
+    /// rims keep, and [`CANDIDATES_PRINTED_RIM`] candidates per band. It costs curve pairs
+    /// and time: half-turn-2to1 goes from K = 4 to K = 6 (docs/synthesis.md).
+    pub fn printable(self) -> Self {
+        Self {
+            band_gap: PRINTABLE_BAND_GAP,
+            axis_room: Some(PRINTABLE_AXIS_ROOM),
+            printed_rim: true,
+            candidates: CANDIDATES_PRINTED_RIM,
+            ..self
+        }
+    }
+}
+
 /// Progress callbacks (all default to doing nothing). Called from worker threads.
 pub trait SynthProgress: Sync {
     /// A (K, d_x) attempt starts with `new_candidates` candidates to solve.
