@@ -83,14 +83,41 @@ fn uniform_prediction(path: &Path, free: f64) {
     std::fs::write(path, doc.to_string()).unwrap();
 }
 
+/// A parts folder as `mpc-rig build` leaves it, for the report: `build.json` with the
+/// fields the report reads and a picture of the assembly.
+fn parts_folder(dir: &Path) {
+    std::fs::create_dir_all(dir).unwrap();
+    let doc = serde_json::json!({
+        "scale_mm": 10.0, "clearance_mm": 0.2, "without_pair": null,
+        "printable": true, "problems": [],
+        "parts": [{"name": "driver", "triangles": 2718, "volume_mm3": 57285.4,
+                   "bbox_min_mm": [-40.0, -40.0, 0.0], "bbox_max_mm": [40.0, 41.5, 92.0]}],
+        "check": {
+            "gaps": [{"pair": 1, "min_mm": 0.183, "lost_t": []},
+                     {"pair": 2, "min_mm": 0.191, "lost_t": []}],
+            "penetrations": [{"what": "follower into driver", "depth_mm": 0.004, "t": 0.5}]
+        }
+    });
+    std::fs::write(dir.join("build.json"), doc.to_string()).unwrap();
+    let file = std::fs::File::create(dir.join("assembly-isometric.png")).unwrap();
+    let mut png = png::Encoder::new(std::io::BufWriter::new(file), 8, 6);
+    png.set_color(png::ColorType::Rgb);
+    png.set_depth(png::BitDepth::Eight);
+    png.write_header()
+        .unwrap()
+        .write_image_data(&[200; 8 * 6 * 3])
+        .unwrap();
+}
+
 /// Guards the geometry plant and the comparison with a prediction end to end
-/// (`sim-device … --prediction`, `analyze --prediction`): a follower the built parts leave
+/// (`sim-device … --prediction`, `analyze --prediction --parts`): a follower the built parts leave
 /// 1° of free turn each way, dragged, lags 1° driven forward and leads 1° in reverse, so
 /// a session measured both ways shows an RMS error of 1° (±0.2°) against the target, which
 /// no offset fit removes (the plain target plant gives about 0.02°), and under 0.2°
 /// against the prediction that says so. The play is the follower-side dead band, 2°
 /// (±0.2°), and the headline says so (it used to give only the driver-side figure,
-/// 0.002°).
+/// 0.002°). The report shows the parts (their figures and the copied picture) and draws
+/// the predicted error of each direction over the measured one.
 #[test]
 fn the_geometry_plant_shows_the_parts_play_in_a_measurement() {
     use mpc_rig::predict::table::PlayTable;
@@ -102,8 +129,11 @@ fn the_geometry_plant_shows_the_parts_play_in_a_measurement() {
     opts.plant.play = Some(Arc::new(PlayTable::load(&prediction).unwrap()));
     let rec = tmp.path().join("rec");
     measure_both_ways(opts, &rec);
+    let parts = tmp.path().join("parts");
+    parts_folder(&parts);
     let report = ReportOptions {
         prediction: Some(prediction),
+        parts: Some(parts.clone()),
         ..ReportOptions::default()
     };
     let s = analyze_and_report(&rec, &report).unwrap();
@@ -120,6 +150,26 @@ fn the_geometry_plant_shows_the_parts_play_in_a_measurement() {
         )),
         "{text}"
     );
+    let section = format!(
+        "## The printed parts\n\nBuilt by `mpc-rig build` into `{}` (printable); its \
+         `build.md` has every figure. Clearance 0.200 mm; over the period no part enters \
+         another by more than 0.004 mm, and the smallest gap at a design contact is 0.183 \
+         mm. The simulated follower is moved as these parts move it (the prediction \
+         above).\n\n| part | triangles | volume [mm³] | size [mm] |\n|---|---|---|---|\n\
+         | driver | 2718 | 57285 | 80 × 82 × 92 |\n",
+        parts.display()
+    );
+    assert!(text.contains(&section), "no\n{section}\nin\n{text}");
+    let copied = rec.join("report/parts-assembly-isometric.png");
+    assert_eq!(
+        std::fs::read(&copied).unwrap(),
+        std::fs::read(parts.join("assembly-isometric.png")).unwrap()
+    );
+    assert!(text.contains("(parts-assembly-isometric.png)"), "{text}");
+    let chart = std::fs::read_to_string(rec.join("report/error_rz.svg")).unwrap();
+    for label in ["predicted forward", "predicted reverse"] {
+        assert!(chart.contains(label), "no `{label}` in the error chart");
+    }
     let p = s.prediction.expect("compared with the prediction");
     assert!(p.rms_deg < 0.2, "against the prediction: {p:?}");
     assert!((p.rms_vs_target_deg - rms).abs() < 0.1, "{p:?}");

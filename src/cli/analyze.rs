@@ -47,6 +47,10 @@ pub struct AnalyzeArgs {
     /// prediction.json; 1R).
     #[arg(long, value_name = "FILE")]
     pub prediction: Option<PathBuf>,
+    /// The folder `mpc-rig build` wrote the measured parts into: the report shows their
+    /// pictures and figures.
+    #[arg(long, value_name = "DIR")]
+    pub parts: Option<PathBuf>,
     /// Print the summary as JSON on standard output (the content of summary.json) instead
     /// of the text, for scripts.
     #[arg(long)]
@@ -73,6 +77,7 @@ impl AnalyzeArgs {
             tol_mm: self.tol_mm,
             tol_ratio: self.tol_ratio,
             prediction: self.prediction.clone(),
+            parts: self.parts.clone(),
         })
     }
 }

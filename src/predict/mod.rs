@@ -97,6 +97,30 @@ pub struct BuiltParts {
     pub without_pair: Option<usize>,
     /// The build's check: which design contacts the parts keep.
     pub check: BuiltCheck,
+    /// Whether the build found the parts printable.
+    #[serde(default)]
+    pub printable: bool,
+    /// Why not, when they are not.
+    #[serde(default)]
+    pub problems: Vec<String>,
+    /// Figures of each part.
+    #[serde(default)]
+    pub parts: Vec<BuiltPart>,
+}
+
+/// One part's figures as the build reported them.
+#[derive(Debug, Clone, Deserialize)]
+pub struct BuiltPart {
+    /// `driver`, `follower` or `support`.
+    pub name: String,
+    /// Triangles of its mesh.
+    pub triangles: usize,
+    /// Volume, mm³.
+    pub volume_mm3: f64,
+    /// Corners of its bounding box in its own frame, mm.
+    pub bbox_min_mm: [f64; 3],
+    /// See `bbox_min_mm`.
+    pub bbox_max_mm: [f64; 3],
 }
 
 /// The part of the build's check read here.
@@ -104,6 +128,18 @@ pub struct BuiltParts {
 pub struct BuiltCheck {
     /// Per curve pair in the parts.
     pub gaps: Vec<BuiltGap>,
+    /// The deepest vertex of each part inside another over the period.
+    #[serde(default)]
+    pub penetrations: Vec<BuiltPenetration>,
+}
+
+/// How deep one part enters another over the period, as the build's check found it.
+#[derive(Debug, Clone, Deserialize)]
+pub struct BuiltPenetration {
+    /// Which parts, e.g. `follower into driver`.
+    pub what: String,
+    /// Depth, mm.
+    pub depth_mm: f64,
 }
 
 /// One curve pair's contact as the build's check found it.
@@ -111,6 +147,10 @@ pub struct BuiltCheck {
 pub struct BuiltGap {
     /// Curve pair, 1-based.
     pub pair: usize,
+    /// The smallest gap between the built surfaces at the design contact, mm (0 in files
+    /// without the field).
+    #[serde(default)]
+    pub min_mm: f64,
     /// Windows `[first, last]` of sample times (fractions of the period) where the built
     /// parts do not keep the contact; `first > last` wraps past t = 1.
     #[serde(default)]

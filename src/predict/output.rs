@@ -14,6 +14,8 @@ use crate::plot::{legend_room_y_range, Chart, PlotError, Series};
 
 /// The `format` of `prediction.json`.
 pub const PREDICTION_FORMAT: &str = "mpcmech-prediction/1";
+/// The prediction's file name in its folder.
+pub const PREDICTION_FILE: &str = "prediction.json";
 
 /// Error writing a prediction.
 #[derive(Debug, thiserror::Error)]
@@ -45,7 +47,7 @@ pub fn write(
     };
     std::fs::create_dir_all(out).map_err(io(out))?;
     let mut files = Vec::new();
-    let json_path = out.join("prediction.json");
+    let json_path = out.join(PREDICTION_FILE);
     let doc = json!({
         "format": PREDICTION_FORMAT,
         "mechanism": mechanism.display().to_string(),

@@ -50,6 +50,9 @@ pub struct ReportOptions {
     pub tol_ratio: Option<f64>,
     /// Also compare with this prediction of `mpc-rig simulate` (prediction.json).
     pub prediction: Option<PathBuf>,
+    /// The folder `mpc-rig build` wrote the measured mechanism's parts into: the report
+    /// shows their pictures and figures.
+    pub parts: Option<PathBuf>,
 }
 
 /// One pass/fail check against a tolerance.
@@ -222,8 +225,88 @@ pub struct Summary {
     pub source: SourceInfo,
     /// The measurement against the parts' predicted law (`--prediction`).
     pub prediction: Option<super::prediction::PredictionComparison>,
+    /// The printed parts the measurement was made with (`--parts`).
+    pub parts: Option<PartsSummary>,
     /// Files written (relative to the report directory).
     pub files: Vec<String>,
+}
+
+/// The parts `mpc-rig build` made of the measured mechanism, as the report shows them.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PartsSummary {
+    /// The folder the build wrote.
+    pub dir: PathBuf,
+    /// Whether the build found them printable.
+    pub printable: bool,
+    /// Why not, when they are not.
+    pub problems: Vec<String>,
+    /// Print clearance, mm.
+    pub clearance_mm: f64,
+    /// Deepest vertex of one part inside another over the period, mm.
+    pub worst_penetration_mm: f64,
+    /// Smallest gap at a design contact over the period, mm (`None` without pairs).
+    pub smallest_gap_mm: Option<f64>,
+    /// Per part: name, triangles, volume (mm³) and bounding box size (mm).
+    pub parts: Vec<(String, usize, f64, [f64; 3])>,
+}
+
+/// The assembly pictures of the build shown in the report, copied beside it as
+/// `parts-<name>` so the report stays whole when moved.
+const PARTS_PICTURES: [(&str, &str); 2] = [
+    (
+        "assembly-isometric.png",
+        "The printed parts, assembled (isometric view).",
+    ),
+    ("assembly-front.png", "The printed parts, from the front."),
+];
+
+/// Read what `mpc-rig build` wrote into `dir` and copy its assembly pictures into
+/// `out_dir`; the summary and the pictures' (caption, copied path).
+fn parts_summary(
+    dir: &Path,
+    out_dir: &Path,
+) -> Result<(PartsSummary, Vec<plots::Picture>), AnalysisError> {
+    let built = crate::predict::BuiltParts::load(dir).map_err(|e| AnalysisError::BadOption {
+        option: "--parts".into(),
+        message: e.to_string(),
+    })?;
+    let mut pics = Vec::new();
+    for (name, caption) in PARTS_PICTURES {
+        let from = dir.join(name);
+        if !from.exists() {
+            continue;
+        }
+        let to = out_dir.join(format!("parts-{name}"));
+        std::fs::copy(&from, &to).map_err(|e| AnalysisError::io(&from, e))?;
+        pics.push((caption.to_string(), to));
+    }
+    let summary = PartsSummary {
+        dir: dir.to_path_buf(),
+        printable: built.printable,
+        problems: built.problems.clone(),
+        clearance_mm: built.clearance_mm,
+        worst_penetration_mm: built
+            .check
+            .penetrations
+            .iter()
+            .map(|p| p.depth_mm)
+            .fold(0.0, f64::max),
+        smallest_gap_mm: built
+            .check
+            .gaps
+            .iter()
+            .map(|g| g.min_mm)
+            .min_by(f64::total_cmp),
+        parts: built
+            .parts
+            .iter()
+            .map(|p| {
+                let size = std::array::from_fn(|i| p.bbox_max_mm[i] - p.bbox_min_mm[i]);
+                (p.name.clone(), p.triangles, p.volume_mm3, size)
+            })
+            .collect(),
+    };
+    Ok((summary, pics))
 }
 
 /// The tolerance checks; with `enough` false (no complete cycle) every figure counts as
@@ -387,6 +470,7 @@ pub fn summarize(
         sampling: a.sampling.clone(),
         source,
         prediction: None,
+        parts: None,
         files: Vec::new(),
     }
 }
@@ -470,9 +554,15 @@ fn verdict(s: &Summary) -> (Option<bool>, String) {
 }
 
 /// The report as blocks, section by section.
-fn blocks(s: &Summary, a: &Analysis, pictures: &[plots::Picture]) -> Vec<Block> {
+fn blocks(
+    s: &Summary,
+    a: &Analysis,
+    pictures: &[plots::Picture],
+    parts_pictures: &[plots::Picture],
+) -> Vec<Block> {
     let mut b = Vec::new();
     headline_blocks(s, pictures, &mut b);
+    parts_blocks(s, parts_pictures, &mut b);
     alignment_blocks(s, &mut b);
     error_blocks(s, a, &mut b);
     timing_blocks(s, &mut b);
@@ -589,6 +679,51 @@ fn headline_blocks(s: &Summary, pictures: &[plots::Picture], b: &mut Vec<Block>)
         ));
     }
     // Pictures early: a person should understand the result at a glance.
+    for (cap, path) in pictures {
+        b.push(Block::Image(cap.clone(), path.clone()));
+    }
+}
+
+/// The printed parts the mechanism was measured with: their pictures and figures.
+fn parts_blocks(s: &Summary, pictures: &[plots::Picture], b: &mut Vec<Block>) {
+    let Some(p) = &s.parts else {
+        return;
+    };
+    b.push(Block::Heading(2, "The printed parts".into()));
+    let verdict = if p.printable {
+        "printable".to_string()
+    } else {
+        format!("**not printable**: {}", p.problems.join("; "))
+    };
+    b.push(Block::Para(format!(
+        "Built by `mpc-rig build` into `{}` ({verdict}); its `build.md` has every figure. \
+         Clearance {} mm; over the period no part enters another by more than {} mm, and \
+         the smallest gap at a design contact is {} mm. The simulated follower is moved as \
+         these parts move it (the prediction above).",
+        p.dir.display(),
+        f3(p.clearance_mm),
+        f3(p.worst_penetration_mm),
+        opt3(p.smallest_gap_mm),
+    )));
+    b.push(Block::Table(
+        vec![
+            "part".into(),
+            "triangles".into(),
+            "volume [mm³]".into(),
+            "size [mm]".into(),
+        ],
+        p.parts
+            .iter()
+            .map(|(name, tri, vol, size)| {
+                vec![
+                    name.clone(),
+                    tri.to_string(),
+                    format!("{vol:.0}"),
+                    format!("{:.0} × {:.0} × {:.0}", size[0], size[1], size[2]),
+                ]
+            })
+            .collect(),
+    ));
     for (cap, path) in pictures {
         b.push(Block::Image(cap.clone(), path.clone()));
     }
@@ -928,6 +1063,7 @@ pub fn write_report(
 ) -> Result<Summary, AnalysisError> {
     std::fs::create_dir_all(out_dir).map_err(|e| AnalysisError::io(out_dir, e))?;
     let mut s = summarize(a, law, source, opts);
+    let mut predicted_deviation = None;
     if let Some(path) = &opts.prediction {
         let predicted = crate::predict::table::PredictedDeviation::load(path).map_err(|e| {
             AnalysisError::BadOption {
@@ -936,6 +1072,13 @@ pub fn write_report(
             }
         })?;
         s.prediction = super::prediction::compare(a, run, &predicted, path.clone());
+        predicted_deviation = Some(predicted);
+    }
+    let mut parts_pics = Vec::new();
+    if let Some(dir) = &opts.parts {
+        let (summary, pics) = parts_summary(dir, out_dir)?;
+        s.parts = Some(summary);
+        parts_pics = pics;
     }
     let mut pics: Vec<plots::Picture> = Vec::new();
     if let Some(t) = &a.timing {
@@ -961,7 +1104,11 @@ pub fn write_report(
         } else {
             opts.tol_mm
         };
-        pics.push(plots::error_chart(out_dir, run, ch, m, tol)?);
+        let predicted = predicted_deviation
+            .as_ref()
+            .filter(|_| ch.name == "rz" && a.class == "1R")
+            .map(|p| (p, a.alignment.driver_offset_deg.value));
+        pics.push(plots::error_chart(out_dir, run, ch, m, tol, predicted)?);
         pics.push(plots::cycles_chart(out_dir, m)?);
         pics.push(plots::histogram_chart(out_dir, run, ch, m)?);
     }
@@ -976,9 +1123,16 @@ pub fn write_report(
             );
         }
     }
+    for (_, p) in &parts_pics {
+        files.push(
+            p.file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+        );
+    }
     files.extend(["report.md", "report.html", "summary.json"].map(String::from));
     s.files = files;
-    let blocks = blocks(&s, a, &pics);
+    let blocks = blocks(&s, a, &pics, &parts_pics);
     doc::write(&out_dir.join("report.md"), &doc::markdown(&blocks))?;
     let title = format!("Bench report: {}", law.name);
     doc::write(&out_dir.join("report.html"), &doc::html(&title, &blocks)?)?;

@@ -13,6 +13,7 @@ use crate::analysis::target::TargetLaw;
 use crate::analysis::timing::TimingReport;
 use crate::analysis::{Analysis, AnalysisError};
 use crate::plot::{Chart, Series};
+use crate::predict::table::PredictedDeviation;
 
 /// Most points drawn per scatter series. Default 4000: a 1000-pixel-wide chart cannot show
 /// more, and SVG files stay below a megabyte.
@@ -123,15 +124,23 @@ pub fn follower_chart(
     ))
 }
 
+/// Driver angles at which a predicted deviation is drawn per revolution: every 0.25°, the
+/// prediction's own default spacing.
+const PREDICTED_POINTS: usize = 1440;
+
 /// Error over the driver angle within the cycle, every cycle of both directions folded
 /// onto one revolution (issue 20: over the cumulative angle the reverse run retraced the
 /// forward one's x range backwards, and a cycle's features were spread over the run).
+/// With `predicted` (the deviation `mpc-rig simulate` predicts for the parts, and the
+/// alignment's driver offset in degrees) the predicted error of each direction is drawn
+/// over the measured one: target (zero), prediction and measurement on one chart.
 pub fn error_chart(
     dir: &Path,
     run: &MeasuredRun,
     ch: &ChannelErrors,
     m: &ChannelMetrics,
     tol: Option<f64>,
+    predicted: Option<(&PredictedDeviation, f64)>,
 ) -> Result<Picture, AnalysisError> {
     let u = unit_label(ch.unit);
     let mut chart = Chart::new(
@@ -157,6 +166,22 @@ pub fn error_chart(
             chart = chart.with(Series::points(label, pts, 2, color));
         }
     }
+    if let Some((p, offset_deg)) = predicted {
+        for (forward, label, color) in [
+            (true, "predicted forward", 2),
+            (false, "predicted reverse", 3),
+        ] {
+            // The measured x is the recorded driver angle; the prediction's is the
+            // mechanism's, `offset_deg` behind it (as `prediction::compare` reads it).
+            let pts: Vec<(f64, f64)> = (0..=PREDICTED_POINTS)
+                .map(|i| {
+                    let x = 360.0 * i as f64 / PREDICTED_POINTS as f64;
+                    (x, p.at(x - offset_deg, forward))
+                })
+                .collect();
+            chart = chart.with(Series::line(label, pts, color));
+        }
+    }
     if let Some(t) = tol {
         chart.h_lines.push((t, format!("±{t}{u} (RMS tolerance)")));
         chart.h_lines.push((-t, String::new()));
@@ -166,8 +191,13 @@ pub fn error_chart(
     chart.write(&stem)?;
     Ok((
         format!(
-            "{} error over the driver angle within the cycle, all cycles folded.",
-            ch.name
+            "{} error over the driver angle within the cycle, all cycles folded{}.",
+            ch.name,
+            if predicted.is_some() {
+                "; lines: the error the parts' prediction gives each direction"
+            } else {
+                ""
+            }
         ),
         stem.with_extension("png"),
     ))
