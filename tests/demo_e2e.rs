@@ -1,7 +1,9 @@
-//! The main job end to end, exactly the code path of `cargo run --release -- demo`: synthesis
-//! (reduced effort with `--quick`), the simulated stepper bench on a pseudo-terminal, the
-//! real session, analysis and report; then the cached mechanism is reused and an injected
-//! backlash shows up in the report.
+//! The main job end to end, the code path of `cargo run --release -- demo` on the target
+//! plant: synthesis (reduced effort with `--quick`), the simulated stepper bench on a
+//! pseudo-terminal, the real session, analysis and report; then the cached mechanism is
+//! reused and an injected backlash shows up in the report. The default geometry plant adds
+//! a build of the parts (minutes at the default cell) and is measured by hand
+//! (docs/simulate.md); here only its refusals run.
 
 use crate::support::serial_group;
 use std::path::{Path, PathBuf};
@@ -9,7 +11,9 @@ use std::path::{Path, PathBuf};
 fn demo(out: &Path, extra: &[&str]) -> (std::process::Output, String) {
     let out = assert_cmd::Command::cargo_bin("mpc-rig")
         .unwrap()
-        .args(["demo", "--quick", "--cycles", "2", "--speed", "60", "-o"])
+        .args([
+            "demo", "--quick", "--plant", "target", "--cycles", "2", "--speed", "60", "-o",
+        ])
         .arg(out)
         .args(extra)
         .output()
@@ -101,20 +105,42 @@ fn a_plan_the_bench_refuses_is_refused_before_the_synthesis() {
             "refused: 500 rpm exceeds safety.max_speed_rpm = 120 of rig `sim-stepper`",
         ),
     ] {
-        let out = assert_cmd::Command::cargo_bin("mpc-rig")
-            .unwrap()
-            .args(["demo", "-o"])
-            .arg(tmp.path())
-            .args(args)
-            .output()
-            .unwrap();
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(1), "{stderr}");
         // Whole: no "[1/4]" step line, so nothing ran before the refusal.
         assert_eq!(
-            stderr,
+            refused_demo(tmp.path(), &args),
             format!("error: the demo's run on rig rigs/sim-stepper.toml\n  caused by: {why}\n")
         );
-        assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 0);
     }
+}
+
+/// Run `mpc-rig demo -o OUT ARGS`, which must exit 1 having written nothing into `out`;
+/// its standard error.
+fn refused_demo(out: &Path, args: &[&str]) -> String {
+    let run = assert_cmd::Command::cargo_bin("mpc-rig")
+        .unwrap()
+        .args(["demo", "-o"])
+        .arg(out)
+        .args(args)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr).into_owned();
+    assert_eq!(run.status.code(), Some(1), "{stderr}");
+    assert_eq!(std::fs::read_dir(out).unwrap().count(), 0);
+    stderr
+}
+
+/// Guards the plant's refusal for a class the parts' prediction does not handle: `--plant
+/// geometry` on a 1R1T example stops before step 1, says why and what measures it instead,
+/// and writes nothing.
+#[test]
+fn the_geometry_plant_is_refused_for_a_class_it_cannot_predict() {
+    let tmp = tempfile::tempdir().unwrap();
+    assert_eq!(
+        refused_demo(
+            tmp.path(),
+            &["--example", "screw-bob", "--plant", "geometry"]
+        ),
+        "error: --plant geometry: the parts' prediction (`mpc-rig simulate`) handles 1R \
+         mechanisms; this motion is 1R1T. `--plant target` measures it on the target law\n"
+    );
 }

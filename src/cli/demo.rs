@@ -1,12 +1,17 @@
 //! `mpc-rig demo`: the main job on a machine without hardware.
 //!
 //! Synthesizes the example mechanism (or reuses the cached one under `out/demo/`, keyed by
-//! the motion file's SHA-256, the seed, the synthesis settings and the tool version), starts
-//! a simulated bench in-process on pseudo-terminals (our firmware core behind the stepper
+//! the motion file's SHA-256, the seed, the synthesis settings and the tool version). For a
+//! 1R motion it then builds the printable parts (`mpc-rig build`, cached beside the
+//! mechanism, keyed by the mechanism file, the build settings and the tool version) and
+//! predicts how they move the follower (`mpc-rig simulate`): the *geometry plant*, so the
+//! simulated bench's follower moves as the printed parts would move it. It starts a
+//! simulated bench in-process on pseudo-terminals (our firmware core behind the stepper
 //! bench, or the Protocol 2.0 Dynamixel bus, with a firmware sensor board beside it for 1R1T
-//! and 3R), measures a few cycles through the real serial
-//! session, analyses the recording and prints where the mechanism and the report are, with
-//! the headline figures. Options choose another example, the bench and injected faults
+//! and 3R), measures a few cycles through the real serial session, analyses the recording
+//! against the target and the prediction, and prints where the mechanism, the parts and the
+//! report are, with the headline figures. Options choose another example, the bench, the
+//! plant (`--plant target`: the follower on the target law, no parts) and injected faults
 //! (`--fault backlash=2`). Every step is a library call; this file only orchestrates.
 
 use std::path::{Path, PathBuf};
@@ -20,12 +25,26 @@ use clap::{Args, ValueEnum};
 use sha2::{Digest, Sha256};
 
 use crate::analysis::{analyze_and_report, ReportOptions};
+use crate::build::{Bench, BuildOptions};
 use crate::motion::{Motion, MotionClass};
+use crate::predict::table::PlayTable;
+use crate::predict::PredictOptions;
 use crate::rig::config::RigConfig;
 use crate::rig::recording::{utc_dir_stamp, Phase};
 use crate::rig::session::{self, MeasureOptions, Progress, TargetSpec};
 use crate::rig::sim::plant::PlantConfig;
 use crate::synth::{Mechanism, Outcome, SynthOptions};
+
+/// What moves the simulated bench's follower.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum DemoPlant {
+    /// The printable parts of the mechanism, as `mpc-rig simulate` predicts they move the
+    /// follower (1R): the mechanism is synthesized with the printable layout
+    /// (`synth --printable`) and built (`mpc-rig build`).
+    Geometry,
+    /// The target law (plus the injected faults): no parts are built.
+    Target,
+}
 
 /// Which simulated bench the demo measures on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -74,11 +93,23 @@ pub struct DemoArgs {
         default_value = "out/demo"
     )]
     pub out: PathBuf,
+    /// What moves the follower (default: `geometry` for a 1R motion, `target` for 1R1T and
+    /// 3R, whose parts and prediction are not built yet, and with `--quick`).
+    #[arg(long, value_enum)]
+    pub plant: Option<DemoPlant>,
+    /// Print clearance of the parts, mm (geometry plant).
+    #[arg(long, default_value_t = crate::build::dims::DEFAULT_CLEARANCE_MM)]
+    pub clearance: f64,
+    /// Mesher cell of the parts, mm (geometry plant; coarser is quicker, but the build's
+    /// check fails the parts above about 0.5 mm, see docs/build.md).
+    #[arg(long = "cell-mm", default_value_t = crate::build::dims::DEFAULT_CELL_MM)]
+    pub cell_mm: f64,
     /// Synthesis seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Reduced synthesis effort (fewer candidates and GA generations): faster, maybe a worse
-    /// mechanism. Used by the tests.
+    /// mechanism, and not a printable one, so the plant is the target law. Used by the
+    /// tests.
     #[arg(long)]
     pub quick: bool,
     /// Synthesize again even when a cached mechanism exists.
@@ -124,13 +155,37 @@ fn rig_for(bench: DemoBench, class: MotionClass) -> &'static str {
     }
 }
 
-/// The synthesis settings of the demo.
-fn synth_options(args: &DemoArgs) -> SynthOptions {
+/// The plant the demo runs with: `--plant`, or the geometry for 1R and the target law
+/// otherwise or with `--quick`. Refuses the geometry for 1R1T and 3R, and with `--quick`,
+/// before anything runs.
+fn plant_for(args: &DemoArgs, class: MotionClass) -> anyhow::Result<DemoPlant> {
+    match args.plant {
+        Some(DemoPlant::Geometry) if class != MotionClass::R1 => bail!(
+            "--plant geometry: the parts' prediction (`mpc-rig simulate`) handles 1R \
+             mechanisms; this motion is {class}. `--plant target` measures it on the target law"
+        ),
+        // Measured: half-turn-2to1 with the printable layout and the quick search (d_x 6,
+        // 6 candidates, 40 generations) closes at no K from 3 to 6.
+        Some(DemoPlant::Geometry) if args.quick => bail!(
+            "--plant geometry --quick: the printable layout needs the full search (the quick \
+             one finds no printable design); drop --quick, or measure with `--plant target`"
+        ),
+        Some(p) => Ok(p),
+        None if class == MotionClass::R1 && !args.quick => Ok(DemoPlant::Geometry),
+        None => Ok(DemoPlant::Target),
+    }
+}
+
+/// The synthesis settings of the demo: the printable layout when parts are built.
+fn synth_options(args: &DemoArgs, plant: DemoPlant) -> SynthOptions {
     let mut o = SynthOptions {
         seed: args.seed,
         cone: args.normal_cone.into(),
         ..SynthOptions::default()
     };
+    if plant == DemoPlant::Geometry {
+        o = o.printable();
+    }
     if args.quick {
         // The paper's d_x for 1R/1R1T, fewer candidates and a shorter GA: a valid but less
         // polished mechanism in a fraction of the time.
@@ -142,13 +197,25 @@ fn synth_options(args: &DemoArgs) -> SynthOptions {
     o
 }
 
+/// A cache key: the first 6 bytes of the SHA-256 of `bytes` and `settings`, in hex.
+fn short_hash(bytes: &[u8], settings: &str) -> String {
+    let mut h = Sha256::new();
+    h.update(bytes);
+    h.update(settings.as_bytes());
+    h.finalize()
+        .iter()
+        .take(6)
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
 /// Cache key: motion bytes, seed, synthesis settings, tool version.
 fn cache_key(motion_bytes: &[u8], o: &SynthOptions) -> String {
-    let mut h = Sha256::new();
-    h.update(motion_bytes);
-    h.update(
-        format!(
-            "seed={} k={:?} dx={:?} n={} m={} g={} p={} e={} scale={} cone={} margin={} version={}",
+    short_hash(
+        motion_bytes,
+        &format!(
+            "seed={} k={:?} dx={:?} n={} m={} g={} p={} e={} scale={} cone={} margin={} \
+             gap={} room={:?} rim={} version={}",
             o.seed,
             o.k,
             o.dx,
@@ -160,26 +227,27 @@ fn cache_key(motion_bytes: &[u8], o: &SynthOptions) -> String {
             o.scale_mm,
             o.cone.label(),
             o.min_margin,
+            o.band_gap,
+            o.axis_room,
+            o.printed_rim,
             env!("CARGO_PKG_VERSION")
-        )
-        .as_bytes(),
-    );
-    h.finalize()
-        .iter()
-        .take(6)
-        .map(|b| format!("{b:02x}"))
-        .collect()
+        ),
+    )
 }
 
 /// Synthesize or reuse the cached mechanism; returns its path and whether it was cached.
 fn mechanism_for(
     args: &DemoArgs,
+    plant: DemoPlant,
     motion_path: &Path,
     motion: &Motion,
 ) -> anyhow::Result<(PathBuf, bool)> {
     let bytes =
         std::fs::read(motion_path).with_context(|| format!("reading {}", motion_path.display()))?;
-    let o = synth_options(args);
+    let o = synth_options(args, plant);
+    if o.printed_rim {
+        eprintln!("      printable layout (as `mpc-rig synth --printable`)");
+    }
     let dir = args.out.join(format!(
         "mechanism-{}-{}",
         motion.name(),
@@ -220,6 +288,119 @@ fn mechanism_for(
     Ok((file, false))
 }
 
+/// The build settings of the demo's parts, for the bench the demo measures on.
+fn build_options(
+    args: &DemoArgs,
+    rig: &RigConfig,
+    mech: &Mechanism,
+) -> anyhow::Result<BuildOptions> {
+    Ok(BuildOptions {
+        clearance_mm: args.clearance,
+        cell_mm: args.cell_mm,
+        bench: Some(Bench::from_rig(rig, mech.class)?),
+        ..BuildOptions::default()
+    })
+}
+
+/// Cache key of the parts: the mechanism file's bytes, the build settings and the tool
+/// version.
+fn parts_key(mechanism_bytes: &[u8], o: &BuildOptions) -> String {
+    short_hash(
+        mechanism_bytes,
+        &format!(
+            "scale={:?} clearance={} cell={} bench={} without={:?} version={}",
+            o.scale_mm,
+            o.clearance_mm,
+            o.cell_mm,
+            o.bench.as_ref().map_or(String::new(), |b| b.to_string()),
+            o.without_pair,
+            env!("CARGO_PKG_VERSION")
+        ),
+    )
+}
+
+/// The parts built from the mechanism, or the cached ones: their folder, whether they
+/// were cached, and the build's problems (empty when the parts are printable). A build
+/// that is not printable still leaves its parts, which the prediction then moves; a
+/// mechanism the build cannot lay out is an error.
+fn parts_for(
+    mech_path: &Path,
+    mech: &Mechanism,
+    opts: &BuildOptions,
+) -> anyhow::Result<(PathBuf, bool, Vec<String>)> {
+    let bytes =
+        std::fs::read(mech_path).with_context(|| format!("reading {}", mech_path.display()))?;
+    let parent = mech_path.parent().unwrap_or_else(|| Path::new("."));
+    let dir = parent.join(format!("parts-{}", parts_key(&bytes, opts)));
+    // `build.json` is the last file a build writes: its presence marks a whole build.
+    if let Ok(done) = crate::predict::BuiltParts::load(&dir) {
+        return Ok((dir, true, done.problems));
+    }
+    // Built aside and renamed when complete, so an interrupted build is never reused.
+    let partial = parent.join(format!(
+        "{}.partial",
+        dir.file_name().unwrap_or_default().to_string_lossy()
+    ));
+    if partial.exists() {
+        std::fs::remove_dir_all(&partial)
+            .with_context(|| format!("removing the unfinished build {}", partial.display()))?;
+    }
+    let t0 = Instant::now();
+    let built = crate::build::build(mech, opts, &|s| eprintln!("      {s}"))
+        .with_context(|| format!("building the parts of {}", mech_path.display()))
+        .context("`--plant target` measures the target law without parts")?;
+    crate::build::output::write(&built, mech_path, opts, &partial, &|s| {
+        eprintln!("      {s}")
+    })?;
+    if dir.exists() {
+        std::fs::remove_dir_all(&dir)
+            .with_context(|| format!("removing the unfinished build {}", dir.display()))?;
+    }
+    std::fs::rename(&partial, &dir)
+        .with_context(|| format!("renaming {} to {}", partial.display(), dir.display()))?;
+    eprintln!("      built in {:.1} s", t0.elapsed().as_secs_f64());
+    Ok((dir, false, built.problems.clone()))
+}
+
+/// The prediction of how the parts in `parts` move the follower, written into
+/// `parts/prediction/` (or the one already there: the parts' folder is keyed by everything
+/// the prediction depends on); its `prediction.json`.
+fn prediction_for(mech_path: &Path, mech: &Mechanism, parts: &Path) -> anyhow::Result<PathBuf> {
+    let out = parts.join(super::simulate::DEFAULT_OUT_DIR);
+    let file = out.join(crate::predict::output::PREDICTION_FILE);
+    if PlayTable::load(&file).is_ok() {
+        eprintln!("      reusing {}", file.display());
+        return Ok(file);
+    }
+    // Written aside and renamed when complete, as the parts are.
+    let partial = parts.join(format!("{}.partial", super::simulate::DEFAULT_OUT_DIR));
+    for dir in [&partial, &out] {
+        if dir.exists() {
+            std::fs::remove_dir_all(dir)
+                .with_context(|| format!("removing the unfinished {}", dir.display()))?;
+        }
+    }
+    let p = crate::predict::predict(mech, parts, &PredictOptions::default())
+        .with_context(|| format!("simulating the parts in {}", parts.display()))?;
+    crate::predict::output::write(&p, mech_path, parts, &partial)?;
+    std::fs::rename(&partial, &out)
+        .with_context(|| format!("renaming {} to {}", partial.display(), out.display()))?;
+    let lost = p.samples.iter().filter(|s| s.drive_lost).count();
+    eprintln!(
+        "      worst play {:.3}°, worst deviation from the target {:.3}° at driver {:.1}°{} ({:.1} s)",
+        p.worst_play.deg,
+        p.worst_deviation.deg,
+        p.worst_deviation.driver_deg,
+        if lost == 0 {
+            String::new()
+        } else {
+            format!("; drive lost at driver {}", p.lost_windows_text())
+        },
+        p.seconds
+    );
+    Ok(file)
+}
+
 /// Run `demo`.
 pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
     let motion_path = match &args.motion {
@@ -238,7 +419,8 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
     };
     let motion = Motion::from_file(&motion_path)
         .with_context(|| format!("loading {}", motion_path.display()))?;
-    let plant = super::sim_device::plant_from(&args.faults)?;
+    let mut plant = super::sim_device::plant_from(&args.faults)?;
+    let plant_kind = plant_for(&args, motion.class())?;
     let rig_path = shipped(rig_for(args.bench, motion.class()));
     let rig = RigConfig::load(&rig_path)?;
     // Refuse a plan the bench would refuse before minutes of synthesis (issue 20).
@@ -253,8 +435,22 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
     )
     .with_context(|| format!("the demo's run on rig {}", rig_path.display()))?;
 
-    eprintln!("[1/4] mechanism for {} ({})", motion.name(), motion.class());
-    let (mech_path, cached) = mechanism_for(&args, &motion_path, &motion)?;
+    let steps = match plant_kind {
+        DemoPlant::Geometry => 6,
+        DemoPlant::Target => 4,
+    };
+    let mut step = 0;
+    let mut next = || {
+        step += 1;
+        format!("[{step}/{steps}]")
+    };
+    eprintln!(
+        "{} mechanism for {} ({})",
+        next(),
+        motion.name(),
+        motion.class()
+    );
+    let (mech_path, cached) = mechanism_for(&args, plant_kind, &motion_path, &motion)?;
     eprintln!(
         "      {} {}",
         if cached { "reusing" } else { "wrote" },
@@ -263,12 +459,51 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
     let target = Motion::from_mechanism_file(&mech_path)
         .with_context(|| format!("reading the target law of {}", mech_path.display()))?;
 
-    eprintln!("[2/4] starting the simulated {:?} bench", args.bench);
+    // The parts and how they move the follower (the geometry plant).
+    let mut parts: Option<(PathBuf, bool, Vec<String>)> = None;
+    let mut prediction: Option<PathBuf> = None;
+    if plant_kind == DemoPlant::Geometry {
+        let mech = Mechanism::load(&mech_path)?;
+        let opts = build_options(&args, &rig, &mech)?;
+        eprintln!(
+            "{} printable parts at {} mm cells, {} mm clearance, for bench {}",
+            next(),
+            args.cell_mm,
+            args.clearance,
+            opts.bench.as_ref().map_or(String::new(), |b| b.to_string())
+        );
+        let (dir, parts_cached, problems) = parts_for(&mech_path, &mech, &opts)?;
+        eprintln!(
+            "      {} {}",
+            if parts_cached { "reusing" } else { "wrote" },
+            dir.display()
+        );
+        for p in &problems {
+            eprintln!("      not printable: {p}");
+        }
+        eprintln!("{} how the parts move the follower", next());
+        let file = prediction_for(&mech_path, &mech, &dir)?;
+        let table =
+            PlayTable::load(&file).context("reading the prediction for the geometry plant")?;
+        plant.play = Some(Arc::new(table));
+        parts = Some((dir, parts_cached, problems));
+        prediction = Some(file);
+    }
+
+    eprintln!("{} starting the simulated {:?} bench", next(), args.bench);
     let sim = Sim::spawn(args.bench, target, plant, &rig)?;
-    eprintln!("      device on {}", sim.ports().join(" "));
+    eprintln!(
+        "      device on {}{}",
+        sim.ports().join(" "),
+        match plant_kind {
+            DemoPlant::Geometry => ", follower moved by the parts",
+            DemoPlant::Target => ", follower on the target law",
+        }
+    );
 
     eprintln!(
-        "[3/4] measuring {} cycle(s){} at {} rpm",
+        "{} measuring {} cycle(s){} at {} rpm",
+        next(),
         args.cycles,
         if args.no_reverse {
             ""
@@ -323,10 +558,12 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         );
     }
 
-    eprintln!("[4/4] analysing {}", outcome.dir.display());
+    eprintln!("{} analysing {}", next(), outcome.dir.display());
     let report = ReportOptions {
         tol_deg: args.tol_deg,
         tol_ratio: args.tol_ratio,
+        prediction: prediction.clone(),
+        parts: parts.as_ref().map(|p| p.0.clone()),
         ..Default::default()
     };
     let summary = analyze_and_report(&outcome.dir, &report)
@@ -337,6 +574,21 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         mech_path.display(),
         if cached { " (cached)" } else { "" }
     );
+    if let Some((dir, parts_cached, problems)) = &parts {
+        println!(
+            "parts:     {} ({}{})",
+            dir.display(),
+            if *parts_cached { "cached, " } else { "" },
+            if problems.is_empty() {
+                "printable".to_string()
+            } else {
+                format!("NOT printable: {}", problems.join("; "))
+            }
+        );
+    }
+    if let Some(p) = &prediction {
+        println!("predicted: {}", p.display());
+    }
     println!("recording: {}", outcome.dir.display());
     crate::cli::analyze::print_summary(&summary, &outcome.dir.join("report"));
     Ok(ExitCode::from(crate::cli::analyze::exit_status(&summary)))
@@ -392,6 +644,80 @@ impl Sim {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use clap::Parser as _;
+
+    /// The demo's arguments as typed after `mpc-rig demo`.
+    fn demo_args(extra: &[&str]) -> DemoArgs {
+        #[derive(clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            demo: DemoArgs,
+        }
+        Cli::parse_from(std::iter::once("demo").chain(extra.iter().copied())).demo
+    }
+
+    /// Guards the demo's plant choice: the parts for 1R by default, the target law for the
+    /// classes the prediction does not handle yet, `--plant` obeyed where it can be, and
+    /// only the geometry plant synthesizes the printable layout (the target plant keeps
+    /// the default one, and its cache key, so the earlier demos' mechanisms are reused).
+    #[test]
+    fn the_plant_is_the_parts_for_1r_and_the_target_law_otherwise() {
+        let default = demo_args(&[]);
+        assert_eq!(
+            plant_for(&default, MotionClass::R1).unwrap(),
+            DemoPlant::Geometry
+        );
+        for class in [MotionClass::R1T1, MotionClass::R3] {
+            assert_eq!(plant_for(&default, class).unwrap(), DemoPlant::Target);
+        }
+        let target = demo_args(&["--plant", "target"]);
+        assert_eq!(
+            plant_for(&target, MotionClass::R1).unwrap(),
+            DemoPlant::Target
+        );
+        let geometry = demo_args(&["--plant", "geometry"]);
+        assert!(plant_for(&geometry, MotionClass::R3).is_err());
+        let quick = demo_args(&["--quick"]);
+        assert_eq!(
+            plant_for(&quick, MotionClass::R1).unwrap(),
+            DemoPlant::Target
+        );
+        let both = demo_args(&["--quick", "--plant", "geometry"]);
+        assert!(plant_for(&both, MotionClass::R1).is_err());
+        let printable = synth_options(&default, DemoPlant::Geometry);
+        assert!(printable.printed_rim && printable.axis_room.is_some());
+        let plain = synth_options(&default, DemoPlant::Target);
+        assert!(!plain.printed_rim && plain.axis_room.is_none());
+        assert_ne!(cache_key(b"m", &printable), cache_key(b"m", &plain));
+    }
+
+    /// Guards the parts' cache key: the same mechanism and settings give the same folder,
+    /// and a change of the mechanism, the clearance, the cell or the bench another.
+    #[test]
+    fn the_parts_are_rebuilt_when_what_they_depend_on_changes() {
+        let o = BuildOptions::default();
+        let key = parts_key(b"mechanism", &o);
+        assert_eq!(key, parts_key(b"mechanism", &o));
+        assert_ne!(key, parts_key(b"mechanism2", &o));
+        for changed in [
+            BuildOptions {
+                clearance_mm: 0.5,
+                ..BuildOptions::default()
+            },
+            BuildOptions {
+                cell_mm: 0.7,
+                ..BuildOptions::default()
+            },
+        ] {
+            assert_ne!(key, parts_key(b"mechanism", &changed));
+        }
+        let rig = RigConfig::load(&shipped("rigs/sim-dynamixel.toml")).unwrap();
+        let horn = BuildOptions {
+            bench: Some(Bench::from_rig(&rig, crate::synth::Class::R1).unwrap()),
+            ..BuildOptions::default()
+        };
+        assert_ne!(key, parts_key(b"mechanism", &horn));
+    }
 
     /// Guards the demo's bench choice: every class gets a simulated rig that has its
     /// sensors (and the file loads); the Dynamixel bench reads 1R1T and 3R followers
