@@ -28,6 +28,9 @@ pub struct PredictionComparison {
     pub rms_vs_target_deg: f64,
     /// Measured samples compared.
     pub samples: usize,
+    /// Driver angles (first and last sample, degrees) where the prediction says the parts
+    /// lose the drive: where a large error is the parts' doing.
+    pub drive_lost_deg: Vec<[f64; 2]>,
 }
 
 /// Compare the rz errors of `a` (from `run`) with `predicted`; `None` when the analysis
@@ -62,5 +65,6 @@ pub fn compare(
         max_deg: max,
         rms_vs_target_deg: (sq_target / n as f64).sqrt(),
         samples: n,
+        drive_lost_deg: predicted.lost_windows_deg().to_vec(),
     })
 }

@@ -147,6 +147,10 @@ pub fn print_summary(s: &Summary, report_dir: &Path) {
             "predict:  RMS {:.3}°, max {:.3}° from the parts' predicted law (vs {:.3}° from the target)",
             p.rms_deg, p.max_deg, p.rms_vs_target_deg
         );
+        let lost = crate::analysis::report::drive_lost_sentence(&p.drive_lost_deg);
+        if !lost.is_empty() {
+            println!("{:10}{}", "", lost.trim_start());
+        }
     }
     if let Some(r) = h.rms_error_mm {
         println!("height:   RMS {r:.3} mm");

@@ -64,6 +64,8 @@ struct Row {
     reverse_deg: f64,
     free_plus_deg: f64,
     free_minus_deg: f64,
+    #[serde(default)]
+    drive_lost: bool,
 }
 
 /// The rows of a prediction file, checked.
@@ -130,16 +132,28 @@ fn periodic(values: &[f64], phi: f64) -> f64 {
 pub struct PredictedDeviation {
     forward: Vec<f64>,
     reverse: Vec<f64>,
+    lost_windows_deg: Vec<[f64; 2]>,
 }
 
 impl PredictedDeviation {
     /// Read `prediction.json` (as [`PlayTable::load`]).
     pub fn load(path: &Path) -> Result<PredictedDeviation, TableError> {
         let (_, rows) = read(path)?;
+        let lost: Vec<bool> = rows.iter().map(|r| r.drive_lost).collect();
         Ok(PredictedDeviation {
             forward: rows.iter().map(|r| r.forward_deg - r.target_deg).collect(),
             reverse: rows.iter().map(|r| r.reverse_deg - r.target_deg).collect(),
+            lost_windows_deg: crate::build::check::windows(&lost)
+                .into_iter()
+                .map(|[a, b]| [a * 360.0, b * 360.0])
+                .collect(),
         })
+    }
+
+    /// The driver angles (first and last sample, degrees) where the prediction says the
+    /// parts lose the drive (`drive_lost`).
+    pub fn lost_windows_deg(&self) -> &[[f64; 2]] {
+        &self.lost_windows_deg
     }
 
     /// Predicted − target (degrees) at driver angle `phi_deg` (any real), driven forward
@@ -244,5 +258,39 @@ mod tests {
                 path.display()
             )
         );
+    }
+
+    /// Guards the drive-lost windows a report quotes: the runs of `drive_lost` rows, in
+    /// driver degrees, a run across 360° as one window (first > last), and none when no
+    /// row is lost.
+    #[test]
+    fn drive_lost_rows_become_windows_in_driver_degrees() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("prediction.json");
+        let write = |lost: &dyn Fn(usize) -> bool| {
+            let rows: Vec<String> = (0..8)
+                .map(|i| {
+                    format!(
+                        r#"{{"driver_deg": {}, "target_deg": 0, "forward_deg": 0, "reverse_deg": 0,
+                            "free_plus_deg": 1, "free_minus_deg": 1, "drive_lost": {}}}"#,
+                        45 * i,
+                        lost(i)
+                    )
+                })
+                .collect();
+            std::fs::write(
+                &path,
+                format!(
+                    r#"{{"format": "{PREDICTION_FORMAT}", "prediction": {{"class": "1R",
+                        "samples": [{}]}}}}"#,
+                    rows.join(",")
+                ),
+            )
+            .unwrap();
+            PredictedDeviation::load(&path).unwrap()
+        };
+        let p = write(&|i| i == 2 || i == 3 || i == 7 || i == 0);
+        assert_eq!(p.lost_windows_deg(), &[[90.0, 135.0], [315.0, 0.0]]);
+        assert!(write(&|_| false).lost_windows_deg().is_empty());
     }
 }

@@ -231,6 +231,23 @@ pub struct Summary {
     pub files: Vec<String>,
 }
 
+/// ` The prediction says the parts lose the drive at driver a–b°, …: there the follower
+/// is not held.` or nothing when they never do.
+pub fn drive_lost_sentence(windows: &[[f64; 2]]) -> String {
+    if windows.is_empty() {
+        return String::new();
+    }
+    format!(
+        " The prediction says the parts lose the drive at driver {}: there the follower is \
+         not held.",
+        windows
+            .iter()
+            .map(|[a, b]| format!("{a:.1}–{b:.1}°"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    )
+}
+
 /// The parts `mpc-rig build` made of the measured mechanism, as the report shows them.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct PartsSummary {
@@ -609,11 +626,12 @@ fn headline_blocks(s: &Summary, pictures: &[plots::Picture], b: &mut Vec<Block>)
     if let Some(p) = &s.prediction {
         lines.push(format!(
             "Against the law predicted for the built parts (`{}`): RMS **{:.3}°**, max {:.3}° \
-             (against the target on the same samples: RMS {:.3}°).",
+             (against the target on the same samples: RMS {:.3}°).{}",
             p.file.display(),
             p.rms_deg,
             p.max_deg,
-            p.rms_vs_target_deg
+            p.rms_vs_target_deg,
+            drive_lost_sentence(&p.drive_lost_deg)
         ));
     }
     if let Some(r) = h.rms_error_mm {
@@ -1148,6 +1166,18 @@ pub fn write_report(
 #[cfg(test)]
 mod tests {
     use super::{backlash_with_error, f3};
+
+    /// Guards the sentence the report and `analyze` give the prediction's loss of drive:
+    /// every window, in driver degrees, and nothing at all when the parts never lose it.
+    #[test]
+    fn the_drive_lost_windows_are_named_or_nothing_is_said() {
+        assert_eq!(
+            super::drive_lost_sentence(&[[290.5, 292.25], [359.75, 0.25]]),
+            " The prediction says the parts lose the drive at driver 290.5–292.2°, \
+             359.8–0.2°: there the follower is not held."
+        );
+        assert_eq!(super::drive_lost_sentence(&[]), "");
+    }
 
     /// Guards figures without a negative zero: what rounds to zero prints unsigned, the
     /// rest keeps its sign.
