@@ -19,7 +19,12 @@
 //!   points more than about a millimetre away without a mesh query;
 //! - the search limit starts at twice the last sample's free turn (the whole cap only when
 //!   nothing touches within it), and the vertex that touched first at the last sample is
-//!   traced first.
+//!   traced first;
+//! - a vertex whose faces all look away from its motion ([`NormalCone`]: the mean of its
+//!   faces' normals and their spread) is not traced: it moves into space its own part
+//!   held just before, so the part's faces ahead of it meet the other part first (their
+//!   vertices, or the other part's vertices entering them, are traced). Measured on the
+//!   0.4 mm parts of half-turn-2to1 it skips about half the traced vertices.
 //!
 //! A test holds these against a plain trace of every vertex.
 //!
@@ -84,11 +89,33 @@ struct Cluster {
     end: usize,
 }
 
+/// The directions a vertex's faces look in: the mean of their unit normals (`axis`, unit)
+/// and the sine of the largest angle between it and any of them (`spread`; 2, never
+/// reached, when that angle is 90° or more).
+#[derive(Clone, Copy, Debug)]
+struct NormalCone {
+    axis: Vector3<f64>,
+    spread: f64,
+}
+
+impl NormalCone {
+    /// Whether a vertex with this cone, moving along `dir` (unit), moves into the space its
+    /// own part held just before: every face around it looks away from `dir` (the angle
+    /// between `dir` and the axis exceeds 90° plus the cone's half-angle). Such a vertex is
+    /// never the first of its part to touch another, whose surface would have met the
+    /// part's faces ahead of it.
+    fn trails(&self, dir: &Vector3<f64>) -> bool {
+        self.axis.dot(dir) < -self.spread
+    }
+}
+
 /// A part's mesh ready for distance queries (parry's BVH with pseudo-normals), with its
 /// vertices sorted into clusters.
 pub struct Solid {
     tri: MeshQuery,
     verts: Vec<Point3<f64>>,
+    /// Per vertex (the order of `verts`), the directions its faces look in.
+    cones: Vec<NormalCone>,
     clusters: Vec<Cluster>,
     aabb: Aabb,
     grid: VoxelGrid,
@@ -135,6 +162,8 @@ impl Solid {
             });
             start = end;
         }
+        let cones = normal_cones(mesh);
+        let cones = order.iter().map(|&i| cones[i]).collect();
         let aabb = mesh.aabb();
         let grid = VoxelGrid::covering(aabb.inflate(GRID_MARGIN_MM), GRID_MM);
         // Every voxel whose cell meets a triangle's box holds the surface points there.
@@ -159,6 +188,7 @@ impl Solid {
         Ok(Solid {
             tri,
             verts,
+            cones,
             clusters,
             aabb,
             grid,
@@ -188,6 +218,50 @@ impl Solid {
     pub fn vertex_count(&self) -> usize {
         self.verts.len()
     }
+}
+
+/// Each vertex's [`NormalCone`], in the mesh's vertex order. A vertex without a face of
+/// non-zero area gets a cone that never trails.
+fn normal_cones(mesh: &Mesh) -> Vec<NormalCone> {
+    let unit_normals: Vec<Option<Vector3<f64>>> = (0..mesh.triangles.len())
+        .map(|i| {
+            let [a, b, c] = mesh.corners(i).map(Vector3::from);
+            (b - a).cross(&(c - a)).try_normalize(0.0)
+        })
+        .collect();
+    let mut sum = vec![Vector3::zeros(); mesh.vertices.len()];
+    for (t, n) in mesh.triangles.iter().zip(&unit_normals) {
+        if let Some(n) = n {
+            for &v in t {
+                sum[v as usize] += n;
+            }
+        }
+    }
+    let axes: Vec<Option<Vector3<f64>>> = sum.iter().map(|s| s.try_normalize(1e-12)).collect();
+    // The smallest cosine between a vertex's axis and its faces' normals.
+    let mut cos_min = vec![1.0f64; mesh.vertices.len()];
+    for (t, n) in mesh.triangles.iter().zip(&unit_normals) {
+        for &v in t {
+            let v = v as usize;
+            cos_min[v] = match (axes[v], n) {
+                (Some(a), Some(n)) => cos_min[v].min(a.dot(n)),
+                _ => cos_min[v],
+            };
+        }
+    }
+    axes.iter()
+        .zip(&cos_min)
+        .map(|(axis, &c)| match axis {
+            Some(axis) if c > 0.0 => NormalCone {
+                axis: *axis,
+                spread: (1.0 - c * c).max(0.0).sqrt(),
+            },
+            _ => NormalCone {
+                axis: Vector3::z(),
+                spread: 2.0,
+            },
+        })
+        .collect()
 }
 
 /// The parts' design motion, as [`free_turns`] needs it: poses of both frames in R (the
@@ -449,6 +523,13 @@ impl AtTime<'_> {
         if r < ON_AXIS_MM || bound > r * *best {
             return;
         }
+        // The arc's direction and the faces turn together about z, so a vertex that
+        // trails at the start trails along the whole arc.
+        let dir = Vector3::new(-w.y, w.x, 0.0) * (self.turn_sense / r);
+        let dir_in_part = self.to_r.rotation.inverse_transform_vector(&dir);
+        if self.moving.cones[vi].trails(&dir_in_part) {
+            return;
+        }
         if self.fixed.lower_bound(&(self.r_to_fixed * w)) > r * *best {
             return;
         }
@@ -645,6 +726,37 @@ mod tests {
         fn driver_reach(&self, p: &Point3<f64>) -> f64 {
             21.7 + p.coords.norm()
         }
+    }
+
+    /// Guards the normal cones: at a box's corner (three faces at right angles) a motion
+    /// straight into the box trails, one along a face, or out of it, does not; on a fine
+    /// sphere a vertex moving inwards trails and one moving along the surface does not.
+    #[test]
+    fn a_vertex_trails_only_when_every_face_looks_away_from_its_motion() {
+        use crate::geometry::primitive_meshes::uv_sphere;
+        let cube = cuboid([0.0, 0.0, 0.0], [1.0, 1.0, 1.0]);
+        let cones = normal_cones(&cube);
+        let corner = cube
+            .vertices
+            .iter()
+            .position(|v| *v == [1.0, 1.0, 1.0])
+            .unwrap();
+        let c = cones[corner];
+        assert!(c.trails(&-Vector3::new(1.0, 1.0, 1.0).normalize()));
+        assert!(!c.trails(&-Vector3::x()));
+        assert!(!c.trails(&Vector3::new(-1.0, -1.0, 0.2).normalize()));
+        assert!(!c.trails(&Vector3::new(1.0, 1.0, 1.0).normalize()));
+        let ball = uv_sphere([0.0, 0.0, 0.0], 2.0, 48, 24);
+        let cones = normal_cones(&ball);
+        let (i, v) = ball
+            .vertices
+            .iter()
+            .enumerate()
+            .find(|(_, v)| v[2].abs() < 0.3 && v[0] > 1.0)
+            .unwrap();
+        let out = Vector3::from(*v).normalize();
+        assert!(cones[i].trails(&-out));
+        assert!(!cones[i].trails(&out.cross(&Vector3::z()).normalize()));
     }
 
     fn joined(parts: &[Mesh]) -> Mesh {
