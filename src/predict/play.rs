@@ -16,7 +16,9 @@
 //!   their distance, carried from their last query by the parts' speed bound, shows they
 //!   cannot touch within the search limit;
 //! - each part carries a coarse distance grid ([`GRID_MM`]) whose lower bound answers for
-//!   points more than about a millimetre away without a mesh query;
+//!   points more than about a millimetre away without a mesh query, and nearer the
+//!   surface the exact distance of the point's voxel centre, computed once for every
+//!   point and every sample that asks there (its own query the first time);
 //! - the search limit starts at twice the last sample's free turn (the whole cap only when
 //!   nothing touches within it), and the vertex that touched first at the last sample is
 //!   traced first;
@@ -31,6 +33,8 @@
 //! Exact distances are parry3d-f64's point–mesh projections with pseudo-normals (inside or
 //! outside), the same queries the build's check uses. The module does not know the target
 //! law, the load or the files; it does not look at the support.
+
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 
 use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 use rayon::prelude::*;
@@ -121,7 +125,23 @@ pub struct Solid {
     grid: VoxelGrid,
     /// Distance from each voxel centre to the nearest voxel the surface passes through.
     coarse: Vec<f32>,
+    /// The exact distance from each voxel centre to the surface, as f32 bits, computed the
+    /// first time a point near the surface asks ([`UNKNOWN`] until then).
+    exact: Vec<AtomicU32>,
+    /// Voxel centres whose exact distance was computed (mesh queries, a cost figure).
+    centres: AtomicU64,
 }
+
+/// Subtracted from a stored centre distance for its rounding to f32, mm: an f32 near
+/// 300 mm is within 2e-5 mm of the f64 it came from.
+const F32_SLACK_MM: f64 = 1e-4;
+/// An entry of [`Solid::exact`] not computed yet (a NaN no distance has).
+const UNKNOWN: u32 = u32::MAX;
+/// Below this coarse bound a point asks its voxel centre's exact distance, mm. 2 mm: the
+/// bound is compared with free arcs (r × free turn, up to about 1.5 mm at the examples'
+/// levers and plays) and with [`FAR_MM`]; above 2 mm the coarse bound already decides, and
+/// an exact centre there would be a query spent for nothing.
+const EXACT_BELOW_MM: f64 = 2.0;
 
 impl Solid {
     /// Prepare `mesh` (the part `part`, in its own frame, mm).
@@ -185,6 +205,7 @@ impl Solid {
             }
         }
         let coarse = distance_transform(&grid, &marks);
+        let exact = (0..grid.len()).map(|_| AtomicU32::new(UNKNOWN)).collect();
         Ok(Solid {
             tri,
             verts,
@@ -193,20 +214,41 @@ impl Solid {
             aabb,
             grid,
             coarse,
+            exact,
+            centres: AtomicU64::new(0),
         })
     }
 
-    /// A lower bound on the distance of `p` to the surface, mm, from the coarse grid: the
+    /// A lower bound on the distance of `p` to the surface, mm. From the coarse grid: the
     /// distance between voxel centres less the two half-diagonals (`p` and the surface
-    /// point each lie within one of their voxel's centre). Far from the grid, the
-    /// distance to the mesh's box.
+    /// point each lie within one of their voxel's centre). Near the surface (a coarse
+    /// bound below [`EXACT_BELOW_MM`]) also the exact distance of `p`'s voxel centre less
+    /// `p`'s distance from it (the distance is 1-Lipschitz), the centre's computed once
+    /// and kept. Far from the grid, the distance to the mesh's box.
     pub fn lower_bound(&self, p: &Point3<f64>) -> f64 {
-        match self.grid.voxel_of(Vec3::new(p.x, p.y, p.z)) {
-            Some(v) => {
-                (f64::from(self.coarse[self.grid.index(v)]) - 3f64.sqrt() * self.grid.h).max(0.0)
-            }
-            None => self.aabb.distance([p.x, p.y, p.z]),
+        let Some(v) = self.grid.voxel_of(Vec3::new(p.x, p.y, p.z)) else {
+            return self.aabb.distance([p.x, p.y, p.z]);
+        };
+        let i = self.grid.index(v);
+        let coarse = (f64::from(self.coarse[i]) - 3f64.sqrt() * self.grid.h).max(0.0);
+        if coarse >= EXACT_BELOW_MM {
+            return coarse;
         }
+        let c = self.grid.center(v);
+        let centre = Point3::new(c.x, c.y, c.z);
+        let known = self.exact[i].load(Ordering::Relaxed);
+        let at_centre = if known == UNKNOWN {
+            // Racing threads store the same value.
+            let d = self.signed(&centre).abs() as f32;
+            self.exact[i].store(d.to_bits(), Ordering::Relaxed);
+            self.centres.fetch_add(1, Ordering::Relaxed);
+            d
+        } else {
+            f32::from_bits(known)
+        };
+        (f64::from(at_centre) - (p - centre).norm() - F32_SLACK_MM)
+            .max(coarse)
+            .max(0.0)
     }
 
     /// Signed distance of `p` (this part's frame) to the surface, mm, negative inside.
@@ -297,7 +339,7 @@ pub struct FreeTurns {
     pub overlap_mm: f64,
     /// Time of `overlap_mm`.
     pub overlap_t: f64,
-    /// Distance queries made (a cost figure).
+    /// Distance queries made, the voxel centres' among them (a cost figure).
     pub queries: u64,
 }
 
@@ -333,6 +375,8 @@ pub fn free_turns(
         (Side::DriverIntoFollower, 1.0),
         (Side::DriverIntoFollower, -1.0),
     ];
+    let centres_before =
+        driver.centres.load(Ordering::Relaxed) + follower.centres.load(Ordering::Relaxed);
     let sweeps: Vec<Sweep> = jobs
         .par_iter()
         .map(|&(side, sense)| sweep(motion, driver, follower, side, sense, n, cap))
@@ -352,7 +396,10 @@ pub fn free_turns(
         minus,
         overlap_mm: overlap.0,
         overlap_t: overlap.1,
-        queries: sweeps.iter().map(|s| s.queries).sum(),
+        queries: sweeps.iter().map(|s| s.queries).sum::<u64>()
+            + driver.centres.load(Ordering::Relaxed)
+            + follower.centres.load(Ordering::Relaxed)
+            - centres_before,
     }
 }
 
