@@ -35,15 +35,28 @@ impl MeshQuery {
         let pr = self
             .tri
             .project_local_point(PVec::new(p[0], p[1], p[2]), false);
-        let d = ((pr.point.x - p[0]).powi(2)
-            + (pr.point.y - p[1]).powi(2)
-            + (pr.point.z - p[2]).powi(2))
-        .sqrt();
-        if pr.is_inside {
-            -d
-        } else {
-            d
-        }
+        signed_from(&pr, p)
+    }
+
+    /// [`signed`](Self::signed) when the surface is within `max_mm` of `p`, `None` when it
+    /// is farther (either side): the search prunes every part of the mesh beyond
+    /// `max_mm`, so ruling a point out costs a fraction of a full query.
+    pub fn signed_within(&self, p: [f64; 3], max_mm: f64) -> Option<f64> {
+        self.tri
+            .project_local_point_with_max_dist(PVec::new(p[0], p[1], p[2]), false, max_mm)
+            .map(|pr| signed_from(&pr, p))
+    }
+}
+
+/// The signed distance a projection of `p` gives.
+fn signed_from(pr: &parry3d_f64::query::PointProjection, p: [f64; 3]) -> f64 {
+    let d =
+        ((pr.point.x - p[0]).powi(2) + (pr.point.y - p[1]).powi(2) + (pr.point.z - p[2]).powi(2))
+            .sqrt();
+    if pr.is_inside {
+        -d
+    } else {
+        d
     }
 }
 
@@ -59,5 +72,18 @@ mod tests {
         let q = MeshQuery::new(&cuboid([0.0; 3], [4.0; 3])).unwrap();
         assert!((q.signed([5.0, 2.0, 2.0]) - 1.0).abs() < 1e-12);
         assert!((q.signed([2.0, 2.0, 2.0]) + 2.0).abs() < 1e-12);
+    }
+
+    /// Guards the bounded query: the signed distance where the surface is within the
+    /// bound (outside and inside), nothing where it is farther on either side.
+    #[test]
+    fn a_bounded_query_answers_only_within_its_bound() {
+        let q = MeshQuery::new(&cuboid([0.0; 3], [4.0; 3])).unwrap();
+        let near = q.signed_within([5.0, 2.0, 2.0], 1.5).unwrap();
+        assert!((near - 1.0).abs() < 1e-12, "{near}");
+        let inside = q.signed_within([2.0, 2.0, 0.5], 1.0).unwrap();
+        assert!((inside + 0.5).abs() < 1e-12, "{inside}");
+        assert_eq!(q.signed_within([7.0, 2.0, 2.0], 2.5), None);
+        assert_eq!(q.signed_within([2.0, 2.0, 2.0], 1.5), None);
     }
 }

@@ -256,6 +256,12 @@ impl Solid {
         self.tri.signed([p.x, p.y, p.z])
     }
 
+    /// [`signed`](Self::signed) when the surface is within `max_mm` of `p`; `None` when it
+    /// is farther, at a fraction of the cost.
+    pub fn signed_within(&self, p: &Point3<f64>, max_mm: f64) -> Option<f64> {
+        self.tri.signed_within([p.x, p.y, p.z], max_mm)
+    }
+
     /// Number of vertices.
     pub fn vertex_count(&self) -> usize {
         self.verts.len()
@@ -530,12 +536,18 @@ impl AtTime<'_> {
             let q = self.r_to_fixed * w;
             // The grid's bound first; the mesh only for clusters it cannot rule out.
             let mut d = self.fixed.lower_bound(&q);
-            if d - c.radius <= r_max * limit {
-                d = self.fixed.signed(&q).max(0.0);
+            let reach = c.radius + r_max * limit;
+            let mut beyond = d > reach;
+            if !beyond {
                 self.queries += 1;
+                match self.fixed.signed_within(&q, reach) {
+                    Some(exact) => d = exact.max(0.0),
+                    // Farther than the reach: the reach is the bound carried on.
+                    None => (d, beyond) = (reach, true),
+                }
             }
             self.last[ci] = (d, self.t);
-            if d - c.radius <= r_max * limit {
+            if !beyond {
                 active.push((d - c.radius, r_max, d, ci));
             }
         }
@@ -621,8 +633,12 @@ fn trace(
             }
             continue;
         }
-        let d = fixed.signed(&p);
+        // Nothing within the arc left: free up to the limit (a vertex deeper inside than
+        // that is not seen as overlapping either; the build's check measures overlaps).
         queries += 1;
+        let Some(d) = fixed.signed_within(&p, r * (limit - delta)) else {
+            return (limit, queries, None);
+        };
         if step == 0 && d < 0.0 {
             return (limit, queries, Some(-d));
         }
