@@ -22,7 +22,7 @@
 //! - the search limit starts at twice the last sample's free turn (the whole cap only when
 //!   nothing touches within it), and the vertex that touched first at the last sample is
 //!   traced first;
-//! - a vertex whose faces all look away from its motion ([`NormalCone`]: the mean of its
+//! - a vertex whose faces all look away from its motion (its normal cone: the mean of its
 //!   faces' normals and their spread) is not traced: it moves into space its own part
 //!   held just before, so the part's faces ahead of it meet the other part first (their
 //!   vertices, or the other part's vertices entering them, are traced). Measured on the
@@ -139,9 +139,9 @@ const F32_SLACK_MM: f64 = 1e-4;
 const UNKNOWN: u32 = u32::MAX;
 /// Below this coarse bound a point asks its voxel centre's exact distance, mm. 2 mm: the
 /// bound is compared with free arcs (r × free turn, up to about 1.5 mm at the examples'
-/// levers and plays) and with [`FAR_MM`]; above 2 mm the coarse bound already decides, and
+/// levers and plays) and with `FAR_MM`; above 2 mm the coarse bound already decides, and
 /// an exact centre there would be a query spent for nothing.
-const EXACT_BELOW_MM: f64 = 2.0;
+pub const EXACT_BELOW_MM: f64 = 2.0;
 
 impl Solid {
     /// Prepare `mesh` (the part `part`, in its own frame, mm).
