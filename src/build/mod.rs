@@ -269,7 +269,7 @@ pub fn build(
     {
         progress("meshing the follower");
         let f = design.follower_solid();
-        let apexes: Vec<Vec3> = design
+        let mut anchors: Vec<Vec3> = design
             .rims
             .iter()
             .flat_map(|r| {
@@ -279,10 +279,35 @@ pub fn build(
                     .map(|fr| fr.o - fr.u * (0.5 * dims::RIM_DEPTH_MM))
             })
             .collect();
+        // The rule-placed features (hub, column, magnet cap, flange, pad, ball) are not
+        // to be lost either: a magnet cap the column does not reach was once dropped as a
+        // crumb of web, and the follower called printable without its magnet.
+        // A feature's cover centres lie on its faces as often as inside it (a cylinder's
+        // on its end faces), so points half a ball's radius from each centre towards the
+        // eight corners are tried too.
+        let corners: Vec<Vec3> = [-1.0, 1.0]
+            .into_iter()
+            .flat_map(|x| [-1.0, 1.0].into_iter().map(move |y| (x, y)))
+            .flat_map(|(x, y)| [-1.0, 1.0].map(|z| Vec3::new(x, y, z).normalize()))
+            .collect();
+        let corners = &corners;
+        anchors.extend(
+            design
+                .follower_pieces
+                .cover
+                .iter()
+                .flat_map(|b| {
+                    let half = 0.5 * b.radius;
+                    b.centers.iter().flat_map(move |&c| {
+                        std::iter::once(c).chain(corners.iter().map(move |d| c + d * half))
+                    })
+                })
+                .filter(|&p| f.dist(p) < -FEATURE_ANCHOR_DEPTH_MM),
+        );
         out.push(mesh_part(
             "follower",
             &f,
-            Loose::Anchored(&apexes),
+            Loose::Anchored(&anchors),
             opts.cell_mm,
         )?);
     }
@@ -339,6 +364,12 @@ pub fn build(
         problems,
     })
 }
+
+/// A rule-placed feature's cover centre this deep inside the follower anchors the shell
+/// that holds it, mm: 0.5, more than the mesher moves a surface at the default 0.4 mm
+/// cell (its error is below 0.1 mm there), so the point is inside the mesh too. At
+/// coarser cells a feature thinner than that may go unanchored, as a web crumb does.
+const FEATURE_ANCHOR_DEPTH_MM: f64 = 0.5;
 
 /// What to do with the shells of a part beyond its largest.
 enum Loose<'a> {
