@@ -219,6 +219,19 @@ pub fn design(
             up_to,
         )
     });
+    // A column that stops just short of the magnet cap leaves the cap loose (half-turn-2to1:
+    // 0.5 mm short, the cap dropped and the follower without its magnet). The cap itself
+    // sits there, so the last stretch up into it is taken; the check measures the result.
+    let follower_column = follower_column.map(|mut c| {
+        if let Some((cap0, _)) = layout.cap {
+            let top = c.base.z + c.length;
+            let into_cap = cap0 + 1.0;
+            if top < into_cap && into_cap - top <= COLUMN_REACH_TO_CAP_MM {
+                c.length = into_cap - c.base.z;
+            }
+        }
+        c
+    });
     let describe = |c: &Option<Cylinder>| {
         c.as_ref().map_or("none".to_string(), |c| {
             format!("{:.0}–{:.0} mm", c.base.z, c.base.z + c.length)
@@ -374,6 +387,12 @@ struct FollowerPlan {
     pieces: Pieces,
     struts: Vec<ThickPolyline>,
 }
+
+/// How far a follower column that stops below the magnet cap is still carried up into
+/// it, mm. 2 mm: the column's stopping test keeps a strut margin that the cap (6 mm
+/// radius, placed by rule above the contact stack) does not, so a column ending within
+/// 2 mm of the cap ends beside material that is there anyway.
+const COLUMN_REACH_TO_CAP_MM: f64 = 2.0;
 
 /// Radius of each part's column up its axis. 3.5 mm: a 7 mm round post.
 const COLUMN_RADIUS_MM: f64 = 3.5;
