@@ -129,9 +129,9 @@ fn refused_demo(out: &Path, args: &[&str]) -> String {
     stderr
 }
 
-/// Guards the plant's refusal for a class the parts' prediction does not handle: `--plant
-/// geometry` on a 1R1T example stops before step 1, says why and what measures it instead,
-/// and writes nothing.
+/// Guards the plant's refusals before step 1, writing nothing: `--plant geometry` on a
+/// 1R1T example (the parts' prediction does not handle it) says why and what measures it
+/// instead; a build option out of range is refused before minutes of synthesis.
 #[test]
 fn the_geometry_plant_is_refused_for_a_class_it_cannot_predict() {
     let tmp = tempfile::tempdir().unwrap();
@@ -142,5 +142,10 @@ fn the_geometry_plant_is_refused_for_a_class_it_cannot_predict() {
         ),
         "error: --plant geometry: the parts' prediction (`mpc-rig simulate`) handles 1R \
          mechanisms; this motion is 1R1T. `--plant target` measures it on the target law\n"
+    );
+    // A build option out of range is refused before the synthesis, in the build's words.
+    assert_eq!(
+        refused_demo(tmp.path(), &["--cell-mm", "5"]),
+        "error: --cell-mm: 5 is outside 0.1–1\n"
     );
 }

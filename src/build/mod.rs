@@ -233,6 +233,15 @@ fn in_range(option: &str, v: f64, r: (f64, f64)) -> Result<(), BuildError> {
     }
 }
 
+impl BuildOptions {
+    /// Refuse a clearance or mesher cell outside its range, naming the option: what a
+    /// caller that builds later (`demo`, after minutes of synthesis) checks first.
+    pub fn check_ranges(&self) -> Result<(), BuildError> {
+        in_range("--clearance", self.clearance_mm, CLEARANCE_RANGE_MM)?;
+        in_range("--cell-mm", self.cell_mm, CELL_RANGE_MM)
+    }
+}
+
 /// Build the parts of `mech`.
 pub fn build(
     mech: &Mechanism,
@@ -241,8 +250,7 @@ pub fn build(
 ) -> Result<Built, BuildError> {
     let scale = opts.scale_mm.unwrap_or(mech.scale_mm);
     in_range("--scale-mm", scale, SCALE_RANGE_MM)?;
-    in_range("--clearance", opts.clearance_mm, CLEARANCE_RANGE_MM)?;
-    in_range("--cell-mm", opts.cell_mm, CELL_RANGE_MM)?;
+    opts.check_ranges()?;
     if let Some(k) = opts.without_pair {
         if k >= mech.curve_pairs.len() {
             return Err(BuildError::BadOption {

@@ -346,9 +346,13 @@ fn parts_for(
             .with_context(|| format!("removing the unfinished build {}", partial.display()))?;
     }
     let t0 = Instant::now();
-    let built = crate::build::build(mech, opts, &|s| eprintln!("      {s}"))
-        .with_context(|| format!("building the parts of {}", mech_path.display()))
-        .context("`--plant target` measures the target law without parts")?;
+    let built =
+        crate::build::build(mech, opts, &|s| eprintln!("      {s}")).with_context(|| {
+            format!(
+                "building the parts of {} (`--plant target` measures the target law without parts)",
+                mech_path.display()
+            )
+        })?;
     crate::build::output::write(&built, mech_path, opts, &partial, &|s| {
         eprintln!("      {s}")
     })?;
@@ -421,6 +425,15 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         .with_context(|| format!("loading {}", motion_path.display()))?;
     let mut plant = super::sim_device::plant_from(&args.faults)?;
     let plant_kind = plant_for(&args, motion.class())?;
+    if plant_kind == DemoPlant::Geometry {
+        // The build would refuse these only after the synthesis.
+        BuildOptions {
+            clearance_mm: args.clearance,
+            cell_mm: args.cell_mm,
+            ..BuildOptions::default()
+        }
+        .check_ranges()?;
+    }
     let rig_path = shipped(rig_for(args.bench, motion.class()));
     let rig = RigConfig::load(&rig_path)?;
     // Refuse a plan the bench would refuse before minutes of synthesis (issue 20).
