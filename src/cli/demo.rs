@@ -336,15 +336,6 @@ fn parts_for(
     if let Ok(done) = crate::predict::BuiltParts::load(&dir) {
         return Ok((dir, true, done.problems));
     }
-    // Built aside and renamed when complete, so an interrupted build is never reused.
-    let partial = parent.join(format!(
-        "{}.partial",
-        dir.file_name().unwrap_or_default().to_string_lossy()
-    ));
-    if partial.exists() {
-        std::fs::remove_dir_all(&partial)
-            .with_context(|| format!("removing the unfinished build {}", partial.display()))?;
-    }
     let t0 = Instant::now();
     let built =
         crate::build::build(mech, opts, &|s| eprintln!("      {s}")).with_context(|| {
@@ -353,17 +344,35 @@ fn parts_for(
                 mech_path.display()
             )
         })?;
-    crate::build::output::write(&built, mech_path, opts, &partial, &|s| {
-        eprintln!("      {s}")
+    written_aside(&dir, |partial| {
+        crate::build::output::write(&built, mech_path, opts, partial, &|s| {
+            eprintln!("      {s}")
+        })?;
+        Ok(())
     })?;
-    if dir.exists() {
-        std::fs::remove_dir_all(&dir)
-            .with_context(|| format!("removing the unfinished build {}", dir.display()))?;
-    }
-    std::fs::rename(&partial, &dir)
-        .with_context(|| format!("renaming {} to {}", partial.display(), dir.display()))?;
     eprintln!("      built in {:.1} s", t0.elapsed().as_secs_f64());
     Ok((dir, false, built.problems.clone()))
+}
+
+/// Fill the folder `dir` by `write` into `dir.partial` (emptied first) and rename it when
+/// `write` is done, replacing what `dir` held: an interrupted step never leaves a folder
+/// that looks whole to the next run.
+fn written_aside(
+    dir: &Path,
+    write: impl FnOnce(&Path) -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
+    let mut name = dir.file_name().unwrap_or_default().to_os_string();
+    name.push(".partial");
+    let partial = dir.with_file_name(name);
+    for stale in [&partial, dir] {
+        if stale.exists() {
+            std::fs::remove_dir_all(stale)
+                .with_context(|| format!("removing the unfinished {}", stale.display()))?;
+        }
+    }
+    write(&partial)?;
+    std::fs::rename(&partial, dir)
+        .with_context(|| format!("renaming {} to {}", partial.display(), dir.display()))
 }
 
 /// The prediction of how the parts in `parts` move the follower, written into
@@ -376,19 +385,12 @@ fn prediction_for(mech_path: &Path, mech: &Mechanism, parts: &Path) -> anyhow::R
         eprintln!("      reusing {}", file.display());
         return Ok(file);
     }
-    // Written aside and renamed when complete, as the parts are.
-    let partial = parts.join(format!("{}.partial", super::simulate::DEFAULT_OUT_DIR));
-    for dir in [&partial, &out] {
-        if dir.exists() {
-            std::fs::remove_dir_all(dir)
-                .with_context(|| format!("removing the unfinished {}", dir.display()))?;
-        }
-    }
     let p = crate::predict::predict(mech, parts, &PredictOptions::default())
         .with_context(|| format!("simulating the parts in {}", parts.display()))?;
-    crate::predict::output::write(&p, mech_path, parts, &partial)?;
-    std::fs::rename(&partial, &out)
-        .with_context(|| format!("renaming {} to {}", partial.display(), out.display()))?;
+    written_aside(&out, |partial| {
+        crate::predict::output::write(&p, mech_path, parts, partial)?;
+        Ok(())
+    })?;
     let lost = p.samples.iter().filter(|s| s.drive_lost).count();
     eprintln!(
         "      worst play {:.3}°, worst deviation from the target {:.3}° at driver {:.1}°{} ({:.1} s)",

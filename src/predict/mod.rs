@@ -297,6 +297,15 @@ pub struct ClosureAgreement {
     pub held_both: usize,
 }
 
+/// The windows (first and last sample, driver degrees) of the runs of `true` in per-angle
+/// `drive_lost` flags evenly spaced over a period from 0.
+pub fn lost_windows_deg(flags: &[bool]) -> Vec<[f64; 2]> {
+    crate::build::check::windows(flags)
+        .into_iter()
+        .map(|[a, b]| [a * 360.0, b * 360.0])
+        .collect()
+}
+
 impl Prediction {
     /// The drive-lost windows as a person reads them: `a–b°, c–d°` (driver degrees).
     pub fn lost_windows_text(&self) -> String {
@@ -446,10 +455,7 @@ pub fn predict(
             .max((s.reverse_deg - s.target_deg).abs())
     });
     let flags: Vec<bool> = samples.iter().map(|s| s.drive_lost).collect();
-    let drive_lost_windows = crate::build::check::windows(&flags)
-        .into_iter()
-        .map(|[a, b]| [a * 360.0, b * 360.0])
-        .collect();
+    let drive_lost_windows = lost_windows_deg(&flags);
     let skip = built.without_pair.map(|k| k.saturating_sub(1));
     let file = mech.closure_with(|k, _| Some(k) != skip);
     let m = mech.samples;

@@ -143,10 +143,7 @@ impl PredictedDeviation {
         Ok(PredictedDeviation {
             forward: rows.iter().map(|r| r.forward_deg - r.target_deg).collect(),
             reverse: rows.iter().map(|r| r.reverse_deg - r.target_deg).collect(),
-            lost_windows_deg: crate::build::check::windows(&lost)
-                .into_iter()
-                .map(|[a, b]| [a * 360.0, b * 360.0])
-                .collect(),
+            lost_windows_deg: super::lost_windows_deg(&lost),
         })
     }
 
