@@ -3,7 +3,7 @@
 //! Synthesizes the example mechanism (or reuses the cached one under `out/demo/`, keyed by
 //! the motion file's SHA-256, the seed, the synthesis settings and the tool version). For a
 //! 1R motion it then builds the printable parts (`mpc-rig build`, cached beside the
-//! mechanism, keyed by the mechanism file, the build settings and the tool version) and
+//! mechanism, keyed by the mechanism file, the build settings and the executable's hash) and
 //! predicts how they move the follower (`mpc-rig simulate`): the *geometry plant*, so the
 //! simulated bench's follower moves as the printed parts would move it. It starts a
 //! simulated bench in-process on pseudo-terminals (our firmware core behind the stepper
@@ -302,21 +302,66 @@ fn build_options(
     })
 }
 
-/// Cache key of the parts: the mechanism file's bytes, the build settings and the tool
-/// version.
-fn parts_key(mechanism_bytes: &[u8], o: &BuildOptions) -> String {
+/// Cache key of the parts: the mechanism file's bytes, the build settings and `tool`, the
+/// fingerprint of the program that builds them ([`tool_fingerprint`]).
+fn parts_key(mechanism_bytes: &[u8], o: &BuildOptions, tool: &str) -> String {
     short_hash(
         mechanism_bytes,
         &format!(
-            "scale={:?} clearance={} cell={} bench={} without={:?} version={}",
+            "scale={:?} clearance={} cell={} bench={} without={:?} tool={tool}",
             o.scale_mm,
             o.clearance_mm,
             o.cell_mm,
             o.bench.as_ref().map_or(String::new(), |b| b.to_string()),
             o.without_pair,
-            env!("CARGO_PKG_VERSION")
         ),
     )
+}
+
+/// What identifies the code that builds and simulates the parts: the SHA-256 of the running
+/// executable, or the tool version when the executable cannot be read. The version alone
+/// stays the same across commits, so a checkout that ran `demo` before a change to the parts
+/// (the magnet cap carried up the column, e2ca13f) kept showing the old parts; the parts
+/// take minutes to build, a hash of the executable a third of a second.
+fn tool_fingerprint() -> String {
+    let exe = std::env::current_exe().and_then(std::fs::read);
+    match exe {
+        Ok(bytes) => short_hash(&bytes, ""),
+        Err(_) => format!("version {}", env!("CARGO_PKG_VERSION")),
+    }
+}
+
+/// Remove the `parts-*` folders beside `keep` other than `keep` itself: parts built for other
+/// settings or by another build of the tool. Each set is several hundred MB (the 0.4 mm
+/// meshes, the 3MF and the GLB), and a new one is written after every change of the tool,
+/// so the demo's cache keeps only the latest. A `*.partial` folder is left alone: another
+/// run may be writing it (an interrupted one is removed by the next build of its key).
+/// Says what it removed; a folder it cannot remove is reported and left.
+fn prune_other_parts(keep: &Path) {
+    let (Some(parent), Some(name)) = (keep.parent(), keep.file_name()) else {
+        return;
+    };
+    let Ok(entries) = std::fs::read_dir(parent) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let other = e.file_name();
+        let other = other.to_string_lossy();
+        if other == name.to_string_lossy()
+            || !other.starts_with("parts-")
+            || other.ends_with(".partial")
+        {
+            continue;
+        }
+        let path = e.path();
+        match std::fs::remove_dir_all(&path) {
+            Ok(()) => eprintln!("      removed older parts {}", path.display()),
+            Err(err) => eprintln!(
+                "      could not remove older parts {}: {err}",
+                path.display()
+            ),
+        }
+    }
 }
 
 /// The parts built from the mechanism, or the cached ones: their folder, whether they
@@ -331,7 +376,10 @@ fn parts_for(
     let bytes =
         std::fs::read(mech_path).with_context(|| format!("reading {}", mech_path.display()))?;
     let parent = mech_path.parent().unwrap_or_else(|| Path::new("."));
-    let dir = parent.join(format!("parts-{}", parts_key(&bytes, opts)));
+    let dir = parent.join(format!(
+        "parts-{}",
+        parts_key(&bytes, opts, &tool_fingerprint())
+    ));
     // `build.json` is the last file a build writes: its presence marks a whole build.
     if let Ok(done) = crate::predict::BuiltParts::load(&dir) {
         return Ok((dir, true, done.problems));
@@ -351,6 +399,7 @@ fn parts_for(
         Ok(())
     })?;
     eprintln!("      built in {:.1} s", t0.elapsed().as_secs_f64());
+    prune_other_parts(&dir);
     Ok((dir, false, built.problems.clone()))
 }
 
@@ -707,13 +756,14 @@ mod tests {
     }
 
     /// Guards the parts' cache key: the same mechanism and settings give the same folder,
-    /// and a change of the mechanism, the clearance, the cell or the bench another.
+    /// and a change of the mechanism, the clearance, the cell, the bench or the program
+    /// another.
     #[test]
     fn the_parts_are_rebuilt_when_what_they_depend_on_changes() {
         let o = BuildOptions::default();
-        let key = parts_key(b"mechanism", &o);
-        assert_eq!(key, parts_key(b"mechanism", &o));
-        assert_ne!(key, parts_key(b"mechanism2", &o));
+        let key = parts_key(b"mechanism", &o, "tool");
+        assert_eq!(key, parts_key(b"mechanism", &o, "tool"));
+        assert_ne!(key, parts_key(b"mechanism2", &o, "tool"));
         for changed in [
             BuildOptions {
                 clearance_mm: 0.5,
@@ -724,14 +774,37 @@ mod tests {
                 ..BuildOptions::default()
             },
         ] {
-            assert_ne!(key, parts_key(b"mechanism", &changed));
+            assert_ne!(key, parts_key(b"mechanism", &changed, "tool"));
         }
         let rig = RigConfig::load(&shipped("rigs/sim-dynamixel.toml")).unwrap();
         let horn = BuildOptions {
             bench: Some(Bench::from_rig(&rig, crate::synth::Class::R1).unwrap()),
             ..BuildOptions::default()
         };
-        assert_ne!(key, parts_key(b"mechanism", &horn));
+        assert_ne!(key, parts_key(b"mechanism", &horn, "tool"));
+        assert_ne!(key, parts_key(b"mechanism", &o, "another build"));
+    }
+
+    /// Guards the cache's size: writing new parts removes the other `parts-*` folders of
+    /// the same mechanism (other settings, another build of the tool) and nothing else, not
+    /// even a folder another run may be writing.
+    #[test]
+    fn new_parts_replace_the_older_ones() {
+        let dir = tempfile::tempdir().unwrap();
+        for sub in ["parts-new", "parts-old", "parts-old.partial", "report"] {
+            std::fs::create_dir_all(dir.path().join(sub).join("prediction")).unwrap();
+        }
+        std::fs::write(dir.path().join("mechanism.json"), "{}").unwrap();
+        prune_other_parts(&dir.path().join("parts-new"));
+        let mut left: Vec<String> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        left.sort();
+        assert_eq!(
+            left,
+            ["mechanism.json", "parts-new", "parts-old.partial", "report"]
+        );
     }
 
     /// Guards the demo's bench choice: every class gets a simulated rig that has its
