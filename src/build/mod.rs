@@ -44,7 +44,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use crate::geometry::mesh::{Mesh, MeshCheck};
-use crate::geometry::mesher::{mesh_solid, MesherError};
+use crate::geometry::mesher::{mesh_solid_reporting, MeshProgress, MesherError};
 use crate::geometry::sdf::{Sdf, Vec3};
 use crate::geometry::sweep::SweepError;
 use crate::synth::closure::Class;
@@ -317,6 +317,7 @@ pub fn build(
             &f,
             Loose::Anchored(&anchors),
             opts.cell_mm,
+            progress,
         )?);
     }
     {
@@ -324,12 +325,24 @@ pub fn build(
         let d = design.driver_solid();
         // Every piece but the largest is one the carve isolated and no strut reached
         // (`parts` joins all the others).
-        out.push(mesh_part("driver", &d, Loose::LeaveOut, opts.cell_mm)?);
+        out.push(mesh_part(
+            "driver",
+            &d,
+            Loose::LeaveOut,
+            opts.cell_mm,
+            progress,
+        )?);
     }
     {
         progress("meshing the support");
         let s = design.support_solid();
-        out.push(mesh_part("support", &s, Loose::Whole, opts.cell_mm)?);
+        out.push(mesh_part(
+            "support",
+            &s,
+            Loose::Whole,
+            opts.cell_mm,
+            progress,
+        )?);
     }
     // Order: driver, follower, support.
     out.swap(0, 1);
@@ -379,6 +392,12 @@ pub fn build(
 /// coarser cells a feature thinner than that may go unanchored, as a web crumb does.
 const FEATURE_ANCHOR_DEPTH_MM: f64 = 0.5;
 
+/// Seconds between two progress lines of a part's meshing, at least: the driver's carve
+/// takes two to three minutes at 0.4 mm cells and said nothing in between, so a person
+/// could not tell it from a hang; a line every 20 s shows it moving without filling the
+/// terminal.
+const MESH_PROGRESS_EVERY_S: f64 = 20.0;
+
 /// What to do with the shells of a part beyond its largest.
 enum Loose<'a> {
     /// Drop those that hold none of these functional points; more than one shell holding
@@ -398,10 +417,24 @@ fn mesh_part(
     solid: &dyn Sdf,
     loose: Loose<'_>,
     cell: f64,
+    progress: &dyn Fn(&str),
 ) -> Result<Part, BuildError> {
     let t = Instant::now();
     let f = |p: Vec3| solid.dist(p);
-    let mesh = mesh_solid(&f, solid.bounds(), cell)
+    let mut last_line = t;
+    let mut report = |r: MeshProgress| {
+        if last_line.elapsed().as_secs_f64() >= MESH_PROGRESS_EVERY_S && r.done < r.known {
+            last_line = Instant::now();
+            progress(&format!(
+                "  {name}: {} of {} blocks near the surface ({:.0} %), {:.0} s",
+                r.done,
+                r.known,
+                100.0 * r.done as f64 / r.known as f64,
+                t.elapsed().as_secs_f64()
+            ));
+        }
+    };
+    let mesh = mesh_solid_reporting(&f, solid.bounds(), cell, &mut report)
         .map_err(|source| BuildError::Mesh { part: name, source })?;
     let check = mesh.check();
     if !check.is_closed_manifold() {

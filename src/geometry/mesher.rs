@@ -1,6 +1,6 @@
 //! From an implicit solid to a closed triangle mesh: marching tetrahedra on a sparse grid.
 //!
-//! Owns [`mesh_solid`]. The grid's cubes are cut into six tetrahedra along their main
+//! Owns [`mesh_solid`] (and [`mesh_solid_reporting`], the same with progress). The grid's cubes are cut into six tetrahedra along their main
 //! diagonal (the Kuhn triangulation, the same in every cube, so neighbouring cubes agree on
 //! their shared faces), and the surface is the zero set of the function interpolated
 //! linearly over each tetrahedron. That surface is a closed, consistently oriented
@@ -36,6 +36,26 @@ pub const ZERO_OFFSET: f64 = 1e-3;
 /// skipped, as a factor: 1.25 leaves room for functions that are distance bounds only up
 /// to a few per cent (swept sections, blends).
 const SKIP_SAFETY: f64 = 1.25;
+
+/// How far a meshing has got, for a caller that reports progress: the blocks evaluated so
+/// far and the blocks known to be near the surface (done or queued). The second grows when
+/// a block's face shows the surface going on into a neighbour the first pass skipped, so
+/// `done / known` is a lower bound of the share done, not an exact one.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MeshProgress {
+    /// Blocks evaluated.
+    pub done: usize,
+    /// Blocks evaluated or queued.
+    pub known: usize,
+}
+
+/// Blocks evaluated between two progress reports, at least: below this the pause at each
+/// report (every thread waits for the slowest block of the chunk) would cost more than a
+/// per cent of a chunk's time.
+const MIN_PROGRESS_CHUNK: usize = 256;
+
+/// Reports per pass over the blocks near the surface, at most: a report every 5 %.
+const PROGRESS_REPORTS: usize = 20;
 
 /// Errors of meshing.
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -295,6 +315,18 @@ pub fn mesh_solid(
     bounds: Aabb,
     h: f64,
 ) -> Result<Mesh, MesherError> {
+    mesh_solid_reporting(f, bounds, h, &mut |_| {})
+}
+
+/// [`mesh_solid`], calling `report` after every chunk of blocks (about every 5 % of them)
+/// with how far it has got. The blocks are the same and are processed in the same order, so
+/// the mesh is the same as [`mesh_solid`]'s.
+pub fn mesh_solid_reporting(
+    f: &(dyn Fn(Vec3) -> f64 + Sync),
+    bounds: Aabb,
+    h: f64,
+    report: &mut dyn FnMut(MeshProgress),
+) -> Result<Mesh, MesherError> {
     // Two cells of margin so the outermost grid points are outside the solid.
     let b = bounds.inflate(2.0 * h);
     let size = b.size();
@@ -345,14 +377,23 @@ pub fn mesh_solid(
         .collect();
     let mut done = vec![false; nblocks];
     let mut outs: Vec<BlockOut> = Vec::new();
+    let mut known = wave.len();
+    let chunk = (known / PROGRESS_REPORTS).max(MIN_PROGRESS_CHUNK);
     while !wave.is_empty() {
         for &i in &wave {
             done[i] = true;
         }
-        let results: Vec<(usize, BlockOut)> = wave
-            .par_iter()
-            .map(|&i| (i, process_block(f, &g, unflat(i))))
-            .collect();
+        let mut results: Vec<(usize, BlockOut)> = Vec::with_capacity(wave.len());
+        for part in wave.chunks(chunk) {
+            results.par_extend(
+                part.par_iter()
+                    .map(|&i| (i, process_block(f, &g, unflat(i)))),
+            );
+            report(MeshProgress {
+                done: outs.len() + results.len(),
+                known,
+            });
+        }
         let mut next = Vec::new();
         for (i, r) in results {
             let bi = unflat(i);
@@ -377,6 +418,7 @@ pub fn mesh_solid(
                 if !done[j] {
                     done[j] = true;
                     next.push(j);
+                    known += 1;
                 }
             }
             outs.push(r);
@@ -465,6 +507,30 @@ mod tests {
             .map(|v| s.dist(Vec3::new(v[0], v[1], v[2])).abs())
             .fold(0.0, f64::max);
         assert!(worst < 0.02, "vertex off the sphere by {worst}");
+    }
+
+    /// Guards the progress reports: meshing with them gives the very mesh meshing without
+    /// them gives, the reports never go back, come several times over a large part and end
+    /// with every known block done.
+    #[test]
+    fn progress_reports_leave_the_mesh_unchanged() {
+        let s = Sphere {
+            center: Vec3::new(0.3, -0.2, 0.1),
+            radius: 12.0,
+        };
+        let plain = mesh_solid(&|p| s.dist(p), s.bounds(), 0.2).unwrap();
+        let mut seen: Vec<MeshProgress> = Vec::new();
+        let reported =
+            mesh_solid_reporting(&|p| s.dist(p), s.bounds(), 0.2, &mut |r| seen.push(r)).unwrap();
+        assert_eq!(plain.vertices, reported.vertices);
+        assert_eq!(plain.triangles, reported.triangles);
+        assert!(seen.len() >= 3, "{seen:?}");
+        assert!(seen
+            .windows(2)
+            .all(|w| w[0].done <= w[1].done && w[0].known <= w[1].known));
+        assert!(seen.iter().all(|r| r.done <= r.known), "{seen:?}");
+        let last = seen.last().unwrap();
+        assert_eq!(last.done, last.known);
     }
 
     /// A box with a through hole (genus 1, sharp edges) is still a closed manifold, with
