@@ -222,16 +222,7 @@ pub fn design(
     // A column that stops just short of the magnet cap leaves the cap loose (half-turn-2to1:
     // 0.5 mm short, the cap dropped and the follower without its magnet). The cap itself
     // sits there, so the last stretch up into it is taken; the check measures the result.
-    let follower_column = follower_column.map(|mut c| {
-        if let Some((cap0, _)) = layout.cap {
-            let top = c.base.z + c.length;
-            let into_cap = cap0 + 1.0;
-            if top < into_cap && into_cap - top <= COLUMN_REACH_TO_CAP_MM {
-                c.length = into_cap - c.base.z;
-            }
-        }
-        c
-    });
+    let follower_column = follower_column.map(|c| reach_cap(c, layout.cap.map(|(cap0, _)| cap0)));
     let describe = |c: &Option<Cylinder>| {
         c.as_ref().map_or("none".to_string(), |c| {
             format!("{:.0}–{:.0} mm", c.base.z, c.base.z + c.length)
@@ -393,6 +384,19 @@ struct FollowerPlan {
 /// radius, placed by rule above the contact stack) does not, so a column ending within
 /// 2 mm of the cap ends beside material that is there anyway.
 const COLUMN_REACH_TO_CAP_MM: f64 = 2.0;
+
+/// The follower's column `c`, carried up 1 mm into the magnet cap starting at height `cap0`
+/// when it stops at most [`COLUMN_REACH_TO_CAP_MM`] short of that; otherwise as it is.
+fn reach_cap(mut c: Cylinder, cap0: Option<f64>) -> Cylinder {
+    if let Some(cap0) = cap0 {
+        let top = c.base.z + c.length;
+        let into_cap = cap0 + 1.0;
+        if top < into_cap && into_cap - top <= COLUMN_REACH_TO_CAP_MM {
+            c.length = into_cap - c.base.z;
+        }
+    }
+    c
+}
 
 /// Radius of each part's column up its axis. 3.5 mm: a 7 mm round post.
 const COLUMN_RADIUS_MM: f64 = 3.5;
@@ -1063,6 +1067,22 @@ mod tests {
     /// one): the clearance from the driver's swept bands is the one without a floor wherever
     /// that is above the floor, and the floor wherever it is not, at points around the
     /// follower's curves (in and out of the bands' sweep).
+    /// Guards the column's last stretch (e2ca13f): a follower column that stops 0.5 mm
+    /// under the magnet cap (half-turn-2to1's printable design) is carried 1 mm into it, so
+    /// the cap is not left loose and dropped; one that stops farther short, or already
+    /// reaches the cap, or a follower without a cap, is left as planned.
+    #[test]
+    fn a_column_just_short_of_the_cap_is_carried_into_it() {
+        let top = |c: &Cylinder| c.base.z + c.length;
+        let planned = |z1: f64| Cylinder::z(0.0, 0.0, 10.0, z1, COLUMN_RADIUS_MM);
+        assert!((top(&reach_cap(planned(59.5), Some(60.0))) - 61.0).abs() < 1e-12);
+        assert!((top(&reach_cap(planned(59.0), Some(60.0))) - 61.0).abs() < 1e-12);
+        for (z1, cap0) in [(58.5, Some(60.0)), (62.0, Some(60.0)), (59.5, None)] {
+            let c = reach_cap(planned(z1), cap0);
+            assert_eq!(top(&c), z1, "column to {z1}, cap at {cap0:?}");
+        }
+    }
+
     #[test]
     fn band_clearance_above_its_floor_is_the_one_without() {
         let (mech, kin) = half_turn();
