@@ -306,14 +306,32 @@ pub fn lost_windows_deg(flags: &[bool]) -> Vec<[f64; 2]> {
         .collect()
 }
 
+/// Drive-lost windows (driver degrees) as a person reads them: `290.5–292.25°, 359.75–0.25°`.
+/// The one wording of `simulate`, `demo`, `analyze` and the report. The samples are
+/// [`PredictOptions::samples`] per period (0.25° apart at the default 1 440), so bounds get
+/// the two decimals that resolves, without trailing zeros: one decimal had written 292.25°
+/// as 292.2° in the report while `simulate` wrote 292.25°.
+pub fn lost_windows_text(windows: &[[f64; 2]]) -> String {
+    let deg = |v: f64| {
+        let s = format!("{v:.2}");
+        let s = s.trim_end_matches('0').trim_end_matches('.');
+        if s == "-0" {
+            "0".to_string()
+        } else {
+            s.to_string()
+        }
+    };
+    windows
+        .iter()
+        .map(|&[a, b]| format!("{}–{}°", deg(a), deg(b)))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 impl Prediction {
-    /// The drive-lost windows as a person reads them: `a–b°, c–d°` (driver degrees).
+    /// The drive-lost windows as a person reads them ([`lost_windows_text`]).
     pub fn lost_windows_text(&self) -> String {
-        self.drive_lost_windows
-            .iter()
-            .map(|[a, b]| format!("{a:.2}–{b:.2}°"))
-            .collect::<Vec<_>>()
-            .join(", ")
+        lost_windows_text(&self.drive_lost_windows)
     }
 }
 
@@ -488,6 +506,17 @@ pub fn predict(
 mod tests {
     use super::*;
     use nalgebra::Vector3;
+
+    /// Guards the one wording of drive-lost windows: bounds to the samples' 0.25° without
+    /// trailing zeros, a window across 0° as it is, nothing for no window.
+    #[test]
+    fn drive_lost_windows_read_to_the_sample() {
+        assert_eq!(
+            lost_windows_text(&[[290.5, 292.25], [359.75, 0.25], [10.0, 12.0]]),
+            "290.5–292.25°, 359.75–0.25°, 10–12°"
+        );
+        assert_eq!(lost_windows_text(&[]), "");
+    }
 
     /// Guards the sign of the target's steps: a turn of +0.3 rad about +z reads +0.3, and
     /// one about −z reads −0.3.

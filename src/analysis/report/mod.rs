@@ -240,11 +240,7 @@ pub fn drive_lost_sentence(windows: &[[f64; 2]]) -> String {
     format!(
         " The prediction says the parts lose the drive at driver {}: there the follower is \
          not held.",
-        windows
-            .iter()
-            .map(|[a, b]| format!("{a:.1}–{b:.1}°"))
-            .collect::<Vec<_>>()
-            .join(", ")
+        crate::predict::lost_windows_text(windows)
     )
 }
 
@@ -1168,13 +1164,14 @@ mod tests {
     use super::{backlash_with_error, f3};
 
     /// Guards the sentence the report and `analyze` give the prediction's loss of drive:
-    /// every window, in driver degrees, and nothing at all when the parts never lose it.
+    /// every window, in driver degrees to the samples' 0.25° (as `simulate` writes them),
+    /// and nothing at all when the parts never lose it.
     #[test]
     fn the_drive_lost_windows_are_named_or_nothing_is_said() {
         assert_eq!(
             super::drive_lost_sentence(&[[290.5, 292.25], [359.75, 0.25]]),
-            " The prediction says the parts lose the drive at driver 290.5–292.2°, \
-             359.8–0.2°: there the follower is not held."
+            " The prediction says the parts lose the drive at driver 290.5–292.25°, \
+             359.75–0.25°: there the follower is not held."
         );
         assert_eq!(super::drive_lost_sentence(&[]), "");
     }
