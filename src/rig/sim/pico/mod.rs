@@ -639,6 +639,12 @@ fn run(
                     d.serial.as_deref().unwrap_or("-"),
                 );
                 around.st.usb = Some(d);
+                // Published now, not at the end of the slice: the board may answer the
+                // host's first bytes in the slice it enumerates in, and the reply reaches
+                // the host (in `sync`) before that slice's status does. A host that read
+                // the reply and then the status found no USB descriptors (a CI run of
+                // `pico_board::sensors_pins_and_serial_number_as_wired`, 2026-12-04).
+                around.publish(status);
             }
             BoardMessage::Log { warning, text } => {
                 if warning {
