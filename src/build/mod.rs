@@ -501,6 +501,14 @@ pub(crate) mod tests {
         Mechanism::load(&file).expect("the test mechanism loads")
     }
 
+    /// The printable 1R design of `tests/data` (`demo`'s half-turn-2to1: `synth
+    /// --printable`, seed 1, K = 6, d_x = 7.5), whose parts the build can join.
+    pub(crate) fn printable_mechanism() -> Mechanism {
+        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data/mechanism/half-turn-2to1-printable/mechanism.json");
+        Mechanism::load(&file).expect("the printable test mechanism loads")
+    }
+
     /// [`test_mechanism`] and its motion at 10 mm per unit.
     pub(crate) fn half_turn() -> (Mechanism, kinematics::Kinematics) {
         let mech = test_mechanism();
