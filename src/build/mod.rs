@@ -80,7 +80,7 @@ pub enum BuildError {
     /// No room for a connection.
     #[error(
         "cannot join {what}: {detail}. The design leaves no room for it: synthesize with \
-         --band-gap and --axis-room (docs/build.md, \"Printable designs\")"
+         `mpc-rig synth --printable` (docs/build.md, \"Printable designs\")"
     )]
     NoRoom {
         /// What could not be joined.
