@@ -2,8 +2,9 @@
 //! plant: synthesis (reduced effort with `--quick`), the simulated stepper bench on a
 //! pseudo-terminal, the real session, analysis and report; then the cached mechanism is
 //! reused and an injected backlash shows up in the report. The default geometry plant adds
-//! a build of the parts (minutes at the default cell) and is measured by hand
-//! (docs/simulate.md); here only its refusals run.
+//! a synthesis with the printable layout and a build of the parts (minutes at the default
+//! cell, measured by hand: docs/simulate.md); here it runs on a given printable mechanism
+//! (`--mechanism`) at coarse cells, and its refusals run.
 
 use crate::support::serial_group;
 use std::path::{Path, PathBuf};
@@ -148,4 +149,98 @@ fn the_geometry_plant_is_refused_for_a_class_it_cannot_predict() {
         refused_demo(tmp.path(), &["--cell-mm", "5"]),
         "error: --cell-mm: 5 is outside 0.1–1\n"
     );
+}
+
+/// Guards the demo's geometry path on a given mechanism (the printable half-turn-2to1 of
+/// tests/data): its parts are built (at 1 mm cells, a preview whose mesh error the build's
+/// check fails, so they are reported not printable and used all the same), their motion
+/// predicted, the bench's follower moved by that prediction, and the report compares the
+/// measurement with target and prediction and shows the parts. The parts are cached under
+/// OUT/mechanisms/, not beside the given file, and a second run reuses them.
+#[test]
+fn demo_measures_the_parts_of_a_given_mechanism() {
+    let _serial = serial_group::lock();
+    let tmp = tempfile::tempdir().unwrap();
+    let given =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/mechanism/half-turn-2to1-printable");
+    let run = || {
+        let out = assert_cmd::Command::cargo_bin("mpc-rig")
+            .unwrap()
+            .args(["demo", "--mechanism"])
+            .arg(&given)
+            .args(["--cell-mm", "1", "--cycles", "1", "--speed", "60", "-o"])
+            .arg(tmp.path())
+            .output()
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(out.status.success(), "{stdout}\n{stderr}");
+        (stdout, stderr)
+    };
+    let (stdout, stderr) = run();
+    assert!(
+        stdout.contains(&format!(
+            "mechanism: {} (given)",
+            given.join("mechanism.json").display()
+        )),
+        "{stdout}"
+    );
+    assert!(
+        stderr.contains("[2/6] printable parts at 1 mm cells"),
+        "{stderr}"
+    );
+    // The coarse preview fails the build's check, which says so; the demo goes on.
+    let parts = line_of(&stdout, "parts:").trim();
+    assert!(parts.contains("NOT printable"), "{parts}");
+    let parts_dir = PathBuf::from(parts.split(" (").next().unwrap());
+    assert!(
+        parts_dir.starts_with(tmp.path().join("mechanisms")),
+        "{}",
+        parts_dir.display()
+    );
+    for f in [
+        "build.json",
+        "driver.stl",
+        "follower.stl",
+        "support.stl",
+        "assembly.glb",
+    ] {
+        assert!(
+            parts_dir.join(f).exists(),
+            "no {f} in {}",
+            parts_dir.display()
+        );
+    }
+    let predicted = PathBuf::from(line_of(&stdout, "predicted:").trim());
+    assert_eq!(predicted, parts_dir.join("prediction/prediction.json"));
+    assert!(predicted.exists());
+    // The bench's follower moved as the parts move it: the measurement is nearer the
+    // prediction than the target.
+    let s = summary_of(&stdout);
+    let p = &s["prediction"];
+    let (rms_pred, rms_target) = (
+        p["rms_deg"].as_f64().unwrap(),
+        p["rms_vs_target_deg"].as_f64().unwrap(),
+    );
+    assert!(
+        rms_pred < 0.5 * rms_target,
+        "vs prediction {rms_pred}°, vs target {rms_target}°"
+    );
+    assert_eq!(s["parts"]["printable"], serde_json::json!(false));
+    assert!(stdout.contains("predict:"), "{stdout}");
+
+    let (stdout, stderr) = run();
+    assert!(
+        line_of(&stdout, "parts:").contains("(cached, NOT printable"),
+        "{stdout}"
+    );
+    assert!(stderr.contains("reusing"), "{stderr}");
+}
+
+/// The rest of the headline line that starts with `prefix`.
+fn line_of<'a>(stdout: &'a str, prefix: &str) -> &'a str {
+    stdout
+        .lines()
+        .find_map(|l| l.strip_prefix(prefix))
+        .unwrap_or_else(|| panic!("no `{prefix}` line in {stdout}"))
 }

@@ -7,7 +7,6 @@ use anyhow::Context;
 use clap::Args;
 
 use crate::build::{self, output, Bench, BuildOptions};
-use crate::motion::MECHANISM_FILE;
 use crate::rig::config::RigConfig;
 use crate::synth::mechanism::Mechanism;
 
@@ -43,11 +42,7 @@ pub struct BuildArgs {
 
 /// Run `mpc-rig build`.
 pub fn run(args: BuildArgs) -> anyhow::Result<ExitCode> {
-    let file = if args.mechanism.is_dir() {
-        args.mechanism.join(MECHANISM_FILE)
-    } else {
-        args.mechanism.clone()
-    };
+    let file = super::mechanism_file(&args.mechanism);
     let mech = Mechanism::load(&file)?;
     let bench = match &args.rig {
         Some(r) => Some(Bench::from_rig(&RigConfig::load(r)?, mech.class)?),

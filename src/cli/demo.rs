@@ -1,7 +1,8 @@
 //! `mpc-rig demo`: the main job on a machine without hardware.
 //!
 //! Synthesizes the example mechanism (or reuses the cached one under `out/demo/`, keyed by
-//! the motion file's SHA-256, the seed, the synthesis settings and the tool version). For a
+//! the motion file's SHA-256, the seed, the synthesis settings and the tool version), or
+//! takes the one `--mechanism` names (its parts cached under `out/demo/mechanisms/`). For a
 //! 1R motion it then builds the printable parts (`mpc-rig build`, cached beside the
 //! mechanism, keyed by the mechanism file, the build settings and the executable's hash) and
 //! predicts how they move the follower (`mpc-rig simulate`): the *geometry plant*, so the
@@ -66,6 +67,15 @@ pub struct DemoArgs {
     /// A motion file instead of an example.
     #[arg(long, value_name = "FILE")]
     pub motion: Option<PathBuf>,
+    /// A synthesized mechanism (`mpc-rig synth`'s mechanism.json, or its folder) instead of
+    /// synthesizing one: its parts are built, predicted and measured. They are cached under
+    /// OUT/mechanisms/, never beside the file.
+    #[arg(
+        long,
+        value_name = "FILE",
+        conflicts_with_all = ["example", "motion", "quick", "resynthesize", "seed", "normal_cone"]
+    )]
+    pub mechanism: Option<PathBuf>,
     /// Simulated bench.
     #[arg(long, value_enum, default_value_t = DemoBench::Stepper)]
     pub bench: DemoBench,
@@ -364,7 +374,8 @@ fn prune_other_parts(keep: &Path) {
     }
 }
 
-/// The parts built from the mechanism, or the cached ones: their folder, whether they
+/// The parts built from the mechanism, or the cached ones in `cache` (the mechanism's cache
+/// folder): their folder, whether they
 /// were cached, and the build's problems (empty when the parts are printable). A build
 /// that is not printable still leaves its parts, which the prediction then moves; a
 /// mechanism the build cannot lay out is an error.
@@ -372,11 +383,11 @@ fn parts_for(
     mech_path: &Path,
     mech: &Mechanism,
     opts: &BuildOptions,
+    cache: &Path,
 ) -> anyhow::Result<(PathBuf, bool, Vec<String>)> {
     let bytes =
         std::fs::read(mech_path).with_context(|| format!("reading {}", mech_path.display()))?;
-    let parent = mech_path.parent().unwrap_or_else(|| Path::new("."));
-    let dir = parent.join(format!(
+    let dir = cache.join(format!(
         "parts-{}",
         parts_key(&bytes, opts, &tool_fingerprint())
     ));
@@ -456,11 +467,20 @@ fn prediction_for(mech_path: &Path, mech: &Mechanism, parts: &Path) -> anyhow::R
     Ok(file)
 }
 
+/// Where the demo's mechanism comes from.
+enum Source {
+    /// Synthesized from (or cached for) this motion file.
+    Motion(PathBuf),
+    /// Given by `--mechanism`.
+    Given(PathBuf),
+}
+
 /// Run `demo`.
 pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
-    let motion_path = match &args.motion {
-        Some(p) => p.clone(),
-        None => {
+    let source = match (&args.mechanism, &args.motion) {
+        (Some(m), _) => Source::Given(super::mechanism_file(m)),
+        (None, Some(p)) => Source::Motion(p.clone()),
+        (None, None) => {
             let p = shipped(&format!("data/motions/{}.toml", args.example));
             if !p.exists() {
                 bail!(
@@ -469,11 +489,16 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
                     p.display()
                 );
             }
-            p
+            Source::Motion(p)
         }
     };
-    let motion = Motion::from_file(&motion_path)
-        .with_context(|| format!("loading {}", motion_path.display()))?;
+    let motion = match &source {
+        Source::Motion(p) => {
+            Motion::from_file(p).with_context(|| format!("loading {}", p.display()))?
+        }
+        Source::Given(m) => Motion::from_mechanism_file(m)
+            .with_context(|| format!("reading the target law of {}", m.display()))?,
+    };
     let mut plant = super::sim_device::plant_from(&args.faults)?;
     let plant_kind = plant_for(&args, motion.class())?;
     if plant_kind == DemoPlant::Geometry {
@@ -514,14 +539,38 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         motion.name(),
         motion.class()
     );
-    let (mech_path, cached) = mechanism_for(&args, plant_kind, &motion_path, &motion)?;
-    eprintln!(
-        "      {} {}",
-        if cached { "reusing" } else { "wrote" },
-        mech_path.display()
-    );
-    let target = Motion::from_mechanism_file(&mech_path)
-        .with_context(|| format!("reading the target law of {}", mech_path.display()))?;
+    let (mech_path, cached, cache_dir) = match &source {
+        Source::Motion(motion_path) => {
+            let (file, cached) = mechanism_for(&args, plant_kind, motion_path, &motion)?;
+            let dir = file
+                .parent()
+                .unwrap_or_else(|| Path::new("."))
+                .to_path_buf();
+            (file, cached, dir)
+        }
+        Source::Given(file) => {
+            let bytes =
+                std::fs::read(file).with_context(|| format!("reading {}", file.display()))?;
+            let dir = args.out.join("mechanisms").join(format!(
+                "{}-{}",
+                motion.name(),
+                short_hash(&bytes, "")
+            ));
+            (file.clone(), true, dir)
+        }
+    };
+    // How the mechanism came: the progress line's verb and the headline's note.
+    let (origin, note) = match (&source, cached) {
+        (Source::Given(_), _) => ("given", " (given)"),
+        (_, true) => ("reusing", " (cached)"),
+        (_, false) => ("wrote", ""),
+    };
+    eprintln!("      {origin} {}", mech_path.display());
+    let target = match &source {
+        Source::Given(_) => motion.clone(),
+        Source::Motion(_) => Motion::from_mechanism_file(&mech_path)
+            .with_context(|| format!("reading the target law of {}", mech_path.display()))?,
+    };
 
     // The parts and how they move the follower (the geometry plant).
     let mut parts: Option<(PathBuf, bool, Vec<String>)> = None;
@@ -536,7 +585,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
             args.clearance,
             opts.bench.as_ref().map_or(String::new(), |b| b.to_string())
         );
-        let (dir, parts_cached, problems) = parts_for(&mech_path, &mech, &opts)?;
+        let (dir, parts_cached, problems) = parts_for(&mech_path, &mech, &opts, &cache_dir)?;
         eprintln!(
             "      {} {}",
             if parts_cached { "reusing" } else { "wrote" },
@@ -633,11 +682,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
     let summary = analyze_and_report(&outcome.dir, &report)
         .with_context(|| format!("analysing {}", outcome.dir.display()))?;
     println!();
-    println!(
-        "mechanism: {}{}",
-        mech_path.display(),
-        if cached { " (cached)" } else { "" }
-    );
+    println!("mechanism: {}{note}", mech_path.display());
     if let Some((dir, parts_cached, problems)) = &parts {
         println!(
             "parts:     {} ({}{})",

@@ -189,6 +189,16 @@ fn colour_on(terminal: bool, no_color: Option<&std::ffi::OsStr>) -> bool {
     terminal && no_color.is_none_or(|v| v.is_empty())
 }
 
+/// The mechanism file a command was given: `PATH` itself, or `PATH/mechanism.json` when
+/// `PATH` is a folder (the one `mpc-rig synth -o` writes).
+pub fn mechanism_file(path: &std::path::Path) -> std::path::PathBuf {
+    if path.is_dir() {
+        path.join(crate::motion::MECHANISM_FILE)
+    } else {
+        path.to_path_buf()
+    }
+}
+
 /// Run a parsed command line.
 pub fn run(cli: Cli) -> anyhow::Result<ExitCode> {
     match cli.command {

@@ -6,7 +6,6 @@ use std::process::ExitCode;
 use anyhow::Context;
 use clap::Args;
 
-use crate::motion::MECHANISM_FILE;
 use crate::predict::law::Load;
 use crate::predict::{self, output, PredictOptions, DEFAULT_SAMPLES, DRIVE_LOST_DEG};
 use crate::synth::mechanism::Mechanism;
@@ -38,11 +37,7 @@ pub struct SimulateArgs {
 
 /// Run `mpc-rig simulate`.
 pub fn run(args: SimulateArgs) -> anyhow::Result<ExitCode> {
-    let file = if args.mechanism.is_dir() {
-        args.mechanism.join(MECHANISM_FILE)
-    } else {
-        args.mechanism.clone()
-    };
+    let file = super::mechanism_file(&args.mechanism);
     let mech = Mechanism::load(&file)?;
     let dir = file
         .parent()
