@@ -1,9 +1,9 @@
 //! From an implicit solid to a closed triangle mesh: marching tetrahedra on a sparse grid.
 //!
-//! Owns [`mesh_solid`] (and [`mesh_solid_reporting`], the same with progress). The grid's cubes are cut into six tetrahedra along their main
-//! diagonal (the Kuhn triangulation, the same in every cube, so neighbouring cubes agree on
-//! their shared faces), and the surface is the zero set of the function interpolated
-//! linearly over each tetrahedron. That surface is a closed, consistently oriented
+//! Owns [`mesh_solid`] (and [`mesh_solid_reporting`], the same with progress). The grid's
+//! cubes are cut into six tetrahedra along their main diagonal (the Kuhn triangulation, the
+//! same in every cube, so neighbouring cubes agree on their shared faces), and the surface
+//! is the zero set of the function interpolated linearly over each tetrahedron. That surface is a closed, consistently oriented
 //! 2-manifold by construction: each of its edges lies on a tetrahedron face shared by
 //! exactly two tetrahedra, the zero set on a triangle is a single segment, and no grid
 //! value is exactly zero (values are pushed off zero by [`ZERO_OFFSET`]). Faces are oriented
@@ -509,9 +509,10 @@ mod tests {
         assert!(worst < 0.02, "vertex off the sphere by {worst}");
     }
 
-    /// Guards the progress reports: meshing with them gives the very mesh meshing without
-    /// them gives, the reports never go back, come several times over a large part and end
-    /// with every known block done.
+    /// Guards the progress reports: they never go back, come several times over a large
+    /// part, end with every known block done, and a caller's report changes nothing in the
+    /// mesh. (That the chunks leave the mesh as the one pass did was checked on the 0.4 mm
+    /// driver and support of the demo's half-turn-2to1: both STLs byte for byte the same.)
     #[test]
     fn progress_reports_leave_the_mesh_unchanged() {
         let s = Sphere {
