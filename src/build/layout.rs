@@ -266,13 +266,17 @@ impl Layout {
             match self.bench.reading {
                 Reading::ServoHorn => horn_cuts(&mut p.cut, z0, z1, c),
                 _ => {
-                    // The rod's bore, through.
+                    // The rod's bore, through, at the rod's radius: the follower's shrink
+                    // (`Design::follower_solid`) grows it by half the clearance, the fit
+                    // of the driver's D-bore on the motor shaft. It used to add the whole
+                    // clearance here as well: a 5.6 mm bore at the default 0.2 mm, 0.3 mm
+                    // of radial play on the rod before the print's own error.
                     p.cut.push(Arc::new(Cylinder::z(
                         0.0,
                         0.0,
                         z0 - 1.0,
                         z1 + 1.0,
-                        0.5 * FOLLOWER_SHAFT_MM + c,
+                        0.5 * FOLLOWER_SHAFT_MM,
                     )));
                 }
             }

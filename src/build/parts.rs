@@ -1094,7 +1094,8 @@ mod tests {
     /// values: at 1 mm clearance every point of the follower's column, which webs and struts
     /// enter at each plate, stays inside the follower; before, the column was cut at every
     /// web it met (the follower of `demo --clearance 1` came out in 14 pieces). Only the
-    /// sign is asked: inside, a union's value is its first holder's, not the deepest.
+    /// sign is asked: inside, a union's value is its first holder's, not the deepest. And
+    /// the rod's bore is the rod plus one clearance wide.
     #[test]
     fn the_shrunk_follower_keeps_its_column_whole() {
         let mech = crate::build::tests::printable_mechanism();
@@ -1127,6 +1128,15 @@ mod tests {
             n + 1,
             &outside[..outside.len().min(5)]
         );
+        // The rod's bore in the hub is the rod plus the clearance wide: the shrink's half
+        // on each side, not the 1.5 clearances it once had.
+        let (hub_bottom, _) = d.layout.follower_hub.unwrap();
+        let z = 0.5 * (hub_bottom + hub_top);
+        let bore = 0.5 * (FOLLOWER_SHAFT_MM + opts.clearance_mm);
+        for (r, inside) in [(bore - 0.05, false), (bore + 0.05, true)] {
+            let v = f.dist(Vec3::new(r, 0.0, z));
+            assert_eq!(v < 0.0, inside, "{r} mm off the axis at z = {z}: {v}");
+        }
     }
 
     /// Guards the column's last stretch (e2ca13f): a follower column that stops 0.5 mm
