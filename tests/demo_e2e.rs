@@ -154,9 +154,9 @@ fn the_geometry_plant_is_refused_for_a_class_it_cannot_predict() {
 /// Guards the demo's geometry path on a given mechanism (the printable half-turn-2to1 of
 /// tests/data): its parts are built (at 1 mm cells, a preview whose mesh error the build's
 /// check fails, so they are reported not printable and used all the same), their motion
-/// predicted, the bench's follower moved by that prediction, and the report compares the
-/// measurement with target and prediction and shows the parts. The parts are cached under
-/// OUT/mechanisms/, not beside the given file, and a second run reuses them.
+/// predicted, the bench's follower moved by that prediction, and the summary compares the
+/// measurement with target and prediction and carries the parts' verdict. The parts are
+/// cached under OUT/mechanisms/, not beside the given file, and a second run reuses them.
 #[test]
 fn demo_measures_the_parts_of_a_given_mechanism() {
     let _serial = serial_group::lock();
