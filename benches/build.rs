@@ -1,6 +1,6 @@
 //! Build benchmark (issue 14): for every example in `data/motions/`, a printable design
-//! (`mpc-rig synth MOTION --band-gap 1.5 --axis-room 1.0 --printed-rim`, the layout
-//! docs/build.md says the parts need) and its parts (`mpc-rig build`), each in a child
+//! (`mpc-rig synth MOTION --printable`, the layout docs/build.md says the parts need; the
+//! same options `demo` synthesizes with) and its parts (`mpc-rig build`), each in a child
 //! process as a user runs them. Prints per example: class, K, d_x, the synthesis seconds,
 //! the build's seconds per stage, its peak resident memory, the triangles per part and the
 //! verdict (printable, not printable and why, or where the command stopped).
@@ -24,9 +24,6 @@ use serde_json::Value;
 
 #[path = "support/examples.rs"]
 mod examples;
-
-/// The synthesis options that leave the parts room (docs/build.md, "Printable designs").
-const PRINTABLE_SYNTH: [&str; 5] = ["--band-gap", "1.5", "--axis-room", "1.0", "--printed-rim"];
 
 fn main() {
     let filter = std::env::var("BUILD_BENCH_FILTER").unwrap_or_default();
@@ -71,7 +68,7 @@ fn main() {
             let out = Command::new(exe)
                 .arg("synth")
                 .arg(&f)
-                .args(PRINTABLE_SYNTH)
+                .arg("--printable")
                 .arg("-q")
                 .arg("-o")
                 .arg(&dir)
