@@ -298,6 +298,16 @@ fn mechanism_for(
     Ok((file, false))
 }
 
+/// The build settings the demo's options give (`--clearance`, `--cell-mm`), before the
+/// bench is known: checked before the synthesis, completed by [`build_options`].
+fn parts_settings(args: &DemoArgs) -> BuildOptions {
+    BuildOptions {
+        clearance_mm: args.clearance,
+        cell_mm: args.cell_mm,
+        ..BuildOptions::default()
+    }
+}
+
 /// The build settings of the demo's parts, for the bench the demo measures on.
 fn build_options(
     args: &DemoArgs,
@@ -305,10 +315,8 @@ fn build_options(
     mech: &Mechanism,
 ) -> anyhow::Result<BuildOptions> {
     Ok(BuildOptions {
-        clearance_mm: args.clearance,
-        cell_mm: args.cell_mm,
         bench: Some(Bench::from_rig(rig, mech.class)?),
-        ..BuildOptions::default()
+        ..parts_settings(args)
     })
 }
 
@@ -374,21 +382,20 @@ fn prune_other_parts(keep: &Path) {
     }
 }
 
-/// The parts built from the mechanism, or the cached ones in `cache` (the mechanism's cache
-/// folder): their folder, whether they were cached, and the build's problems (empty when
+/// The parts built from the mechanism (read from `mech_path`, whose bytes `mech_bytes` key
+/// the cache), or the cached ones in `cache` (the mechanism's cache folder): their folder, whether they were cached, and the build's problems (empty when
 /// the parts are printable). A build that is not printable still leaves its parts, which
 /// the prediction then moves; a mechanism the build cannot lay out is an error.
 fn parts_for(
     mech_path: &Path,
+    mech_bytes: &[u8],
     mech: &Mechanism,
     opts: &BuildOptions,
     cache: &Path,
 ) -> anyhow::Result<(PathBuf, bool, Vec<String>)> {
-    let bytes =
-        std::fs::read(mech_path).with_context(|| format!("reading {}", mech_path.display()))?;
     let dir = cache.join(format!(
         "parts-{}",
-        parts_key(&bytes, opts, &tool_fingerprint())
+        parts_key(mech_bytes, opts, &tool_fingerprint())
     ));
     // `build.json` is the last file a build writes: its presence marks a whole build.
     if let Ok(done) = crate::predict::BuiltParts::load(&dir) {
@@ -502,12 +509,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
     let plant_kind = plant_for(&args, motion.class())?;
     if plant_kind == DemoPlant::Geometry {
         // The build would refuse these only after the synthesis.
-        BuildOptions {
-            clearance_mm: args.clearance,
-            cell_mm: args.cell_mm,
-            ..BuildOptions::default()
-        }
-        .check_ranges()?;
+        parts_settings(&args).check_ranges()?;
     }
     let rig_path = shipped(rig_for(args.bench, motion.class()));
     let rig = RigConfig::load(&rig_path)?;
@@ -538,25 +540,23 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         motion.name(),
         motion.class()
     );
-    let (mech_path, cached, cache_dir) = match &source {
-        Source::Motion(motion_path) => {
-            let (file, cached) = mechanism_for(&args, plant_kind, motion_path, &motion)?;
-            let dir = file
-                .parent()
-                .unwrap_or_else(|| Path::new("."))
-                .to_path_buf();
-            (file, cached, dir)
-        }
-        Source::Given(file) => {
-            let bytes =
-                std::fs::read(file).with_context(|| format!("reading {}", file.display()))?;
-            let dir = args.out.join("mechanisms").join(format!(
-                "{}-{}",
-                motion.name(),
-                short_hash(&bytes, "")
-            ));
-            (file.clone(), true, dir)
-        }
+    let (mech_path, cached) = match &source {
+        Source::Motion(motion_path) => mechanism_for(&args, plant_kind, motion_path, &motion)?,
+        Source::Given(file) => (file.clone(), true),
+    };
+    // The file's bytes key the caches of its parts (read once, for every key).
+    let mech_bytes =
+        std::fs::read(&mech_path).with_context(|| format!("reading {}", mech_path.display()))?;
+    let cache_dir = match &source {
+        Source::Motion(_) => mech_path
+            .parent()
+            .unwrap_or_else(|| Path::new("."))
+            .to_path_buf(),
+        Source::Given(_) => args.out.join("mechanisms").join(format!(
+            "{}-{}",
+            motion.name(),
+            short_hash(&mech_bytes, "")
+        )),
     };
     // How the mechanism came: the progress line's verb and the headline's note.
     let (origin, note) = match (&source, cached) {
@@ -580,11 +580,12 @@ pub fn run(args: DemoArgs) -> anyhow::Result<ExitCode> {
         eprintln!(
             "{} printable parts at {} mm cells, {} mm clearance, for bench {}",
             next(),
-            args.cell_mm,
-            args.clearance,
+            opts.cell_mm,
+            opts.clearance_mm,
             opts.bench.as_ref().map_or(String::new(), |b| b.to_string())
         );
-        let (dir, parts_cached, problems) = parts_for(&mech_path, &mech, &opts, &cache_dir)?;
+        let (dir, parts_cached, problems) =
+            parts_for(&mech_path, &mech_bytes, &mech, &opts, &cache_dir)?;
         eprintln!(
             "      {} {}",
             if parts_cached { "reusing" } else { "wrote" },
