@@ -88,6 +88,19 @@ pub enum BuildError {
         /// Why.
         detail: String,
     },
+    /// No room for a connection in a design synthesized for printing already: another
+    /// design is what can help, not the options.
+    #[error(
+        "cannot join {what}: {detail}. The design has the printable layout \
+         (`mpc-rig synth --printable`) and still leaves no room for it: synthesize another \
+         (`--seed`, or a larger `--dx`; docs/build.md, \"Printable designs\")"
+    )]
+    NoRoomInPrintable {
+        /// What could not be joined.
+        what: String,
+        /// Why.
+        detail: String,
+    },
     /// A curve pair's samples cannot be swept into its rim or band.
     #[error(
         "the {what} of curve pair {pair} cannot be swept (frame i is sample i of the pair's \
@@ -270,7 +283,12 @@ pub fn build(
         .bench
         .clone()
         .unwrap_or_else(|| Bench::default_for(mech.class));
-    let design = parts::design(mech, kin, &bench, opts, progress)?;
+    let design = parts::design(mech, kin, &bench, opts, progress).map_err(|e| match e {
+        BuildError::NoRoom { what, detail } if mech.solve.printable_layout() => {
+            BuildError::NoRoomInPrintable { what, detail }
+        }
+        e => e,
+    })?;
     timings.push(("design".to_string(), t0.elapsed().as_secs_f64()));
 
     let mut out = Vec::new();
@@ -514,6 +532,29 @@ pub(crate) mod tests {
         let mech = test_mechanism();
         let kin = kinematics::Kinematics::new(&mech, 10.0).expect("its law rebuilds");
         (mech, kin)
+    }
+
+    /// Guards which advice a design without room gets: the default layout is told to
+    /// synthesize with `--printable`, a design that has that layout to synthesize another
+    /// (the two test mechanisms: `synth` defaults, and `synth --printable`).
+    #[test]
+    fn a_printable_design_without_room_is_told_to_try_another() {
+        assert!(!test_mechanism().solve.printable_layout());
+        assert!(printable_mechanism().solve.printable_layout());
+        let e = BuildError::NoRoomInPrintable {
+            what: "plate 5 (curve pair 5)".into(),
+            detail: "all 180 rays leaving it come within 2.5 mm of the other part's moving \
+                     contact surfaces, so no strut can start there"
+                .into(),
+        };
+        assert_eq!(
+            e.to_string(),
+            "cannot join plate 5 (curve pair 5): all 180 rays leaving it come within 2.5 mm of \
+             the other part's moving contact surfaces, so no strut can start there. The design \
+             has the printable layout (`mpc-rig synth --printable`) and still leaves no room \
+             for it: synthesize another (`--seed`, or a larger `--dx`; docs/build.md, \
+             \"Printable designs\")"
+        );
     }
 
     /// Guards the option errors, whole: each names the option as typed and its range, and

@@ -256,6 +256,18 @@ pub struct SolveInfo {
     pub printed_rim: bool,
 }
 
+impl SolveInfo {
+    /// Whether the design was synthesized with at least the layout of `synth --printable`
+    /// ([`SynthOptions::printable`](super::search::SynthOptions::printable)): the band
+    /// gap, the axis room and the printed rims' contacts.
+    pub fn printable_layout(&self) -> bool {
+        use super::search::{PRINTABLE_AXIS_ROOM, PRINTABLE_BAND_GAP};
+        self.printed_rim
+            && self.band_gap >= PRINTABLE_BAND_GAP
+            && self.axis_room.is_some_and(|a| a >= PRINTABLE_AXIS_ROOM)
+    }
+}
+
 /// A mechanism: the content of `mechanism.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Mechanism {
