@@ -72,6 +72,9 @@ pub struct Design {
     pub webs: Vec<Arc<ThickTriangles>>,
     /// Follower struts.
     pub follower_struts: Vec<ThickPolyline>,
+    /// Follower struts whose root the driver's swept bands hem in: only their core was
+    /// planned clear there, and their flanks are trimmed as the webs are.
+    pub follower_rooted: Vec<ThickPolyline>,
     /// Driver struts.
     pub driver_struts: Vec<ThickPolyline>,
     /// Follower features by rule plus planned ones (pad, end-effector).
@@ -313,12 +316,22 @@ pub fn design(
             place_imu_pad(&field, &mut pieces)?;
         }
         progress("planning the follower's struts");
-        let struts = plan_follower_struts(&layout, &rims, &web_clear, &field, &pieces, &pairs)?;
+        let (struts, rooted) = plan_follower_struts(
+            &layout,
+            &rims,
+            &web_clear,
+            &field,
+            &pieces,
+            &pairs,
+            opts.clearance_mm,
+            progress,
+        )?;
         Ok(FollowerPlan {
             field,
             web_clear,
             pieces,
             struts,
+            rooted,
         })
     };
     let (driver_struts, plan) = match plan_follower(&driver_struts) {
@@ -349,6 +362,7 @@ pub fn design(
         web_clear,
         pieces: follower_pieces,
         struts: follower_struts,
+        rooted: follower_rooted,
     } = plan;
 
     Ok(Design {
@@ -358,6 +372,7 @@ pub fn design(
         bands,
         webs,
         follower_struts,
+        follower_rooted,
         driver_struts,
         follower_pieces,
         driver_pieces,
@@ -377,6 +392,7 @@ struct FollowerPlan {
     web_clear: Arc<BandClearance>,
     pieces: Pieces,
     struts: Vec<ThickPolyline>,
+    rooted: Vec<ThickPolyline>,
 }
 
 /// How far a follower column that stops below the magnet cap is still carried up into
@@ -412,7 +428,16 @@ fn column(clearance: &dyn Fn(Vec3) -> f64, z0: f64, z1: f64) -> Option<Cylinder>
     (z - z0 >= 5.0).then(|| Cylinder::z(0.0, 0.0, z0 - 1.0, z, COLUMN_RADIUS_MM))
 }
 
-/// Join each plate (nearest the hub first), then the rule-placed features, to the hub.
+/// Join each plate (nearest the hub first), then the rule-placed features, to the hub:
+/// the struts, and those of them rooted by their core alone (see below).
+///
+/// A plate's strut leaves from behind its rim, along −n², with its whole section clear of
+/// the driver's swept bands; failing that, also across the rim (±v, towards the gap
+/// between slabs, and the diagonals), as the driver's struts do; failing that, with only
+/// its core clear ([`STRUT_CORE_MM`] plus half the clearance): such a strut is trimmed by
+/// the bands' sweep as the webs are ([`Design::follower_solid`]). Screw-bob's printable
+/// design has a plate that every ray from behind leaves within 2.5 mm of the bands' sweep.
+#[allow(clippy::too_many_arguments)]
 fn plan_follower_struts(
     layout: &Layout,
     rims: &[Sweep],
@@ -420,7 +445,9 @@ fn plan_follower_struts(
     field: &DistanceField,
     pieces: &Pieces,
     pairs: &[(usize, &crate::synth::mechanism::CurvePair)],
-) -> Result<Vec<ThickPolyline>, BuildError> {
+    clearance: f64,
+    progress: &dyn Fn(&str),
+) -> Result<(Vec<ThickPolyline>, Vec<ThickPolyline>), BuildError> {
     let fgrid = field.grid;
     let mut joined = Joined::new(fgrid);
     let hub_center = match layout.follower_hub {
@@ -439,19 +466,63 @@ fn plan_follower_struts(
     };
     order.sort_by(|&a, &b| nearest(a).total_cmp(&nearest(b)));
     let mut struts = Vec::new();
-    let band_clearance =
-        |p: Vec3| web_clear.below(p, STRUT_RADIUS_MM + ROOT_MARGIN_MM, f64::NEG_INFINITY);
+    let mut rooted = Vec::new();
+    let whole = STRUT_RADIUS_MM + ROOT_MARGIN_MM;
+    let core = STRUT_CORE_MM + 0.5 * clearance;
+    let band_clearance = |p: Vec3| web_clear.below(p, whole, f64::NEG_INFINITY);
     for &k in &order {
+        let what = format!("plate {} (curve pair {})", k + 1, pairs[k].0 + 1);
         // Struts leave a rim from behind it, along −n², where the driver's band is not.
-        let st = strut_from_behind(
+        let depth = RIM_DEPTH_MM + ROOT_DEPTH_MM;
+        let behind = strut_from_behind(
             &rims[k],
-            RIM_DEPTH_MM + ROOT_DEPTH_MM,
+            depth,
             field,
             &band_clearance,
             &mut joined,
             hub_center,
-            &format!("plate {} (curve pair {})", k + 1, pairs[k].0 + 1),
-        )?;
+            &what,
+        );
+        let st = match behind {
+            Ok(st) => st,
+            Err(BuildError::NoRoom { .. }) => {
+                let rays = rim_rays(&rims[k], depth);
+                let across = strut_from_rays(
+                    &rays,
+                    whole,
+                    field,
+                    &band_clearance,
+                    &mut joined,
+                    hub_center,
+                    &what,
+                );
+                match across {
+                    Ok(st) => st,
+                    Err(BuildError::NoRoom { .. }) => {
+                        let st = strut_from_rays(
+                            &rays,
+                            core,
+                            field,
+                            &band_clearance,
+                            &mut joined,
+                            hub_center,
+                            &what,
+                        )?;
+                        progress(&format!(
+                            "{what}: no strut's whole section leaves it clear of the driver's \
+                             swept bands; one leaves with its {:.1} mm core clear, its flanks \
+                             trimmed like the webs",
+                            2.0 * core
+                        ));
+                        joined.mark_balls(&core_of(k), 1.5);
+                        rooted.push(st);
+                        continue;
+                    }
+                    Err(e) => return Err(e),
+                }
+            }
+            Err(e) => return Err(e),
+        };
         joined.mark_balls(&core_of(k), 1.5);
         struts.push(st);
     }
@@ -493,7 +564,21 @@ fn plan_follower_struts(
         joined.mark_balls(pts, 1.0);
         struts.push(st);
     }
-    Ok(struts)
+    Ok((struts, rooted))
+}
+
+/// Rays leaving a rim from `depth` mm behind its curve at every second frame: behind it
+/// (−u), across it (±v) and the diagonals between, u and v the section's axes.
+fn rim_rays(rim: &Sweep, depth: f64) -> Vec<(Vec3, Vec3)> {
+    let frames = rim.frames();
+    (0..frames.len())
+        .step_by(2)
+        .flat_map(|i| {
+            let (u, v) = segments::section_axes(frames, i);
+            let root = frames[i].o - frames[i].u * depth;
+            [-u, v, -v, (v - u).normalize(), (-v - u).normalize()].map(|d| (root, d))
+        })
+        .collect()
 }
 
 /// The pieces the carve leaves of each band ([`segments::band_segments`]), largest first,
@@ -538,7 +623,8 @@ fn carved_pieces(
 /// Join every piece of every band (`band_pieces`, from [`carved_pieces`]; nearest the hub
 /// first) to the driver's hub: a band the rims' sweep cuts crosswise needs a strut per
 /// piece. With `every_piece` false, only each band's largest piece (the others are left
-/// out).
+/// out). A piece no strut can start from is left out and said so, even a band's largest:
+/// the check judges what the pieces left give.
 #[allow(clippy::too_many_arguments)]
 fn plan_driver_struts(
     kin: &Kinematics,
@@ -575,6 +661,7 @@ fn plan_driver_struts(
     };
     items.sort_by(|a, b| nearest(a.2).total_cmp(&nearest(b.2)));
     let mut struts = Vec::new();
+    let mut band_joined = vec![false; band_pieces.len()];
     for (k, j, seg) in &items {
         let what = if *j == 0 {
             format!("band {} (curve pair {})", k + 1, pairs[*k].0 + 1)
@@ -611,13 +698,27 @@ fn plan_driver_struts(
             Ok(st) => {
                 joined.mark_balls(&seg.samples, 0.5);
                 struts.push(st);
+                band_joined[*k] = true;
             }
-            // A band's largest piece must be joined; a smaller one that cannot be is left
-            // for the mesh check, which reports the driver in pieces.
-            Err(BuildError::NoRoom { detail, .. }) if *j > 0 => {
+            // A piece no strut can reach is left out of the driver (the mesher drops the
+            // shells beyond the largest), and the check counts the contacts it carried as
+            // lost: whether the mechanism still works is the check's closure to say, not
+            // the planner's. Screw-bob's printable design has a band whose largest piece is
+            // hemmed in by the rims' sweep while three of its other pieces are joined.
+            Err(BuildError::NoRoom { detail, .. }) => {
                 progress(&format!("{what} stays loose: {detail}"))
             }
             Err(e) => return Err(e),
+        }
+    }
+    for (k, joined) in band_joined.iter().enumerate() {
+        if !joined && !band_pieces[k].is_empty() {
+            progress(&format!(
+                "no piece of band {} (curve pair {}) can be joined: it is left out of the \
+                 driver, and the check counts its contacts as lost",
+                k + 1,
+                pairs[k].0 + 1
+            ));
         }
     }
     Ok(struts)
@@ -939,6 +1040,13 @@ impl Design {
         for s in &self.follower_struts {
             add.push(shrunk(Box::new(s.clone())));
         }
+        for s in &self.follower_rooted {
+            add.push(shrunk(Box::new(KeptWeb {
+                web: Arc::new(s.clone()),
+                clear: self.band_clearance.clone(),
+                far: CARVE_CAP_CELLS * self.cell_mm + half,
+            })));
+        }
         add.extend(
             self.follower_pieces
                 .add
@@ -1007,10 +1115,10 @@ impl Design {
     }
 }
 
-/// A web kept clear of the driver's swept bands, for the mesher: inside the web, values
-/// more than `far` from zero are only said to be that far.
+/// A web (or a strut rooted by its core) kept clear of the driver's swept bands, for the
+/// mesher: inside it, values more than `far` from zero are only said to be that far.
 struct KeptWeb {
-    web: Arc<ThickTriangles>,
+    web: Arc<dyn Sdf>,
     clear: Arc<BandClearance>,
     /// Beyond this, mm, a value needs no more than its sign and that it is this far: the
     /// mesher reads magnitudes only near the surface (as the driver's carve,
