@@ -451,6 +451,22 @@ fn left_out_text(volumes: &[f64]) -> String {
 pub const CRUMB_MM3: f64 = 1.0;
 
 /// JSON has no NaN: an undefined figure is null.
+/// A curve pair's row of `build.md`'s contact-gap table.
+fn gap_row(g: &super::check::PairGap) -> String {
+    format!(
+        "| {} | {:.3} | {:.4} | {:.3} | {} | {:.1} % | {} | {} |",
+        g.pair,
+        g.min_mm,
+        g.min_t,
+        g.max_mm,
+        // No contact kept at any instant (a band no strut reaches): no mean.
+        finite(g.mean_mm).map_or("–".to_string(), |m| format!("{m:.3}")),
+        100.0 * g.lost_fraction,
+        lost_windows_text(&g.lost),
+        cut_by_text(&g.cut_by)
+    )
+}
+
 fn finite(x: f64) -> Option<f64> {
     x.is_finite().then_some(x)
 }
@@ -552,18 +568,7 @@ fn summary_md(summary: &Summary) -> String {
     );
     let _ = writeln!(s, "|---:|---:|---:|---:|---:|---:|---|---|");
     for g in &f.gaps {
-        let _ = writeln!(
-            s,
-            "| {} | {:.3} | {:.4} | {:.3} | {:.3} | {:.1} % | {} | {} |",
-            g.pair,
-            g.min_mm,
-            g.min_t,
-            g.max_mm,
-            g.mean_mm,
-            100.0 * g.lost_fraction,
-            lost_windows_text(&g.lost),
-            cut_by_text(&g.cut_by)
-        );
+        let _ = writeln!(s, "{}", gap_row(g));
     }
     let c = &f.closure;
     let _ = writeln!(
@@ -631,6 +636,31 @@ mod tests {
 
     /// Guards the left-out line of `build.md`: pieces listed largest first with volumes,
     /// crumbs (slivers and the shells of tiny voids, volume about ±0) only counted.
+    /// Guards the gap table's row of a pair that keeps no contact (screw-bob's band 6,
+    /// which no strut reached, wrote "NaN" for its mean): a dash, the rest as usual.
+    #[test]
+    fn a_pair_that_keeps_no_contact_has_no_mean_gap() {
+        let g = crate::build::check::PairGap {
+            pair: 6,
+            min_mm: 2.822,
+            min_t: 0.0333,
+            max_mm: 23.988,
+            mean_mm: f64::NAN,
+            lost: vec![[0.0, 0.997]],
+            lost_fraction: 1.0,
+            cut_by: vec![(6, 0.092)],
+        };
+        assert_eq!(
+            gap_row(&g),
+            "| 6 | 2.822 | 0.0333 | 23.988 | – | 100.0 % | 0.000–0.997 | 6 (9.2 %) |"
+        );
+        let kept = crate::build::check::PairGap {
+            mean_mm: 0.2214,
+            ..g
+        };
+        assert!(gap_row(&kept).contains("| 23.988 | 0.221 | 100.0 % |"));
+    }
+
     #[test]
     fn left_out_pieces_are_listed_and_crumbs_counted() {
         assert_eq!(
