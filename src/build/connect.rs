@@ -207,6 +207,8 @@ pub struct RayStarts {
     /// Rays that came within the root clearance of the other part's functional surfaces
     /// before they found free space.
     pub blocked: usize,
+    /// Where each of those rays was stopped (for saying what stopped it).
+    pub blocked_at: Vec<Vec3>,
     /// How far the rays went, mm.
     pub reach: f64,
     /// The root clearance asked, mm.
@@ -265,27 +267,32 @@ pub fn ray_starts(
 ) -> RayStarts {
     use rayon::prelude::*;
     let need = STRUT_RADIUS_MM + STRUT_MARGIN_MM;
-    // Per ray: Ok(start), Err(true) when blocked, Err(false) when out of reach.
-    let found: Vec<Result<Start, bool>> = rays
+    // Per ray: Ok(start), Err(Some(where)) when blocked, Err(None) when out of reach.
+    let found: Vec<Result<Start, Option<Vec3>>> = rays
         .par_iter()
         .map(|&(root, dir)| {
             let mut s = 1.0;
             while s <= reach {
                 let p = root + dir * s;
                 if exact(p) < root_clearance {
-                    return Err(true);
+                    return Err(Some(p));
                 }
                 if field.sample(p) >= need {
                     return Ok(Start { root, at: p });
                 }
                 s += 1.0;
             }
-            Err(false)
+            Err(None)
         })
+        .collect();
+    let blocked_at: Vec<Vec3> = found
+        .iter()
+        .filter_map(|f| f.as_ref().err().copied().flatten())
         .collect();
     RayStarts {
         rays: rays.len(),
-        blocked: found.iter().filter(|f| matches!(f, Err(true))).count(),
+        blocked: blocked_at.len(),
+        blocked_at,
         starts: found.into_iter().filter_map(Result::ok).collect(),
         reach,
         root_clearance,
@@ -342,6 +349,7 @@ mod tests {
             starts: Vec::new(),
             rays,
             blocked,
+            blocked_at: vec![Vec3::zeros(); blocked],
             reach: 12.0,
             root_clearance: 2.5,
         }

@@ -495,6 +495,7 @@ fn plan_follower_struts(
                     &mut joined,
                     hub_center,
                     &what,
+                    None,
                 );
                 match across {
                     Ok(st) => st,
@@ -507,6 +508,7 @@ fn plan_follower_struts(
                             &mut joined,
                             hub_center,
                             &what,
+                            None,
                         )?;
                         progress(&format!(
                             "{what}: no strut's whole section leaves it clear of the driver's \
@@ -559,6 +561,7 @@ fn plan_follower_struts(
             &starts,
             hub_center,
             &format!("follower feature {}", i + 1),
+            None,
         )?;
         joined.mark_balls(&connect::polyline_points(&st, 0.5), st.radius);
         joined.mark_balls(pts, 1.0);
@@ -690,10 +693,29 @@ fn plan_driver_struts(
         // failing that, with its core clear (the carve then trims the strut's flank there).
         let whole = STRUT_RADIUS_MM + ROOT_MARGIN_MM;
         let core = STRUT_CORE_MM + 0.5 * clearance;
-        let planned = strut_from_rays(&rays, whole, field, &rim_clearance, &mut joined, hub, &what)
-            .or_else(|_| {
-                strut_from_rays(&rays, core, field, &rim_clearance, &mut joined, hub, &what)
-            });
+        let blame = |points: &[Vec3]| rims_that_block(kin, rims, pairs, core, points);
+        let planned = strut_from_rays(
+            &rays,
+            whole,
+            field,
+            &rim_clearance,
+            &mut joined,
+            hub,
+            &what,
+            None,
+        )
+        .or_else(|_| {
+            strut_from_rays(
+                &rays,
+                core,
+                field,
+                &rim_clearance,
+                &mut joined,
+                hub,
+                &what,
+                Some(&blame),
+            )
+        });
         match planned {
             Ok(st) => {
                 joined.mark_balls(&seg.samples, 0.5);
@@ -969,30 +991,93 @@ fn strut_from_behind(
         .map(|f| (f.o - f.u * depth, -f.u))
         .collect();
     let root_clearance = STRUT_RADIUS_MM + ROOT_MARGIN_MM;
-    strut_from_rays(&rays, root_clearance, field, exact, joined, toward, what)
+    strut_from_rays(
+        &rays,
+        root_clearance,
+        field,
+        exact,
+        joined,
+        toward,
+        what,
+        None,
+    )
 }
 
+/// Says which of the other part's functional surfaces stopped rays at these points (see
+/// [`rims_that_block`]).
+type Blame<'a> = &'a (dyn Fn(&[Vec3]) -> String + Sync);
+
 /// [`connect::strut`] from the starts the rays found; when they found none, the error says
-/// what stopped the rays.
+/// what stopped the rays (and `blame`, given, whose surfaces).
 fn strut_from_starts(
     field: &DistanceField,
     joined: &connect::Joined,
     starts: &connect::RayStarts,
     toward: Vec3,
     what: &str,
+    blame: Option<Blame>,
 ) -> Result<ThickPolyline, BuildError> {
     connect::strut(field, joined, &starts.starts, toward, what).map_err(|e| match e {
         BuildError::NoRoom { what, .. } if starts.starts.is_empty() => BuildError::NoRoom {
             what,
-            detail: starts.none_detail(),
+            detail: match blame {
+                Some(b) if !starts.blocked_at.is_empty() => {
+                    format!("{} ({})", starts.none_detail(), b(&starts.blocked_at))
+                }
+                _ => starts.none_detail(),
+            },
         },
         e => e,
     })
 }
 
+/// Which rims' sweep (through the driver's frame) comes within `clearance` of the points
+/// where rays were stopped, with how many rays each stops (a ray may count for several):
+/// "rays stopped by the sweep of pair 6's rim (310), pair 5's rim (40)", the pairs
+/// numbered as in the file. The synthesis's island test counts only a pair's own rim
+/// (docs/synthesis.md), so this says whether another pair's rim is what hems a piece in.
+fn rims_that_block(
+    kin: &Kinematics,
+    rims: &[Sweep],
+    pairs: &[(usize, &crate::synth::mechanism::CurvePair)],
+    clearance: f64,
+    points: &[Vec3],
+) -> String {
+    let counts: Vec<(usize, usize)> = rims
+        .iter()
+        .enumerate()
+        .map(|(k, rim)| {
+            let swept = SweptEach::new(
+                kin,
+                std::slice::from_ref(rim),
+                Frame::Follower,
+                Frame::Driver,
+            );
+            let n = points
+                .iter()
+                .filter(|&&p| swept.value(p, clearance) < clearance)
+                .count();
+            (pairs[k].0 + 1, n)
+        })
+        .filter(|&(_, n)| n > 0)
+        .collect();
+    let mut counts = counts;
+    counts.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
+    let parts: Vec<String> = counts
+        .iter()
+        .map(|(pair, n)| format!("pair {pair}'s rim ({n})"))
+        .collect();
+    if parts.is_empty() {
+        "no single rim's sweep stops them".to_string()
+    } else {
+        format!("rays stopped by the sweep of {}", parts.join(", "))
+    }
+}
+
 /// A strut from one of `rays` (root, direction away from the contact) to what its part has
 /// joined so far, aimed at `toward`; `exact` stays at least `root_clearance` along the ray
 /// up to the start; the strut is marked joined.
+#[allow(clippy::too_many_arguments)]
 fn strut_from_rays(
     rays: &[(Vec3, Vec3)],
     root_clearance: f64,
@@ -1001,9 +1086,10 @@ fn strut_from_rays(
     joined: &mut connect::Joined,
     toward: Vec3,
     what: &str,
+    blame: Option<Blame>,
 ) -> Result<ThickPolyline, BuildError> {
     let starts = connect::ray_starts(rays, field, exact, root_clearance, RAY_REACH_MM);
-    let st = strut_from_starts(field, joined, &starts, toward, what)?;
+    let st = strut_from_starts(field, joined, &starts, toward, what, blame)?;
     joined.mark_balls(&connect::polyline_points(&st, 0.5), st.radius);
     Ok(st)
 }
@@ -1197,6 +1283,34 @@ impl Sdf for DriverSolid<'_> {
 mod tests {
     use super::*;
     use crate::build::tests::half_turn;
+
+    /// Guards what a loose piece's message blames: a point on one rim, posed in the driver's
+    /// frame at some instant, is within the clearance of that rim's sweep (and named by its
+    /// pair's number in the file), a point far from every rim of none.
+    #[test]
+    fn the_rims_that_stop_a_ray_are_named_by_pair() {
+        let (mech, kin) = half_turn();
+        let pairs: Vec<(usize, &crate::synth::mechanism::CurvePair)> =
+            mech.curve_pairs.iter().enumerate().collect();
+        let rims: Vec<Sweep> = pairs
+            .iter()
+            .map(|(_, cp)| shapes::rim(cp, kin.scale_mm()).unwrap())
+            .collect();
+        // A point inside pair 2's rim (0.5 mm behind its apex at frame 0), posed in the
+        // driver's frame at t = 0.3: inside that rim's sweep.
+        let q = rims[1].frames()[0].o - rims[1].frames()[0].u * 0.5;
+        let p = kin.follower_to_driver(0.3) * nalgebra::Point3::from(q);
+        let far = Vec3::new(1e3, 1e3, 1e3);
+        let text = rims_that_block(&kin, &rims, &pairs, 1.1, &[p.coords, p.coords, far]);
+        assert!(
+            text.starts_with("rays stopped by the sweep of pair 2's rim (2)"),
+            "{text}"
+        );
+        assert_eq!(
+            rims_that_block(&kin, &rims, &pairs, 1.1, &[far]),
+            "no single rim's sweep stops them"
+        );
+    }
 
     /// Guards the follower's shrink by half the clearance against the union's first-holder
     /// values: at 1 mm clearance every point of the follower's column, which webs and struts
