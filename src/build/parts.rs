@@ -627,7 +627,8 @@ fn carved_pieces(
 /// first) to the driver's hub: a band the rims' sweep cuts crosswise needs a strut per
 /// piece. With `every_piece` false, only each band's largest piece (the others are left
 /// out). A piece no strut can start from is left out and said so, even a band's largest:
-/// the check judges what the pieces left give.
+/// the check judges what the pieces left give. A band none of whose pieces can be joined
+/// is an error.
 #[allow(clippy::too_many_arguments)]
 fn plan_driver_struts(
     kin: &Kinematics,
@@ -665,6 +666,8 @@ fn plan_driver_struts(
     items.sort_by(|a, b| nearest(a.2).total_cmp(&nearest(b.2)));
     let mut struts = Vec::new();
     let mut band_joined = vec![false; band_pieces.len()];
+    // Why each band's largest piece could not be joined, when it could not.
+    let mut band_why: Vec<Option<String>> = vec![None; band_pieces.len()];
     for (k, j, seg) in &items {
         let what = if *j == 0 {
             format!("band {} (curve pair {})", k + 1, pairs[*k].0 + 1)
@@ -726,21 +729,30 @@ fn plan_driver_struts(
             // shells beyond the largest), and the check counts the contacts it carried as
             // lost: whether the mechanism still works is the check's closure to say, not
             // the planner's. Screw-bob's printable design has a band whose largest piece is
-            // hemmed in by the rims' sweep while three of its other pieces are joined.
+            // hemmed in by the rims' sweep while others of its pieces are joined.
             Err(BuildError::NoRoom { detail, .. }) => {
-                progress(&format!("{what} stays loose: {detail}"))
+                progress(&format!("{what} stays loose: {detail}"));
+                if *j == 0 {
+                    band_why[*k] = Some(detail);
+                }
             }
             Err(e) => return Err(e),
         }
     }
-    for (k, joined) in band_joined.iter().enumerate() {
-        if !joined && !band_pieces[k].is_empty() {
-            progress(&format!(
-                "no piece of band {} (curve pair {}) can be joined: it is left out of the \
-                 driver, and the check counts its contacts as lost",
-                k + 1,
-                pairs[k].0 + 1
-            ));
+    // A band of which no piece is joined would leave its pair without a single contact,
+    // and the search leaves out every pair the closure does not need (docs/synthesis.md),
+    // so the check would fail it: say so now rather than after minutes of carving.
+    for (k, why) in band_why.into_iter().enumerate() {
+        if let (false, Some(why)) = (band_joined[k], why) {
+            let tried = items.iter().filter(|(b, _, _)| *b == k).count();
+            return Err(BuildError::NoRoom {
+                what: format!("band {} (curve pair {})", k + 1, pairs[k].0 + 1),
+                detail: if tried > 1 {
+                    format!("none of its {tried} pieces can be; from the largest, {why}")
+                } else {
+                    why
+                },
+            });
         }
     }
     Ok(struts)
