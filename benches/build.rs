@@ -146,11 +146,23 @@ fn read_json(path: &Path) -> Value {
     serde_json::from_str(&text).expect("the command writes valid JSON")
 }
 
-/// The first line of a command's error output, for the table.
+/// What a command's error output says about why it failed, for the table: its `error:`
+/// line and the `caused by:` line under it, or failing those its first line. A failed
+/// synthesis prints every attempt before it, a build its progress.
 fn first_line(stderr: &[u8]) -> String {
-    String::from_utf8_lossy(stderr)
-        .lines()
-        .find(|l| !l.trim().is_empty())
-        .unwrap_or("(no message)")
-        .to_string()
+    let text = String::from_utf8_lossy(stderr);
+    let lines: Vec<&str> = text.lines().filter(|l| !l.trim().is_empty()).collect();
+    match lines.iter().position(|l| l.starts_with("error:")) {
+        Some(i) => {
+            let cause = lines
+                .get(i + 1)
+                .map(|l| l.trim())
+                .filter(|l| l.starts_with("caused by:"));
+            match cause {
+                Some(c) => format!("{} {c}", lines[i]),
+                None => lines[i].to_string(),
+            }
+        }
+        None => lines.first().unwrap_or(&"(no message)").to_string(),
+    }
 }
