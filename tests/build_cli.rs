@@ -8,7 +8,8 @@ use assert_cmd::Command;
 const TEST_MECHANISM: &str = "tests/data/mechanism/half-turn-2to1";
 
 /// Guards what a user sees when the design leaves no room for a part: the whole message
-/// (which plate, why, and which synthesis options make room), exit 1, and no output folder.
+/// (which plate, why, whose bands' sweep stops its struts, and which synthesis options
+/// make room), exit 1, and no output folder.
 /// The test mechanism was synthesized with the default band gap, whose follower cannot be
 /// joined (docs/build.md, "Printable designs").
 #[test]
@@ -29,8 +30,9 @@ fn a_design_without_room_is_refused_whole_and_writes_nothing() {
             "  caused by: cannot join plate 2 (curve pair 2): of the 225 rays leaving it, 208 \
              come within 1.1 mm of the other part's moving contact surfaces and 17 reach no \
              point 3.4 mm clear of the other part's swept volume within 12 mm, so no strut can \
-             start there. The design leaves no room for it: synthesize with `mpc-rig synth \
-             --printable` (docs/build.md, \"Printable designs\")",
+             start there (rays stopped by the sweep of pair 2's band (175), pair 1's band \
+             (32), pair 4's band (1)). The design leaves no room for it: synthesize with \
+             `mpc-rig synth --printable` (docs/build.md, \"Printable designs\")",
             "error: building tests/data/mechanism/half-turn-2to1/mechanism.json",
         ],
         "stderr:\n{stderr}"

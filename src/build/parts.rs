@@ -500,6 +500,19 @@ fn plan_follower_struts(
                 match across {
                     Ok(st) => st,
                     Err(BuildError::NoRoom { .. }) => {
+                        let blame = |points: &[Vec3]| {
+                            sweeps_that_block(
+                                &web_clear.kin,
+                                &web_clear.bands,
+                                (Frame::Driver, Frame::Follower),
+                                pairs,
+                                "band",
+                                "no single band's sweep stops them: the driver's hub, \
+                                 column, struts or the support do",
+                                core,
+                                points,
+                            )
+                        };
                         let st = strut_from_rays(
                             &rays,
                             core,
@@ -508,7 +521,7 @@ fn plan_follower_struts(
                             &mut joined,
                             hub_center,
                             &what,
-                            None,
+                            Some(&blame),
                         )?;
                         progress(&format!(
                             "{what}: no strut's whole section leaves it clear of the driver's \
@@ -1043,28 +1056,28 @@ fn strut_from_starts(
     })
 }
 
-/// Which rims' sweep (through the driver's frame) comes within `clearance` of the points
-/// where rays were stopped, with how many rays each stops (a ray may count for several):
-/// "rays stopped by the sweep of pair 6's rim (310), pair 5's rim (40)", the pairs
-/// numbered as in the file. The synthesis's island test counts only a pair's own rim
-/// (docs/synthesis.md), so this says whether another pair's rim is what hems a piece in.
-fn rims_that_block(
+/// Which of `solids` (rims or bands, `noun`), swept from frame `from` through `to`, come
+/// within `clearance` of the points where rays were stopped, with how many rays each stops
+/// (a ray may count for several): "rays stopped by the sweep of pair 6's rim (310), pair
+/// 5's rim (40)", the pairs numbered as in the file; `none` when no single one does. The
+/// synthesis's island test counts only a pair's own rim (docs/synthesis.md), so this says
+/// whether another pair's rim is what hems a piece in.
+#[allow(clippy::too_many_arguments)]
+fn sweeps_that_block(
     kin: &Kinematics,
-    rims: &[Sweep],
+    solids: &[Sweep],
+    (from, to): (Frame, Frame),
     pairs: &[(usize, &crate::synth::mechanism::CurvePair)],
+    noun: &str,
+    none: &str,
     clearance: f64,
     points: &[Vec3],
 ) -> String {
-    let counts: Vec<(usize, usize)> = rims
+    let mut counts: Vec<(usize, usize)> = solids
         .iter()
         .enumerate()
-        .map(|(k, rim)| {
-            let swept = SweptEach::new(
-                kin,
-                std::slice::from_ref(rim),
-                Frame::Follower,
-                Frame::Driver,
-            );
+        .map(|(k, solid)| {
+            let swept = SweptEach::new(kin, std::slice::from_ref(solid), from, to);
             let n = points
                 .iter()
                 .filter(|&&p| swept.value(p, clearance) < clearance)
@@ -1073,17 +1086,36 @@ fn rims_that_block(
         })
         .filter(|&(_, n)| n > 0)
         .collect();
-    let mut counts = counts;
     counts.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
     let parts: Vec<String> = counts
         .iter()
-        .map(|(pair, n)| format!("pair {pair}'s rim ({n})"))
+        .map(|(pair, n)| format!("pair {pair}'s {noun} ({n})"))
         .collect();
     if parts.is_empty() {
-        "no single rim's sweep stops them".to_string()
+        none.to_string()
     } else {
         format!("rays stopped by the sweep of {}", parts.join(", "))
     }
+}
+
+/// [`sweeps_that_block`] for the rims seen from the driver.
+fn rims_that_block(
+    kin: &Kinematics,
+    rims: &[Sweep],
+    pairs: &[(usize, &crate::synth::mechanism::CurvePair)],
+    clearance: f64,
+    points: &[Vec3],
+) -> String {
+    sweeps_that_block(
+        kin,
+        rims,
+        (Frame::Follower, Frame::Driver),
+        pairs,
+        "rim",
+        "no single rim's sweep stops them",
+        clearance,
+        points,
+    )
 }
 
 /// A strut from one of `rays` (root, direction away from the contact) to what its part has
