@@ -450,7 +450,6 @@ fn left_out_text(volumes: &[f64]) -> String {
 /// Loose shells smaller than this are crumbs, counted but not listed, mm³.
 pub const CRUMB_MM3: f64 = 1.0;
 
-/// JSON has no NaN: an undefined figure is null.
 /// A curve pair's row of `build.md`'s contact-gap table.
 fn gap_row(g: &super::check::PairGap) -> String {
     format!(
@@ -467,6 +466,7 @@ fn gap_row(g: &super::check::PairGap) -> String {
     )
 }
 
+/// JSON has no NaN: an undefined figure is null.
 fn finite(x: f64) -> Option<f64> {
     x.is_finite().then_some(x)
 }
@@ -634,8 +634,6 @@ mod tests {
         assert!(mb >= 64.0, "{mb} MB");
     }
 
-    /// Guards the left-out line of `build.md`: pieces listed largest first with volumes,
-    /// crumbs (slivers and the shells of tiny voids, volume about ±0) only counted.
     /// Guards the gap table's row of a pair that keeps no contact (screw-bob's band 6,
     /// which no strut reached, wrote "NaN" for its mean): a dash, the rest as usual.
     #[test]
@@ -661,6 +659,8 @@ mod tests {
         assert!(gap_row(&kept).contains("| 23.988 | 0.221 | 100.0 % |"));
     }
 
+    /// Guards the left-out line of `build.md`: pieces listed largest first with volumes,
+    /// crumbs (slivers and the shells of tiny voids, volume about ±0) only counted.
     #[test]
     fn left_out_pieces_are_listed_and_crumbs_counted() {
         assert_eq!(

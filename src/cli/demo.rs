@@ -383,9 +383,10 @@ fn prune_other_parts(keep: &Path) {
 }
 
 /// The parts built from the mechanism (read from `mech_path`, whose bytes `mech_bytes` key
-/// the cache), or the cached ones in `cache` (the mechanism's cache folder): their folder, whether they were cached, and the build's problems (empty when
-/// the parts are printable). A build that is not printable still leaves its parts, which
-/// the prediction then moves; a mechanism the build cannot lay out is an error.
+/// the cache), or the cached ones in `cache` (the mechanism's cache folder): their folder,
+/// whether they were cached, and the build's problems (empty when the parts are
+/// printable). A build that is not printable still leaves its parts, which the prediction
+/// then moves; a mechanism the build cannot lay out is an error.
 fn parts_for(
     mech_path: &Path,
     mech_bytes: &[u8],

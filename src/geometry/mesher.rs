@@ -3,11 +3,11 @@
 //! Owns [`mesh_solid`] (and [`mesh_solid_reporting`], the same with progress). The grid's
 //! cubes are cut into six tetrahedra along their main diagonal (the Kuhn triangulation, the
 //! same in every cube, so neighbouring cubes agree on their shared faces), and the surface
-//! is the zero set of the function interpolated linearly over each tetrahedron. That surface is a closed, consistently oriented
-//! 2-manifold by construction: each of its edges lies on a tetrahedron face shared by
-//! exactly two tetrahedra, the zero set on a triangle is a single segment, and no grid
-//! value is exactly zero (values are pushed off zero by [`ZERO_OFFSET`]). Faces are oriented
-//! from a table computed once on the reference cube.
+//! is the zero set of the function interpolated linearly over each tetrahedron. That
+//! surface is a closed, consistently oriented 2-manifold by construction: each of its edges
+//! lies on a tetrahedron face shared by exactly two tetrahedra, the zero set on a triangle
+//! is a single segment, and no grid value is exactly zero (values are pushed off zero by
+//! [`ZERO_OFFSET`]). Faces are oriented from a table computed once on the reference cube.
 //!
 //! Only blocks of [`BLOCK`]³ cells near the surface are evaluated: a block is skipped when
 //! the value at its centre says the surface is farther than the block is wide (the
