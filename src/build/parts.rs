@@ -1159,24 +1159,24 @@ impl Design {
             })
         };
         let mut add: Vec<Box<dyn Sdf>> = self.rims.iter().cloned().map(boxed).map(shrunk).collect();
-        for w in &self.webs {
-            add.push(shrunk(Box::new(KeptWeb {
-                web: w.clone(),
+        // Webs and core-rooted struts, kept clear of the driver's swept bands.
+        let kept_clear = |solid: Arc<dyn Sdf>| -> Box<dyn Sdf> {
+            shrunk(Box::new(KeptClear {
+                solid,
                 clear: self.band_clearance.clone(),
                 // Exact within CARVE_CAP_CELLS cells of the surface after the shrink.
                 far: CARVE_CAP_CELLS * self.cell_mm + half,
-            })));
-        }
+            }))
+        };
+        add.extend(self.webs.iter().map(|w| kept_clear(w.clone())));
         for s in &self.follower_struts {
             add.push(shrunk(Box::new(s.clone())));
         }
-        for s in &self.follower_rooted {
-            add.push(shrunk(Box::new(KeptWeb {
-                web: Arc::new(s.clone()),
-                clear: self.band_clearance.clone(),
-                far: CARVE_CAP_CELLS * self.cell_mm + half,
-            })));
-        }
+        add.extend(
+            self.follower_rooted
+                .iter()
+                .map(|s| kept_clear(Arc::new(s.clone()))),
+        );
         add.extend(
             self.follower_pieces
                 .add
@@ -1247,21 +1247,23 @@ impl Design {
 
 /// A web (or a strut rooted by its core) kept clear of the driver's swept bands, for the
 /// mesher: inside it, values more than `far` from zero are only said to be that far.
-struct KeptWeb {
-    web: Arc<dyn Sdf>,
+struct KeptClear {
+    /// The web or strut.
+    solid: Arc<dyn Sdf>,
+    /// Its clearance from the driver's swept bands (and the rest of the driver).
     clear: Arc<BandClearance>,
     /// Beyond this, mm, a value needs no more than its sign and that it is this far: the
     /// mesher reads magnitudes only near the surface (as the driver's carve,
-    /// [`CARVE_CAP_CELLS`] cells), and the union and difference the web enters keep a
+    /// [`CARVE_CAP_CELLS`] cells), and the union and difference the solid enters keep a
     /// value that is at least this far (in either direction) at least this far. The shrink
     /// by half the clearance moves every value by that much, so the follower's webs pass
     /// that half on top ([`Design::follower_solid`]).
     far: f64,
 }
 
-impl Sdf for KeptWeb {
+impl Sdf for KeptClear {
     fn dist(&self, p: Vec3) -> f64 {
-        let v = self.web.dist(p);
+        let v = self.solid.dist(p);
         if v > 0.0 {
             return v;
         }
@@ -1272,7 +1274,7 @@ impl Sdf for KeptWeb {
         v.max(WEB_MARGIN_MM - self.clear.below(p, need, WEB_MARGIN_MM - self.far))
     }
     fn bounds(&self) -> Aabb {
-        self.web.bounds()
+        self.solid.bounds()
     }
 }
 
@@ -1421,7 +1423,7 @@ mod tests {
         }
     }
 
-    /// Guards the follower's floor ([`BandClearance::below`], which [`KeptWeb`] asks with
+    /// Guards the follower's floor ([`BandClearance::below`], which [`KeptClear`] asks with
     /// one): the clearance from the driver's swept bands is the one without a floor wherever
     /// that is above the floor, and the floor wherever it is not, at points around the
     /// follower's curves (in and out of the bands' sweep).
