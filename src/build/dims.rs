@@ -19,16 +19,10 @@ pub use crate::synth::undercut::{RIM_DEPTH_MM, RIM_HALF_WIDTH_MM};
 /// the web never reaches the contact side of the rim.
 pub const WEB_HALF_THICKNESS_MM: f64 = 1.2;
 
-/// Driver band: half width across the contact curve. 3.5 mm: a 7 mm band flanks the
-/// 3.2 mm rim with 1.9 mm walls on each side of the groove.
-pub const BAND_HALF_WIDTH_MM: f64 = 3.5;
-/// Driver band: depth of material behind the contact (along the driver's inward normal).
-/// 3.5 mm: more than two 1.2 mm walls below the groove bottom.
-pub const BAND_DEPTH_MM: f64 = 3.5;
-/// Driver band: how far the band stands out past the contact towards the follower (the
-/// groove's depth before carving). 1.5 mm: half the rim depth, so the walls guide the rim
-/// while the follower's web (at the rim's full depth) stays clear of them.
-pub const BAND_LIP_MM: f64 = 1.5;
+/// The driver band's section (half width, depth behind the contact, lip past it):
+/// synthesis owns it too, since whether a strut can leave a follower plate depends on the
+/// band's sweep around it.
+pub use crate::synth::undercut::{BAND_DEPTH_MM, BAND_HALF_WIDTH_MM, BAND_LIP_MM};
 /// Driver band: corner radius of the rectangular section (no sharp edge for the mesher to
 /// chamfer). 0.6 mm.
 pub const BAND_ROUND_MM: f64 = 0.6;
@@ -115,3 +109,18 @@ pub const BASE_THICKNESS_MM: f64 = 5.0;
 pub const PILLAR_RADIUS_MM: f64 = 5.0;
 /// Margin between the support and anything moving. 3 mm.
 pub const SUPPORT_MARGIN_MM: f64 = 3.0;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Guards the one fact synthesis and the build must share about a strut: the island test
+    /// (`synth::undercut::ESCAPE_STRUT_MM`) calls a point free where the planner's strut, its
+    /// radius and margin, fits. Were they to differ, synthesis would accept designs whose
+    /// driver pieces the build cannot join, or refuse ones it can.
+    #[test]
+    fn the_island_test_frees_a_point_where_a_strut_fits() {
+        let fits = STRUT_RADIUS_MM + STRUT_MARGIN_MM;
+        assert!((fits - crate::synth::undercut::ESCAPE_STRUT_MM).abs() < 1e-9);
+    }
+}

@@ -42,8 +42,9 @@ const ROOT_DEPTH_MM: f64 = 1.0;
 /// Exact clearance the strut's first segment keeps from the other part's functional
 /// surfaces beyond its radius, mm (the coarse field takes over at the start point).
 const ROOT_MARGIN_MM: f64 = 0.3;
-/// How far behind a rim or band a strut may have to reach for free space, mm.
-const RAY_REACH_MM: f64 = 12.0;
+/// How far behind a rim or band a strut may have to reach for free space, mm: synthesis
+/// owns it, since its island test must anchor only the pieces these rays can leave.
+use crate::synth::undercut::ESCAPE_REACH_MM as RAY_REACH_MM;
 /// The exact carve of the driver is computed only where its value matters: within this many
 /// cells of the surface (values beyond are capped). A capped value keeps its sign, and the
 /// mesher reads magnitudes only on the edges of its tetrahedra that change sign, which are
@@ -1329,6 +1330,15 @@ impl Sdf for DriverSolid<'_> {
 mod tests {
     use super::*;
     use crate::build::tests::half_turn;
+
+    /// Guards the one fact synthesis's plate test (`synth::undercut::plate_escapes`) takes
+    /// from the planner: where a plate's strut takes root behind its rim. Were they to
+    /// differ, synthesis would judge rays the planner never casts.
+    #[test]
+    fn plates_root_where_synthesis_tests_them() {
+        let planner = RIM_DEPTH_MM + ROOT_DEPTH_MM;
+        assert!((planner - crate::synth::undercut::PLATE_ROOT_MM).abs() < 1e-9);
+    }
 
     /// Guards what a loose piece's message blames: a point on one rim, posed in the driver's
     /// frame at some instant, is within the clearance of that rim's sweep (and named by its

@@ -219,13 +219,21 @@ fn short_hash(bytes: &[u8], settings: &str) -> String {
         .collect()
 }
 
-/// Cache key: motion bytes, seed, synthesis settings, tool version.
+/// Cache key: motion bytes, seed, synthesis settings, tool version; with the printed rim,
+/// also the version of the rules that decide what such a design keeps
+/// (`undercut::RULES`: a cache from before they changed would hand the demo a design its
+/// build disowns).
 fn cache_key(motion_bytes: &[u8], o: &SynthOptions) -> String {
+    let rules = if o.printed_rim {
+        format!(" rules={}", crate::synth::undercut::RULES)
+    } else {
+        String::new()
+    };
     short_hash(
         motion_bytes,
         &format!(
             "seed={} k={:?} dx={:?} n={} m={} g={} p={} e={} scale={} cone={} margin={} \
-             gap={} room={:?} rim={} version={}",
+             gap={} room={:?} rim={} version={}{rules}",
             o.seed,
             o.k,
             o.dx,

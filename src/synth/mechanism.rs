@@ -790,7 +790,7 @@ impl Mechanism {
             "printed contacts",
             kept_ok || !self.solve.printed_rim,
             format!(
-                "own rims lose {} of each pair's contacts (cut, or on islands); with the rest E_valiTime = {:.4}, \
+                "own rims lose {} of each pair's contacts (cut, on islands, or on a plate no strut leaves); with the rest E_valiTime = {:.4}, \
                  E_maxDist = {:.4}, robust {:.4}{}",
                 shares.join("/"),
                 kept.vali_time,

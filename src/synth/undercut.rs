@@ -10,16 +10,25 @@
 //! made for ([`RIM_DEPTH_MM`], [`RIM_HALF_WIDTH_MM`]; `build::dims` reads them from here).
 //! It also finds the contacts the build cannot keep although no rim cuts them: runs of
 //! band between two cuts that the rim's sweep hems in behind and on both sides, so no
-//! strut can leave them ([`island_contacts`]). Synthesis drops both before it judges
-//! closure, so a design closes with the contacts its parts keep; `Mechanism::check`
-//! reports the same figure for a file.
+//! strut can leave them ([`island_contacts`]), and a pair's whole follower plate when its
+//! own band's sweep leaves no strut a way off it ([`plate_escapes`]). Synthesis drops all
+//! of them before it judges closure, so a design closes with the contacts its parts keep;
+//! `Mechanism::check` reports the same figure for a file. The rays of both tests are the
+//! build planner's, and they count as free where the planner's coarse field would
+//! ([`ESCAPE_FREE_MM`]).
 //!
-//! It tests each pair against its own rim only: another pair's rim lies in another band
-//! (the slabs are disjoint and `band_gap` apart), and the built parts' check
+//! It tests each pair against its own rim and band only: another pair's lie in another
+//! slab (the slabs are disjoint and `band_gap` apart), and the built parts' check
 //! (`build::check`) measures every rim against every band on the meshes. It does not model
 //! the follower's web or struts (the build plans those around the driver).
 
 use super::math::{Mat3, V3};
+
+/// Which form of this module's rules a printed-rim design was judged by: 2 since the
+/// island test reaches as far as the build's rays, the plates' escape is tested and lost
+/// runs are widened by [`LOST_EDGE_MM`] (2026-12-04). Caches of designs (`demo`) key on it, so a design judged by older rules
+/// is synthesized again rather than handed to a build that disowns it.
+pub const RULES: u32 = 2;
 
 /// Follower rim: half-ellipse semi-axis along the contact normal (how deep the rim is).
 /// 3 mm: deep enough that the driver's groove walls hold it, shallow enough to fit the 5 mm
@@ -29,21 +38,60 @@ pub const RIM_DEPTH_MM: f64 = 3.0;
 /// 1.6 mm: a 3.2 mm rim is eight 0.4 mm perimeters, and the apex radius b²/a = 0.85 mm is
 /// still well above the nozzle width.
 pub const RIM_HALF_WIDTH_MM: f64 = 1.6;
+/// Driver band: half width across the contact curve. 3.5 mm: a 7 mm band flanks the
+/// 3.2 mm rim with 1.9 mm walls on each side of the groove.
+pub const BAND_HALF_WIDTH_MM: f64 = 3.5;
+/// Driver band: depth of material behind the contact (along the driver's inward normal).
+/// 3.5 mm: more than two 1.2 mm walls below the groove bottom.
+pub const BAND_DEPTH_MM: f64 = 3.5;
+/// Driver band: how far the band stands out past the contact towards the follower (the
+/// groove's depth before carving). 1.5 mm: half the rim depth, so the walls guide the rim
+/// while the follower's web (at the rim's full depth) stays clear of them.
+pub const BAND_LIP_MM: f64 = 1.5;
 /// How far past a contact a rim must reach for the contact to count as cut, mm. 0.1 mm: the
 /// built parts' check calls a contact lost when its gap exceeds the clearance by as much.
 pub const CUT_TOLERANCE_MM: f64 = 0.1;
+
+/// How far along a driver band from a lost contact the contacts beside it are lost too,
+/// mm: where the carve ends the groove (a hole cut through the band) or a piece is left
+/// out, the mesher rounds the edge on 0.4 mm cells and the rim's 0.85 mm apex radius no
+/// longer finds both walls, so the gap there exceeds the clearance. Measured against the
+/// build's check (share of the period lost per pair): on screw-bob at K = 7 the test
+/// without it said 58.1/10.3/18.9/35.0/19.2/27.5/32.8 %, with it 59.7/10.8/20.0/36.9/
+/// 19.7/28.1/34.2 %, and the build measured 60.8/11.9/20.6/36.1/21.7/27.8/33.6 %; on
+/// half-turn-2to1 at K = 5, 29.7/30.0/55.0 %, 30.6/30.6/55.6 % and 33.1/30.3/55.0 % for the
+/// pairs that lose any. 2 mm overshot as many pairs as it matched.
+pub const LOST_EDGE_MM: f64 = 1.5;
 
 /// Where a strut leaves a band, behind its contact, mm: the build roots driver struts in
 /// the deepest row of the carved band (`build::segments`), about 0.5 mm in front of the
 /// band's 3.5 mm deep back face.
 pub const ESCAPE_ROOT_MM: f64 = 3.0;
-/// How far a strut's first segment runs from its root before the build's planner takes
-/// over, mm: through the rest of the band (3.5 mm half width) and the strut's own clearance
-/// (3.4 mm) beyond it.
-pub const ESCAPE_REACH_MM: f64 = 7.0;
+/// How far from its root a strut may have to run before it is in free space, mm: the
+/// build's rays reach as far (`build::parts` reads it from here), so a piece this test
+/// anchors is one the build can leave.
+pub const ESCAPE_REACH_MM: f64 = 12.0;
 /// The clearance a strut's core keeps from the rims' sweep where it leaves a band, mm: the
 /// build's 1 mm core plus half the default 0.2 mm print clearance.
 pub const ESCAPE_CLEARANCE_MM: f64 = 1.1;
+/// How clear of the rims' sweep a point must be for a strut to run on from it, mm: the
+/// build's strut radius plus its margin (2.2 + 1.2, `build::dims::STRUT_RADIUS_MM` and
+/// `STRUT_MARGIN_MM`; a test there keeps the sum equal to this).
+pub const ESCAPE_STRUT_MM: f64 = 3.4;
+/// How much the build's planning field understates the rims' swept distance near a band,
+/// mm. The planner finds a strut's start where its coarse field (a lower bound from a ball
+/// cover of each rim on 1 mm voxels, `build::swept::swept_field`) reads
+/// [`ESCAPE_STRUT_MM`], and along the rays that leave screw-bob's band 6 that field read
+/// 2.35 mm (median; 10th–90th percentile 1.16–2.84) below the exact swept distance where
+/// the latter was 3–7 mm. A ray this test calls free has to reach that far.
+pub const PLANNER_UNDERSTATEMENT_MM: f64 = 2.4;
+/// How clear of its rim's sweep a ray must get for the build to start a strut there, mm.
+pub const ESCAPE_FREE_MM: f64 = ESCAPE_STRUT_MM + PLANNER_UNDERSTATEMENT_MM;
+
+/// Where a strut leaves a follower plate, behind its rim's apex along −n², mm: the build
+/// roots it 1 mm behind the rim's 3 mm deep flat side (`build::parts`; a test there keeps
+/// the two equal).
+pub const PLATE_ROOT_MM: f64 = 4.0;
 
 /// The rim section in model units.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -60,6 +108,18 @@ pub struct RimSection {
     pub escape_reach: f64,
     /// [`ESCAPE_CLEARANCE_MM`] in model units.
     pub escape_clearance: f64,
+    /// [`ESCAPE_FREE_MM`] in model units.
+    pub escape_free: f64,
+    /// [`PLATE_ROOT_MM`] in model units.
+    pub plate_root: f64,
+    /// [`LOST_EDGE_MM`] in model units.
+    pub lost_edge: f64,
+    /// The driver band's [`BAND_HALF_WIDTH_MM`] in model units.
+    pub band_half_width: f64,
+    /// [`BAND_DEPTH_MM`] in model units.
+    pub band_depth: f64,
+    /// [`BAND_LIP_MM`] in model units.
+    pub band_lip: f64,
 }
 
 impl RimSection {
@@ -72,6 +132,12 @@ impl RimSection {
             escape_root: ESCAPE_ROOT_MM / scale_mm,
             escape_reach: ESCAPE_REACH_MM / scale_mm,
             escape_clearance: ESCAPE_CLEARANCE_MM / scale_mm,
+            escape_free: ESCAPE_FREE_MM / scale_mm,
+            plate_root: PLATE_ROOT_MM / scale_mm,
+            lost_edge: LOST_EDGE_MM / scale_mm,
+            band_half_width: BAND_HALF_WIDTH_MM / scale_mm,
+            band_depth: BAND_DEPTH_MM / scale_mm,
+            band_lip: BAND_LIP_MM / scale_mm,
         }
     }
 }
@@ -100,6 +166,11 @@ impl DriverToFollower {
     fn apply(&self, x: V3<f64>) -> V3<f64> {
         x.rot(&self.a) + V3::from(self.b)
     }
+
+    /// The inverse map, follower-local to driver-local: x = Aᵀ·(y − b).
+    fn unapply(&self, y: V3<f64>) -> V3<f64> {
+        (y - V3::from(self.b)).rot_t(&self.a)
+    }
 }
 
 /// Samples of the follower curve per chunk when pruning by bounding spheres.
@@ -123,7 +194,7 @@ pub fn cut_contacts(
     if n < 3 || n2.len() != n || c1.len() != n || poses.len() != n {
         return vec![false; n];
     }
-    let rims = Rims::new(c2, n2, rim.depth + rim.half_width);
+    let rims = Sections::new(c2, n2, rim.depth + rim.half_width);
     let mut cut = vec![false; n];
     for pose in poses {
         for (u, flag) in cut.iter_mut().enumerate() {
@@ -138,8 +209,10 @@ pub fn cut_contacts(
 }
 
 /// The contacts of one pair the printed parts lose: those its own rim cuts
-/// ([`cut_contacts`]) and those left on islands of band ([`island_contacts`]). `n1[i]` is
-/// the driver-local outward normal; the other arguments are as for [`cut_contacts`].
+/// ([`cut_contacts`]) and those left on islands of band ([`island_contacts`]), each run of
+/// them widened by [`LOST_EDGE_MM`] along the band; all of them when no strut can leave the
+/// pair's follower plate ([`plate_escapes`]). `n1[i]` is the
+/// driver-local outward normal; the other arguments are as for [`cut_contacts`].
 pub fn lost_contacts(
     c2: &[[f64; 3]],
     n2: &[[f64; 3]],
@@ -148,9 +221,40 @@ pub fn lost_contacts(
     poses: &[DriverToFollower],
     rim: &RimSection,
 ) -> Vec<bool> {
+    if !plate_escapes(c2, n2, c1, n1, poses, rim) {
+        return vec![true; c2.len()];
+    }
     let cut = cut_contacts(c2, n2, c1, poses, rim);
     let island = island_contacts(c2, n2, c1, n1, poses, rim, &cut);
-    cut.iter().zip(island).map(|(c, i)| *c || i).collect()
+    let lost: Vec<bool> = cut.iter().zip(island).map(|(c, i)| *c || i).collect();
+    widen_lost(&lost, c1, rim.lost_edge)
+}
+
+/// `lost` with every contact within arc length `edge` along c¹ of a lost one lost too
+/// ([`LOST_EDGE_MM`]).
+fn widen_lost(lost: &[bool], c1: &[[f64; 3]], edge: f64) -> Vec<bool> {
+    let n = lost.len();
+    if n < 2 || c1.len() != n || lost.iter().all(|l| *l) || lost.iter().all(|l| !l) {
+        return lost.to_vec();
+    }
+    let step = |i: usize, j: usize| (V3::from(c1[i]) - V3::from(c1[j])).norm();
+    let mut out = lost.to_vec();
+    for i in (0..n).filter(|&i| lost[i]) {
+        // Walk both ways from a lost contact until `edge` of arc is used up.
+        for dir in [1, n - 1] {
+            let (mut j, mut arc) = (i, 0.0);
+            loop {
+                let k = (j + dir) % n;
+                arc += step(j, k);
+                if arc > edge || lost[k] {
+                    break;
+                }
+                out[k] = true;
+                j = k;
+            }
+        }
+    }
+    out
 }
 
 /// The contacts that lie on islands of band: runs of contacts the rim does not cut (`cut`
@@ -158,11 +262,14 @@ pub fn lost_contacts(
 /// the rim's sweep, so the build can only leave them out.
 ///
 /// From each contact, rays start [`ESCAPE_ROOT_MM`] behind it (along −n¹, the driver's
-/// inward normal `n1` negated) and run [`ESCAPE_REACH_MM`] behind or across the band (−n¹,
-/// ±v, −n¹ ± v with v = T̂¹ × n¹); a ray is free when every point on it, 1 mm apart, stays
-/// [`ESCAPE_CLEARANCE_MM`] clear of the rim at every instant. A run with one free ray is
-/// anchored. This is the pair's own rim only, as [`cut_contacts`]; it does not see the
-/// follower's web, struts or other rims, which the build plans around.
+/// inward normal `n1` negated) and run up to [`ESCAPE_REACH_MM`] behind or across the band
+/// (−n¹, ±v, −n¹ ± v with v = T̂¹ × n¹), testing points 1 mm apart, as the build's rays do
+/// (`build::connect::ray_starts`). A ray is free when it reaches a point [`ESCAPE_FREE_MM`]
+/// clear of the rim at every instant (where the build's planner sees room for a strut)
+/// before any of its points comes within [`ESCAPE_CLEARANCE_MM`] of the rim at some instant
+/// (where the carve would cut the strut's core). A run with one free ray is anchored. This
+/// is the pair's own rim only, as [`cut_contacts`]; it does not see the follower's web,
+/// struts or other rims, which the build plans around.
 pub fn island_contacts(
     c2: &[[f64; 3]],
     n2: &[[f64; 3]],
@@ -178,10 +285,25 @@ pub fn island_contacts(
         // Nothing cut: the band is whole and the build roots its strut anywhere.
         return island;
     }
-    let rims = Rims::new(c2, n2, rim.depth + rim.half_width + rim.escape_clearance);
+    let rims = Sections::new(c2, n2, rim.depth + rim.half_width + rim.escape_free);
     // One millimetre in model units: the spacing of the points tested along a ray.
     let step = rim.escape_reach / ESCAPE_REACH_MM;
     let steps = ESCAPE_REACH_MM.floor() as usize;
+    // Whether a strut may run on from `p` (Some(true)), its core would be cut there
+    // (Some(false)), or neither (None: the ray goes on).
+    let verdict = |p: V3<f64>| -> Option<bool> {
+        let mut free = true;
+        for pose in poses {
+            let y = pose.apply(p);
+            if rims.near(y, rim, rim.escape_free) {
+                if rims.near(y, rim, rim.escape_clearance) {
+                    return Some(false);
+                }
+                free = false;
+            }
+        }
+        free.then_some(true)
+    };
     let free_from = |u: usize| -> bool {
         let c = V3::from(c1[u]);
         let nn = V3::from(n1[u]).unit();
@@ -192,12 +314,9 @@ pub fn island_contacts(
         let h = std::f64::consts::FRAC_1_SQRT_2;
         let dirs = [back, v, -v, (back + v).scalec(h), (back - v).scalec(h)];
         dirs.iter().any(|&d| {
-            (1..=steps).all(|k| {
-                let p = root + d.scalec(step * k as f64);
-                poses
-                    .iter()
-                    .all(|pose| !rims.near(pose.apply(p), rim, rim.escape_clearance))
-            })
+            (1..=steps)
+                .find_map(|k| verdict(root + d.scalec(step * k as f64)))
+                .unwrap_or(false)
         })
     };
     // Runs of uncut contacts, cyclically, starting after a cut sample.
@@ -223,14 +342,69 @@ pub fn island_contacts(
     island
 }
 
-/// The rim's sections with bounding spheres per [`CHUNK`] samples, for "is this point in
-/// or near the rim" queries.
-struct Rims {
+/// Whether a strut can leave the pair's follower plate clear of the pair's own driver band:
+/// from some sample of c², a ray starting [`PLATE_ROOT_MM`] behind the curve (along −n²)
+/// and running behind or across the rim (−n², ±v, −n² ± v with v = T̂² × n²) gets
+/// [`ESCAPE_FREE_MM`] clear of the band's sweep through the follower frame before it comes
+/// within [`ESCAPE_CLEARANCE_MM`] of it, as in [`island_contacts`] with the parts' roles
+/// swapped. The build's planner tries the same rays from its plates (`build::parts`); a
+/// plate none of them leaves cannot be joined to the follower, and its pair keeps nothing.
+/// The band is the uncarved one (as the planner sees it): its lip, which the rim's groove
+/// removes, is counted as material.
+pub fn plate_escapes(
+    c2: &[[f64; 3]],
+    n2: &[[f64; 3]],
+    c1: &[[f64; 3]],
+    n1: &[[f64; 3]],
+    poses: &[DriverToFollower],
+    rim: &RimSection,
+) -> bool {
+    let n = c2.len();
+    if n < 3 || n2.len() != n || c1.len() != n || n1.len() != n || poses.len() != n {
+        return true;
+    }
+    let reach = rim.band_depth.max(rim.band_lip).hypot(rim.band_half_width) + rim.escape_free;
+    let bands = Sections::new(c1, n1, reach);
+    let rims = Sections::new(c2, n2, 0.0);
+    let step = rim.escape_reach / ESCAPE_REACH_MM;
+    let steps = ESCAPE_REACH_MM.floor() as usize;
+    // As in `island_contacts`: free (Some(true)), core cut (Some(false)) or go on (None).
+    let verdict = |p: V3<f64>| -> Option<bool> {
+        let mut free = true;
+        for pose in poses {
+            let x = pose.unapply(p);
+            if bands.near_band(x, rim, rim.escape_free) {
+                if bands.near_band(x, rim, rim.escape_clearance) {
+                    return Some(false);
+                }
+                free = false;
+            }
+        }
+        free.then_some(true)
+    };
+    let h = std::f64::consts::FRAC_1_SQRT_2;
+    rims.sections.iter().any(|sec| {
+        let back = -sec.normal;
+        let v = sec.binormal;
+        let root = sec.apex + back.scalec(rim.plate_root);
+        [back, v, -v, (back + v).scalec(h), (back - v).scalec(h)]
+            .iter()
+            .any(|&d| {
+                (1..=steps)
+                    .find_map(|k| verdict(root + d.scalec(step * k as f64)))
+                    .unwrap_or(false)
+            })
+    })
+}
+
+/// A sampled curve's sections (a rim's half ellipses or a band's rectangles) with bounding
+/// spheres per [`CHUNK`] samples, for "is this point in or near it" queries.
+struct Sections {
     sections: Vec<Section>,
     chunks: Vec<(V3<f64>, f64, std::ops::Range<usize>)>,
 }
 
-impl Rims {
+impl Sections {
     fn new(c2: &[[f64; 3]], n2: &[[f64; 3]], reach: f64) -> Self {
         let n = c2.len();
         let sections = (0..n).map(|s| Section::new(c2, n2, s)).collect();
@@ -255,6 +429,11 @@ impl Rims {
     /// Whether `y` (follower frame) lies within `margin` of the rim's half ellipse.
     fn near(&self, y: V3<f64>, rim: &RimSection, margin: f64) -> bool {
         self.any(y, |s| s.near(y, rim, margin))
+    }
+
+    /// Whether `x` (driver frame) lies within `margin` of the band's section.
+    fn near_band(&self, x: V3<f64>, rim: &RimSection, margin: f64) -> bool {
+        self.any(x, |s| s.near_band(x, rim, margin))
     }
 
     /// Whether `test` holds for a section whose chunk's sphere holds `y` (follower frame).
@@ -307,6 +486,21 @@ impl Section {
         }
         let (a, b) = (rim.depth, rim.half_width);
         ((h - a) / (a + margin)).hypot(w / (b + margin)) < 1.0
+    }
+
+    /// Whether `x` lies within `margin` of the band's rectangle at this sample (lip ahead of
+    /// the curve along the normal, depth behind it, half width across; the rectangle grown
+    /// by `margin` on every side, which holds the true offset region and exceeds it at the
+    /// corners).
+    fn near_band(&self, x: V3<f64>, rim: &RimSection, margin: f64) -> bool {
+        let d = x - self.apex;
+        if d.dot(self.tangent).abs() > self.half_step + margin {
+            return false;
+        }
+        let h = d.dot(self.normal);
+        h >= -rim.band_depth - margin
+            && h <= rim.band_lip + margin
+            && d.dot(self.binormal).abs() <= rim.band_half_width + margin
     }
 
     /// Whether `y` lies inside the section's half ellipse by more than the tolerance.
@@ -423,6 +617,84 @@ mod tests {
         let hemmed = island_contacts(&c2, &flipped, &c1, &n1, &poses, &rim, &cut);
         let expected: Vec<bool> = cut.iter().map(|c| !c).collect();
         assert_eq!(hemmed, expected);
+    }
+
+    /// Guards that a run is anchored only by a ray that reaches the free space the build's
+    /// planner needs, not by one merely clear of the rim's sweep. The rolling wheels' rim
+    /// stays outside the driver's disc, so a ray from 3 mm inside it is at most 15 mm from
+    /// the sweep at the end of its 12 mm: asking 16 mm leaves every run an island, the
+    /// default (5.8 mm) anchors them all.
+    #[test]
+    fn a_run_is_anchored_only_where_a_ray_reaches_the_planners_free_space() {
+        let n = 120;
+        let (c2, n2, c1, poses) = wheels(n, 1.0);
+        let n1 = wheel_n1(n);
+        let cut: Vec<bool> = (0..n).map(|i| i < n / 2).collect();
+        let rim = RimSection::printed(10.0);
+        let anchored = island_contacts(&c2, &n2, &c1, &n1, &poses, &rim, &cut);
+        assert_eq!(anchored.iter().filter(|c| **c).count(), 0);
+        let beyond = RimSection {
+            escape_free: 1.6,
+            ..rim
+        };
+        let islands = island_contacts(&c2, &n2, &c1, &n1, &poses, &beyond, &cut);
+        let expected: Vec<bool> = cut.iter().map(|c| !c).collect();
+        assert_eq!(islands, expected);
+    }
+
+    /// Guards the plate's escape: the rolling wheels' band stays outside the follower's
+    /// disc but for its 1.5 mm lip, so a strut leaves the plate from behind its rim; a band
+    /// whose lip reaches 20 mm into the follower sweeps over the whole back of the rim and
+    /// every side of it, so none can, and the pair keeps no contact at all.
+    #[test]
+    fn a_plate_its_band_sweeps_around_keeps_nothing() {
+        let n = 120;
+        let (c2, n2, c1, poses) = wheels(n, 1.0);
+        let n1 = wheel_n1(n);
+        let rim = RimSection::printed(10.0);
+        assert!(plate_escapes(&c2, &n2, &c1, &n1, &poses, &rim));
+        let kept = lost_contacts(&c2, &n2, &c1, &n1, &poses, &rim);
+        assert_eq!(kept.iter().filter(|l| **l).count(), 0);
+        let deep = RimSection {
+            band_lip: 2.0,
+            ..rim
+        };
+        assert!(!plate_escapes(&c2, &n2, &c1, &n1, &poses, &deep));
+        let lost = lost_contacts(&c2, &n2, &c1, &n1, &poses, &deep);
+        assert_eq!(lost, vec![true; n]);
+    }
+
+    /// Guards the widening of lost runs: by arc length along c¹, both ways, across the
+    /// loop's closing sample, and never of a pair that keeps all or nothing.
+    #[test]
+    fn lost_runs_widen_by_arc_length_both_ways() {
+        // 20 samples 1 apart (chord) on a circle.
+        let r = 0.5 / (std::f64::consts::PI / 20.0).sin();
+        let c1: Vec<[f64; 3]> = (0..20)
+            .map(|i| {
+                let a = TAU * i as f64 / 20.0;
+                [r * a.cos(), r * a.sin(), 0.0]
+            })
+            .collect();
+        let mut lost = vec![false; 20];
+        lost[0] = true;
+        lost[10] = true;
+        let wide = widen_lost(&lost, &c1, 1.5);
+        let idx: Vec<usize> = (0..20).filter(|&i| wide[i]).collect();
+        assert_eq!(idx, vec![0, 1, 9, 10, 11, 19]);
+        assert_eq!(widen_lost(&lost, &c1, 0.9), lost);
+        assert_eq!(widen_lost(&[false; 20], &c1, 5.0), vec![false; 20]);
+    }
+
+    /// The map and its inverse are inverses: follower to driver and back.
+    #[test]
+    fn the_inverse_map_undoes_the_map() {
+        let (_, _, c1, poses) = wheels(36, 1.0);
+        for (i, pose) in poses.iter().enumerate() {
+            let x = V3::from(c1[i]) + V3::new(0.3, -0.2, 0.7);
+            let back = pose.unapply(pose.apply(x));
+            assert!((back - x).norm() < 1e-12, "sample {i}");
+        }
     }
 
     /// The driver-to-follower map takes a driver curve point to the follower curve point it
