@@ -26,8 +26,9 @@ use super::math::{Mat3, V3};
 
 /// Which form of this module's rules a printed-rim design was judged by: 2 since the
 /// island test reaches as far as the build's rays, the plates' escape is tested and lost
-/// runs are widened by [`LOST_EDGE_MM`] (2026-12-04). Caches of designs (`demo`) key on it, so a design judged by older rules
-/// is synthesized again rather than handed to a build that disowns it.
+/// runs are widened by [`LOST_EDGE_MM`] (2026-12-04). Caches of designs (`demo`) key on
+/// it, so a design judged by older rules is synthesized again rather than handed to a
+/// build that disowns it.
 pub const RULES: u32 = 2;
 
 /// Follower rim: half-ellipse semi-axis along the contact normal (how deep the rim is).
@@ -211,8 +212,8 @@ pub fn cut_contacts(
 /// The contacts of one pair the printed parts lose: those its own rim cuts
 /// ([`cut_contacts`]) and those left on islands of band ([`island_contacts`]), each run of
 /// them widened by [`LOST_EDGE_MM`] along the band; all of them when no strut can leave the
-/// pair's follower plate ([`plate_escapes`]). `n1[i]` is the
-/// driver-local outward normal; the other arguments are as for [`cut_contacts`].
+/// pair's follower plate ([`plate_escapes`]). `n1[i]` is the driver-local outward normal;
+/// the other arguments are as for [`cut_contacts`].
 pub fn lost_contacts(
     c2: &[[f64; 3]],
     n2: &[[f64; 3]],
@@ -286,37 +287,14 @@ pub fn island_contacts(
         return island;
     }
     let rims = Sections::new(c2, n2, rim.depth + rim.half_width + rim.escape_free);
-    // One millimetre in model units: the spacing of the points tested along a ray.
-    let step = rim.escape_reach / ESCAPE_REACH_MM;
-    let steps = ESCAPE_REACH_MM.floor() as usize;
-    // Whether a strut may run on from `p` (Some(true)), its core would be cut there
-    // (Some(false)), or neither (None: the ray goes on).
-    let verdict = |p: V3<f64>| -> Option<bool> {
-        let mut free = true;
-        for pose in poses {
-            let y = pose.apply(p);
-            if rims.near(y, rim, rim.escape_free) {
-                if rims.near(y, rim, rim.escape_clearance) {
-                    return Some(false);
-                }
-                free = false;
-            }
-        }
-        free.then_some(true)
-    };
     let free_from = |u: usize| -> bool {
         let c = V3::from(c1[u]);
         let nn = V3::from(n1[u]).unit();
         let t = (V3::from(c1[(u + 1) % n]) - V3::from(c1[(u + n - 1) % n])).unit();
         let v = t.cross(nn).unit();
-        let back = -nn;
-        let root = c + back.scalec(rim.escape_root);
-        let h = std::f64::consts::FRAC_1_SQRT_2;
-        let dirs = [back, v, -v, (back + v).scalec(h), (back - v).scalec(h)];
-        dirs.iter().any(|&d| {
-            (1..=steps)
-                .find_map(|k| verdict(root + d.scalec(step * k as f64)))
-                .unwrap_or(false)
+        let root = c - nn.scalec(rim.escape_root);
+        any_ray_free(root, -nn, v, poses, rim, |pose, p, margin| {
+            rims.near(pose.apply(p), rim, margin)
         })
     };
     // Runs of uncut contacts, cyclically, starting after a cut sample.
@@ -366,15 +344,42 @@ pub fn plate_escapes(
     let reach = rim.band_depth.max(rim.band_lip).hypot(rim.band_half_width) + rim.escape_free;
     let bands = Sections::new(c1, n1, reach);
     let rims = Sections::new(c2, n2, 0.0);
+    rims.sections.iter().any(|sec| {
+        let root = sec.apex - sec.normal.scalec(rim.plate_root);
+        any_ray_free(
+            root,
+            -sec.normal,
+            sec.binormal,
+            poses,
+            rim,
+            |pose, p, margin| bands.near_band(pose.unapply(p), rim, margin),
+        )
+    })
+}
+
+/// Whether one of the planner's five rays from `root` (along `back`, ±`v` and the two
+/// diagonals between) is free: on its points 1 mm apart, up to [`ESCAPE_REACH_MM`], it
+/// reaches one that is `rim.escape_free` clear of an obstacle at every instant before any
+/// comes within `rim.escape_clearance` of it at some instant. `near(pose, p, margin)` says
+/// whether `p` lies within `margin` of the obstacle at the instant of `pose`.
+fn any_ray_free(
+    root: V3<f64>,
+    back: V3<f64>,
+    v: V3<f64>,
+    poses: &[DriverToFollower],
+    rim: &RimSection,
+    near: impl Fn(&DriverToFollower, V3<f64>, f64) -> bool,
+) -> bool {
+    // One millimetre in model units: the spacing of the points tested along a ray.
     let step = rim.escape_reach / ESCAPE_REACH_MM;
     let steps = ESCAPE_REACH_MM.floor() as usize;
-    // As in `island_contacts`: free (Some(true)), core cut (Some(false)) or go on (None).
+    // Whether a strut may run on from `p` (Some(true)), its core would be cut there
+    // (Some(false)), or neither (None: the ray goes on).
     let verdict = |p: V3<f64>| -> Option<bool> {
         let mut free = true;
         for pose in poses {
-            let x = pose.unapply(p);
-            if bands.near_band(x, rim, rim.escape_free) {
-                if bands.near_band(x, rim, rim.escape_clearance) {
+            if near(pose, p, rim.escape_free) {
+                if near(pose, p, rim.escape_clearance) {
                     return Some(false);
                 }
                 free = false;
@@ -383,18 +388,13 @@ pub fn plate_escapes(
         free.then_some(true)
     };
     let h = std::f64::consts::FRAC_1_SQRT_2;
-    rims.sections.iter().any(|sec| {
-        let back = -sec.normal;
-        let v = sec.binormal;
-        let root = sec.apex + back.scalec(rim.plate_root);
-        [back, v, -v, (back + v).scalec(h), (back - v).scalec(h)]
-            .iter()
-            .any(|&d| {
-                (1..=steps)
-                    .find_map(|k| verdict(root + d.scalec(step * k as f64)))
-                    .unwrap_or(false)
-            })
-    })
+    [back, v, -v, (back + v).scalec(h), (back - v).scalec(h)]
+        .iter()
+        .any(|&d| {
+            (1..=steps)
+                .find_map(|k| verdict(root + d.scalec(step * k as f64)))
+                .unwrap_or(false)
+        })
 }
 
 /// A sampled curve's sections (a rim's half ellipses or a band's rectangles) with bounding
@@ -603,7 +603,8 @@ mod tests {
     /// Guards the island test: with half the contacts marked cut, the other half is an
     /// island when the rim sweeps behind and beside the band everywhere along it (the rim
     /// on the driver's side of the contact sweeps an annulus 3 mm deep into the driver),
-    /// and anchored when the rim stays on the follower's side (rolling wheels).
+    /// and anchored when the rim stays on the follower's side (rolling wheels), but only
+    /// while its rays can reach the free space the planner needs.
     #[test]
     fn a_run_hemmed_in_by_the_rims_sweep_is_an_island() {
         let n = 120;
@@ -617,29 +618,15 @@ mod tests {
         let hemmed = island_contacts(&c2, &flipped, &c1, &n1, &poses, &rim, &cut);
         let expected: Vec<bool> = cut.iter().map(|c| !c).collect();
         assert_eq!(hemmed, expected);
-    }
-
-    /// Guards that a run is anchored only by a ray that reaches the free space the build's
-    /// planner needs, not by one merely clear of the rim's sweep. The rolling wheels' rim
-    /// stays outside the driver's disc, so a ray from 3 mm inside it is at most 15 mm from
-    /// the sweep at the end of its 12 mm: asking 16 mm leaves every run an island, the
-    /// default (5.8 mm) anchors them all.
-    #[test]
-    fn a_run_is_anchored_only_where_a_ray_reaches_the_planners_free_space() {
-        let n = 120;
-        let (c2, n2, c1, poses) = wheels(n, 1.0);
-        let n1 = wheel_n1(n);
-        let cut: Vec<bool> = (0..n).map(|i| i < n / 2).collect();
-        let rim = RimSection::printed(10.0);
-        let anchored = island_contacts(&c2, &n2, &c1, &n1, &poses, &rim, &cut);
-        assert_eq!(anchored.iter().filter(|c| **c).count(), 0);
+        // A ray from 3 mm inside the rolling driver's disc is at most 15 mm from the rim's
+        // sweep at the end of its 12 mm: asking 16 mm of free space leaves every run an
+        // island, where the planner's 5.8 mm anchored them all.
         let beyond = RimSection {
             escape_free: 1.6,
             ..rim
         };
-        let islands = island_contacts(&c2, &n2, &c1, &n1, &poses, &beyond, &cut);
-        let expected: Vec<bool> = cut.iter().map(|c| !c).collect();
-        assert_eq!(islands, expected);
+        let unreachable = island_contacts(&c2, &n2, &c1, &n1, &poses, &beyond, &cut);
+        assert_eq!(unreachable, expected);
     }
 
     /// Guards the plate's escape: the rolling wheels' band stays outside the follower's
