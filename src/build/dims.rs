@@ -114,10 +114,11 @@ pub const SUPPORT_MARGIN_MM: f64 = 3.0;
 mod tests {
     use super::*;
 
-    /// Guards the one fact synthesis and the build must share about a strut: the island test
-    /// (`synth::undercut::ESCAPE_STRUT_MM`) calls a point free where the planner's strut, its
-    /// radius and margin, fits. Were they to differ, synthesis would accept designs whose
-    /// driver pieces the build cannot join, or refuse ones it can.
+    /// Guards the one fact synthesis and the build must share about a strut: the free space
+    /// the island and plate tests ask of a ray starts from the planner's strut, its radius
+    /// and margin (`synth::undercut::ESCAPE_STRUT_MM`, to which they add how much the
+    /// planner's field understates). Were they to differ, synthesis would accept designs
+    /// whose pieces the build cannot join, or refuse ones it can.
     #[test]
     fn the_island_test_frees_a_point_where_a_strut_fits() {
         let fits = STRUT_RADIUS_MM + STRUT_MARGIN_MM;

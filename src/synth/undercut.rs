@@ -54,9 +54,9 @@ pub const BAND_LIP_MM: f64 = 1.5;
 pub const CUT_TOLERANCE_MM: f64 = 0.1;
 
 /// How far along a driver band from a lost contact the contacts beside it are lost too,
-/// mm: where the carve ends the groove (a hole cut through the band) or a piece is left
-/// out, the mesher rounds the edge on 0.4 mm cells and the rim's 0.85 mm apex radius no
-/// longer finds both walls, so the gap there exceeds the clearance. Measured against the
+/// mm: the built parts lose a little more than the tests, at the ends of the lost runs,
+/// where the carve ends a groove or a piece is left out (the mesher rounds that edge on
+/// 0.4 mm cells; that it is the cause is a reading, not measured). Measured against the
 /// build's check (share of the period lost per pair): on screw-bob at K = 7 the test
 /// without it said 58.1/10.3/18.9/35.0/19.2/27.5/32.8 %, with it 59.7/10.8/20.0/36.9/
 /// 19.7/28.1/34.2 %, and the build measured 60.8/11.9/20.6/36.1/21.7/27.8/33.6 %; on
