@@ -78,7 +78,7 @@ fn main() {
             if !mech.exists() {
                 println!(
                     "{name:<20} no printable design ({s:.0} s): {}",
-                    first_line(&out.stderr)
+                    failure_line(&out.stderr)
                 );
                 continue;
             }
@@ -104,7 +104,7 @@ fn main() {
         );
         let report = parts.join("build.json");
         if !report.exists() {
-            println!("{head}  stopped: {}", first_line(&out.stderr));
+            println!("{head}  stopped: {}", failure_line(&out.stderr));
             continue;
         }
         let b = read_json(&report);
@@ -149,7 +149,7 @@ fn read_json(path: &Path) -> Value {
 /// What a command's error output says about why it failed, for the table: its `error:`
 /// line and the `caused by:` line under it, or failing those its first line. A failed
 /// synthesis prints every attempt before it, a build its progress.
-fn first_line(stderr: &[u8]) -> String {
+fn failure_line(stderr: &[u8]) -> String {
     let text = String::from_utf8_lossy(stderr);
     let lines: Vec<&str> = text.lines().filter(|l| !l.trim().is_empty()).collect();
     match lines.iter().position(|l| l.starts_with("error:")) {

@@ -204,10 +204,8 @@ pub struct RayStarts {
     pub starts: Vec<Start>,
     /// Rays tried.
     pub rays: usize,
-    /// Rays that came within the root clearance of the other part's functional surfaces
-    /// before they found free space.
-    pub blocked: usize,
-    /// Where each of those rays was stopped (for saying what stopped it).
+    /// Where each ray that came within the root clearance of the other part's functional
+    /// surfaces before it found free space was stopped (for saying what stopped it).
     pub blocked_at: Vec<Vec3>,
     /// How far the rays went, mm.
     pub reach: f64,
@@ -220,7 +218,8 @@ impl RayStarts {
     /// into the other part's functional surfaces and how many found no free point.
     pub fn none_detail(&self) -> String {
         let need = STRUT_RADIUS_MM + STRUT_MARGIN_MM;
-        let unreached = self.rays - self.blocked - self.starts.len();
+        let stopped = self.blocked_at.len();
+        let unreached = self.rays - stopped - self.starts.len();
         let (reach, clear) = (self.reach, self.root_clearance);
         let verb =
             |n: usize, one: &'static str, many: &'static str| if n == 1 { one } else { many };
@@ -236,7 +235,7 @@ impl RayStarts {
                 verb(n, "reaches", "reach")
             )
         };
-        let what = match (self.blocked, unreached) {
+        let what = match (stopped, unreached) {
             (0, _) => format!(
                 "none of the {} rays leaving it reach a point {need:.1} mm clear of the other \
                  part's swept volume within {reach:.0} mm",
@@ -291,7 +290,6 @@ pub fn ray_starts(
         .collect();
     RayStarts {
         rays: rays.len(),
-        blocked: blocked_at.len(),
         blocked_at,
         starts: found.into_iter().filter_map(Result::ok).collect(),
         reach,
@@ -348,7 +346,6 @@ mod tests {
         RayStarts {
             starts: Vec::new(),
             rays,
-            blocked,
             blocked_at: vec![Vec3::zeros(); blocked],
             reach: 12.0,
             root_clearance: 2.5,
