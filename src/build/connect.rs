@@ -253,16 +253,24 @@ impl RayStarts {
     }
 }
 
+/// Where [`ray_starts`] tests a ray between its root and the first millimetre (synthesis
+/// tests the same points).
+pub use crate::synth::undercut::ROOT_STEP_MM;
+
 /// Starts along rays leaving a piece: from each `(root, dir)`, the first point at distance
 /// s = 1, 2, … up to `reach` mm whose coarse clearance in `field` suffices, provided
 /// `exact` (the exact clearance from the other part's functional surfaces) stays at least
-/// `root_clearance` from the root up to there.
+/// `root_clearance` at every point tested up to there. With `from_root`, the root itself
+/// and the point [`ROOT_STEP_MM`] out are tested too: a strut that is trimmed by that
+/// clearance (a follower strut rooted by its core) keeps nothing where it is low, and a
+/// strut cut off at its root joins nothing.
 pub fn ray_starts(
     rays: &[(Vec3, Vec3)],
     field: &DistanceField,
     exact: &(dyn Fn(Vec3) -> f64 + Sync),
     root_clearance: f64,
     reach: f64,
+    from_root: bool,
 ) -> RayStarts {
     use rayon::prelude::*;
     let need = STRUT_RADIUS_MM + STRUT_MARGIN_MM;
@@ -270,6 +278,14 @@ pub fn ray_starts(
     let found: Vec<Result<Start, Option<Vec3>>> = rays
         .par_iter()
         .map(|&(root, dir)| {
+            if from_root {
+                for s in [0.0, ROOT_STEP_MM] {
+                    let p = root + dir * s;
+                    if exact(p) < root_clearance {
+                        return Err(Some(p));
+                    }
+                }
+            }
             let mut s = 1.0;
             while s <= reach {
                 let p = root + dir * s;
@@ -350,6 +366,28 @@ mod tests {
             reach: 12.0,
             root_clearance: 2.5,
         }
+    }
+
+    /// Guards `from_root`: with an obstacle 1.7 mm behind the root and free space all
+    /// round, a ray asked to keep 1.9 mm from its root on is blocked at the root, and one
+    /// asked to keep it from 1 mm out starts there (the first point tested).
+    #[test]
+    fn a_trimmed_strut_is_blocked_at_its_root() {
+        let grid = VoxelGrid::covering(Aabb::new([-2.0; 3], [2.0; 3]), 1.0);
+        let field = DistanceField {
+            values: vec![100.0; grid.len()],
+            grid,
+            outside: 100.0,
+        };
+        let obstacle = Vec3::new(-1.7, 0.0, 0.0);
+        let exact = |p: Vec3| (p - obstacle).norm();
+        let rays = [(Vec3::zeros(), Vec3::new(1.0, 0.0, 0.0))];
+        let from_one = ray_starts(&rays, &field, &exact, 1.9, 12.0, false);
+        assert_eq!(from_one.starts.len(), 1);
+        assert_eq!(from_one.starts[0].at, Vec3::new(1.0, 0.0, 0.0));
+        let from_root = ray_starts(&rays, &field, &exact, 1.9, 12.0, true);
+        assert!(from_root.starts.is_empty());
+        assert_eq!(from_root.blocked_at, vec![Vec3::zeros()]);
     }
 
     /// Guards the three wordings of why no strut can start from a piece, whole: every ray

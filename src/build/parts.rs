@@ -440,8 +440,9 @@ fn column(clearance: &dyn Fn(Vec3) -> f64, z0: f64, z1: f64) -> Option<Cylinder>
 /// A plate's strut leaves from behind its rim, along −n², with its whole section clear of
 /// the driver's swept bands; failing that, also across the rim (±v, towards the gap
 /// between slabs, and the diagonals), as the driver's struts do; failing that, with only
-/// its core clear ([`STRUT_CORE_MM`] plus half the clearance): such a strut is trimmed by
-/// the bands' sweep as the webs are ([`Design::follower_solid`]). Screw-bob's printable
+/// its core clear from its root on ([`STRUT_CORE_MM`] plus the webs' margin and half the
+/// clearance): such a strut is trimmed by the bands' sweep as the webs are
+/// ([`Design::follower_solid`]). Screw-bob's printable
 /// design has a plate that every ray from behind leaves within 2.5 mm of the bands' sweep.
 #[allow(clippy::too_many_arguments)]
 fn plan_follower_struts(
@@ -474,7 +475,12 @@ fn plan_follower_struts(
     let mut struts = Vec::new();
     let mut rooted = Vec::new();
     let whole = STRUT_RADIUS_MM + ROOT_MARGIN_MM;
-    let core = STRUT_CORE_MM + 0.5 * clearance;
+    // A strut rooted by its core is trimmed as the webs are: nothing is left within
+    // WEB_MARGIN_MM of the bands' sweep, and the shrink takes half the clearance more. Its
+    // core survives where the clearance is that much beyond the core's radius, and from
+    // its root on: screw-bob's K = 7 design had plate 6's strut pass at 1.1 mm from 1 mm
+    // out, its root 0.6 mm from band 6's sweep, and the rim came out loose.
+    let core = STRUT_CORE_MM + WEB_MARGIN_MM + 0.5 * clearance;
     let band_clearance = |p: Vec3| web_clear.below(p, whole, f64::NEG_INFINITY);
     for &k in &order {
         let what = format!("plate {} (curve pair {})", k + 1, pairs[k].0 + 1);
@@ -496,6 +502,7 @@ fn plan_follower_struts(
                 let across = strut_from_rays(
                     &rays,
                     whole,
+                    false,
                     field,
                     &band_clearance,
                     &mut joined,
@@ -522,6 +529,7 @@ fn plan_follower_struts(
                         let st = strut_from_rays(
                             &rays,
                             core,
+                            true,
                             field,
                             &band_clearance,
                             &mut joined,
@@ -533,7 +541,7 @@ fn plan_follower_struts(
                             "{what}: no strut's whole section leaves it clear of the driver's \
                              swept bands; one leaves with its {:.1} mm core clear, its flanks \
                              trimmed like the webs",
-                            2.0 * core
+                            2.0 * STRUT_CORE_MM
                         ));
                         joined.mark_balls(&core_of(k), 1.5);
                         rooted.push(st);
@@ -573,7 +581,8 @@ fn plan_follower_struts(
                 .map(|d| (p, d))
             })
             .collect();
-        let starts = connect::ray_starts(&rays, field, &|_| f64::INFINITY, 0.0, RAY_REACH_MM);
+        let starts =
+            connect::ray_starts(&rays, field, &|_| f64::INFINITY, 0.0, RAY_REACH_MM, false);
         let st = strut_from_starts(
             field,
             &joined,
@@ -719,6 +728,7 @@ fn plan_driver_struts(
         let planned = strut_from_rays(
             &rays,
             whole,
+            false,
             field,
             &rim_clearance,
             &mut joined,
@@ -730,6 +740,7 @@ fn plan_driver_struts(
             strut_from_rays(
                 &rays,
                 core,
+                false,
                 field,
                 &rim_clearance,
                 &mut joined,
@@ -1025,6 +1036,7 @@ fn strut_from_behind(
     strut_from_rays(
         &rays,
         root_clearance,
+        false,
         field,
         exact,
         joined,
@@ -1126,11 +1138,13 @@ fn rims_that_block(
 
 /// A strut from one of `rays` (root, direction away from the contact) to what its part has
 /// joined so far, aimed at `toward`; `exact` stays at least `root_clearance` along the ray
-/// up to the start; the strut is marked joined.
+/// up to the start, from the root itself when the strut is `trimmed` by that clearance
+/// ([`connect::ray_starts`]); the strut is marked joined.
 #[allow(clippy::too_many_arguments)]
 fn strut_from_rays(
     rays: &[(Vec3, Vec3)],
     root_clearance: f64,
+    trimmed: bool,
     field: &DistanceField,
     exact: &(dyn Fn(Vec3) -> f64 + Sync),
     joined: &mut connect::Joined,
@@ -1138,7 +1152,7 @@ fn strut_from_rays(
     what: &str,
     blame: Option<Blame>,
 ) -> Result<ThickPolyline, BuildError> {
-    let starts = connect::ray_starts(rays, field, exact, root_clearance, RAY_REACH_MM);
+    let starts = connect::ray_starts(rays, field, exact, root_clearance, RAY_REACH_MM, trimmed);
     let st = strut_from_starts(field, joined, &starts, toward, what, blame)?;
     joined.mark_balls(&connect::polyline_points(&st, 0.5), st.radius);
     Ok(st)
@@ -1336,13 +1350,17 @@ mod tests {
     use super::*;
     use crate::build::tests::half_turn;
 
-    /// Guards the one fact synthesis's plate test (`synth::undercut::plate_escapes`) takes
-    /// from the planner: where a plate's strut takes root behind its rim. Were they to
-    /// differ, synthesis would judge rays the planner never casts.
+    /// Guards the two facts synthesis's plate test (`synth::undercut::plate_escapes`) takes
+    /// from the planner: where a plate's strut takes root behind its rim, and the clearance
+    /// its core needs from there at the default print clearance. Were they to differ,
+    /// synthesis would judge rays the planner never casts, or by another need.
     #[test]
     fn plates_root_where_synthesis_tests_them() {
         let planner = RIM_DEPTH_MM + ROOT_DEPTH_MM;
         assert!((planner - crate::synth::undercut::PLATE_ROOT_MM).abs() < 1e-9);
+        // And how clear of the bands' sweep a strut rooted by its core must leave it.
+        let core = STRUT_CORE_MM + WEB_MARGIN_MM + 0.5 * DEFAULT_CLEARANCE_MM;
+        assert!((core - crate::synth::undercut::PLATE_CLEARANCE_MM).abs() < 1e-9);
     }
 
     /// Guards what a loose piece's message blames: a point on one rim, posed in the driver's

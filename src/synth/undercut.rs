@@ -26,10 +26,11 @@ use super::math::{Mat3, V3};
 
 /// Which form of this module's rules a printed-rim design was judged by: 2 since the
 /// island test reaches as far as the build's rays, the plates' escape is tested and lost
-/// runs are widened by [`LOST_EDGE_MM`] (2026-12-04). Caches of designs (`demo`) key on
-/// it, so a design judged by older rules is synthesized again rather than handed to a
+/// runs are widened by [`LOST_EDGE_MM`] (2026-12-04); 3 since a plate's rays need
+/// [`PLATE_CLEARANCE_MM`] from their root on (2026-12-05). Caches of designs (`demo`) key
+/// on it, so a design judged by older rules is synthesized again rather than handed to a
 /// build that disowns it.
-pub const RULES: u32 = 2;
+pub const RULES: u32 = 3;
 
 /// Follower rim: half-ellipse semi-axis along the contact normal (how deep the rim is).
 /// 3 mm: deep enough that the driver's groove walls hold it, shallow enough to fit the 5 mm
@@ -93,6 +94,18 @@ pub const ESCAPE_FREE_MM: f64 = ESCAPE_STRUT_MM + PLANNER_UNDERSTATEMENT_MM;
 /// roots it 1 mm behind the rim's 3 mm deep flat side (`build::parts`; a test there keeps
 /// the two equal).
 pub const PLATE_ROOT_MM: f64 = 4.0;
+/// Where a ray is tested between its root and its first millimetre, mm (the build's
+/// `connect::ray_starts` reads it from here): half of it, so no stretch untested is
+/// longer than the 1 mm steps beyond.
+pub const ROOT_STEP_MM: f64 = 0.5;
+/// The clearance from the band's sweep a strut leaving a plate keeps from its root on, mm:
+/// where none leaves with its whole section clear, the build roots one by its 1 mm core
+/// and trims it as the webs are (nothing within their 0.8 mm margin of the bands' sweep,
+/// and half the 0.2 mm print clearance more), so the core survives only this far out
+/// (`build::parts`; a test there keeps the two equal). Screw-bob's K = 7 design passed at
+/// [`ESCAPE_CLEARANCE_MM`] from 1 mm out; its plate 6 strut's root was 0.6 mm from the
+/// band's sweep and the rim came out of the build loose.
+pub const PLATE_CLEARANCE_MM: f64 = 1.9;
 
 /// The rim section in model units.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -113,6 +126,8 @@ pub struct RimSection {
     pub escape_free: f64,
     /// [`PLATE_ROOT_MM`] in model units.
     pub plate_root: f64,
+    /// [`PLATE_CLEARANCE_MM`] in model units.
+    pub plate_clearance: f64,
     /// [`LOST_EDGE_MM`] in model units.
     pub lost_edge: f64,
     /// The driver band's [`BAND_HALF_WIDTH_MM`] in model units.
@@ -135,6 +150,7 @@ impl RimSection {
             escape_clearance: ESCAPE_CLEARANCE_MM / scale_mm,
             escape_free: ESCAPE_FREE_MM / scale_mm,
             plate_root: PLATE_ROOT_MM / scale_mm,
+            plate_clearance: PLATE_CLEARANCE_MM / scale_mm,
             lost_edge: LOST_EDGE_MM / scale_mm,
             band_half_width: BAND_HALF_WIDTH_MM / scale_mm,
             band_depth: BAND_DEPTH_MM / scale_mm,
@@ -293,7 +309,11 @@ pub fn island_contacts(
         let t = (V3::from(c1[(u + 1) % n]) - V3::from(c1[(u + n - 1) % n])).unit();
         let v = t.cross(nn).unit();
         let root = c - nn.scalec(rim.escape_root);
-        any_ray_free(root, -nn, v, poses, rim, |pose, p, margin| {
+        let clear = Clear {
+            need: rim.escape_clearance,
+            from_root: false,
+        };
+        any_ray_free(root, -nn, v, poses, rim, clear, |pose, p, margin| {
             rims.near(pose.apply(p), rim, margin)
         })
     };
@@ -324,8 +344,8 @@ pub fn island_contacts(
 /// from some sample of c², a ray starting [`PLATE_ROOT_MM`] behind the curve (along −n²)
 /// and running behind or across the rim (−n², ±v, −n² ± v with v = T̂² × n²) gets
 /// [`ESCAPE_FREE_MM`] clear of the band's sweep through the follower frame before it comes
-/// within [`ESCAPE_CLEARANCE_MM`] of it, as in [`island_contacts`] with the parts' roles
-/// swapped. The build's planner tries the same rays from its plates (`build::parts`); a
+/// within [`PLATE_CLEARANCE_MM`] of it, from its root on, as in [`island_contacts`] with
+/// the parts' roles swapped. The build's planner tries the same rays from its plates (`build::parts`); a
 /// plate none of them leaves cannot be joined to the follower, and its pair keeps nothing.
 /// The band is the uncarved one (as the planner sees it): its lip, which the rim's groove
 /// removes, is counted as material.
@@ -346,28 +366,44 @@ pub fn plate_escapes(
     let rims = Sections::new(c2, n2, 0.0);
     rims.sections.iter().any(|sec| {
         let root = sec.apex - sec.normal.scalec(rim.plate_root);
+        let clear = Clear {
+            need: rim.plate_clearance,
+            from_root: true,
+        };
         any_ray_free(
             root,
             -sec.normal,
             sec.binormal,
             poses,
             rim,
+            clear,
             |pose, p, margin| bands.near_band(pose.unapply(p), rim, margin),
         )
     })
 }
 
+/// How close to an obstacle a ray may come before a strut's core would be cut (model
+/// units), and whether that holds from the ray's root or from its first millimetre (the
+/// build's `connect::ray_starts` with `from_root`).
+#[derive(Clone, Copy)]
+struct Clear {
+    need: f64,
+    from_root: bool,
+}
+
 /// Whether one of the planner's five rays from `root` (along `back`, ±`v` and the two
 /// diagonals between) is free: on its points 1 mm apart, up to [`ESCAPE_REACH_MM`], it
 /// reaches one that is `rim.escape_free` clear of an obstacle at every instant before any
-/// comes within `rim.escape_clearance` of it at some instant. `near(pose, p, margin)` says
-/// whether `p` lies within `margin` of the obstacle at the instant of `pose`.
+/// comes within `clear.need` of it at some instant (nor, with `clear.from_root`, the root
+/// or the point [`ROOT_STEP_MM`] out). `near(pose, p, margin)` says whether `p` lies within
+/// `margin` of the obstacle at the instant of `pose`.
 fn any_ray_free(
     root: V3<f64>,
     back: V3<f64>,
     v: V3<f64>,
     poses: &[DriverToFollower],
     rim: &RimSection,
+    clear: Clear,
     near: impl Fn(&DriverToFollower, V3<f64>, f64) -> bool,
 ) -> bool {
     // One millimetre in model units: the spacing of the points tested along a ray.
@@ -379,7 +415,7 @@ fn any_ray_free(
         let mut free = true;
         for pose in poses {
             if near(pose, p, rim.escape_free) {
-                if near(pose, p, rim.escape_clearance) {
+                if near(pose, p, clear.need) {
                     return Some(false);
                 }
                 free = false;
@@ -387,10 +423,20 @@ fn any_ray_free(
         }
         free.then_some(true)
     };
+    // The root and ROOT_STEP_MM out only need the core clear: no strut starts there.
+    let core_cut = |p: V3<f64>| poses.iter().any(|pose| near(pose, p, clear.need));
     let h = std::f64::consts::FRAC_1_SQRT_2;
     [back, v, -v, (back + v).scalec(h), (back - v).scalec(h)]
         .iter()
         .any(|&d| {
+            let near_root = [0.0, ROOT_STEP_MM];
+            if clear.from_root
+                && near_root
+                    .iter()
+                    .any(|&s| core_cut(root + d.scalec(step * s)))
+            {
+                return false;
+            }
             (1..=steps)
                 .find_map(|k| verdict(root + d.scalec(step * k as f64)))
                 .unwrap_or(false)
@@ -649,6 +695,33 @@ mod tests {
         assert!(!plate_escapes(&c2, &n2, &c1, &n1, &poses, &deep));
         let lost = lost_contacts(&c2, &n2, &c1, &n1, &poses, &deep);
         assert_eq!(lost, vec![true; n]);
+    }
+
+    /// Guards the plates' clearance from the root ([`RULES`] 3): a point 1.7 mm in front of
+    /// the rays' root (towards the rim's apex) stops every ray at its root when the core
+    /// must keep [`PLATE_CLEARANCE_MM`] from there on, and none of them when it need only
+    /// from the first millimetre out (the rule that passed screw-bob's K = 7 plate 6, whose
+    /// rim the build's trim then cut loose).
+    #[test]
+    fn a_plate_ray_needs_its_core_clear_from_the_root() {
+        let (_, _, _, poses) = wheels(12, 1.0);
+        let rim = RimSection::printed(10.0);
+        let (root, n, v) = (
+            V3::new(0.0, 0.0, 0.0),
+            V3::new(1.0, 0.0, 0.0),
+            V3::new(0.0, 1.0, 0.0),
+        );
+        let obstacle = root + n.scalec(0.17);
+        let near = |_: &DriverToFollower, p: V3<f64>, margin: f64| (p - obstacle).norm() < margin;
+        let free = |from_root| {
+            let clear = Clear {
+                need: rim.plate_clearance,
+                from_root,
+            };
+            any_ray_free(root, -n, v, &poses, &rim, clear, near)
+        };
+        assert!(free(false));
+        assert!(!free(true));
     }
 
     /// Guards the widening of lost runs: by arc length along c¹, both ways, across the
