@@ -442,8 +442,8 @@ fn column(clearance: &dyn Fn(Vec3) -> f64, z0: f64, z1: f64) -> Option<Cylinder>
 /// between slabs, and the diagonals), as the driver's struts do; failing that, with only
 /// its core clear from its root on ([`STRUT_CORE_MM`] plus the webs' margin and half the
 /// clearance): such a strut is trimmed by the bands' sweep as the webs are
-/// ([`Design::follower_solid`]). Screw-bob's printable
-/// design has a plate that every ray from behind leaves within 2.5 mm of the bands' sweep.
+/// ([`Design::follower_solid`]). Screw-bob's printable design has a plate that every ray
+/// from behind leaves within 2.5 mm of the bands' sweep.
 #[allow(clippy::too_many_arguments)]
 fn plan_follower_struts(
     layout: &Layout,

@@ -345,8 +345,12 @@ pub fn island_contacts(
 /// and running behind or across the rim (−n², ±v, −n² ± v with v = T̂² × n²) gets
 /// [`ESCAPE_FREE_MM`] clear of the band's sweep through the follower frame before it comes
 /// within [`PLATE_CLEARANCE_MM`] of it, from its root on, as in [`island_contacts`] with
-/// the parts' roles swapped. The build's planner tries the same rays from its plates (`build::parts`); a
-/// plate none of them leaves cannot be joined to the follower, and its pair keeps nothing.
+/// the parts' roles swapped. The build's planner tries the same rays from its plates
+/// (`build::parts`); a plate none of them leaves cannot be joined to the follower, and its
+/// pair keeps nothing. That is the planner's last resort, a strut rooted by its core; the
+/// planner first tries struts whose whole section is clear from 1 mm out, which need
+/// nothing at the root, so this test may refuse a plate the planner could join that way
+/// (never the other way round).
 /// The band is the uncarved one (as the planner sees it): its lip, which the rim's groove
 /// removes, is counted as material.
 pub fn plate_escapes(
