@@ -349,8 +349,9 @@ pub fn island_contacts(
 /// (`build::parts`); a plate none of them leaves cannot be joined to the follower, and its
 /// pair keeps nothing. That is the planner's last resort, a strut rooted by its core; the
 /// planner first tries struts whose whole section is clear from 1 mm out, which need
-/// nothing at the root, so this test may refuse a plate the planner could join that way
-/// (never the other way round).
+/// nothing at the root, so this test may refuse a plate the planner could join that way.
+/// The other way round, it sees only the pair's own band, where the planner sees every
+/// band and the driver's hub, column and struts too.
 /// The band is the uncarved one (as the planner sees it): its lip, which the rim's groove
 /// removes, is counted as material.
 pub fn plate_escapes(
