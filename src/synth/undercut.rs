@@ -303,16 +303,16 @@ pub fn island_contacts(
         return island;
     }
     let rims = Sections::new(c2, n2, rim.depth + rim.half_width + rim.escape_free);
+    let clear = Clear {
+        need: rim.escape_clearance,
+        from_root: false,
+    };
     let free_from = |u: usize| -> bool {
         let c = V3::from(c1[u]);
         let nn = V3::from(n1[u]).unit();
         let t = (V3::from(c1[(u + 1) % n]) - V3::from(c1[(u + n - 1) % n])).unit();
         let v = t.cross(nn).unit();
         let root = c - nn.scalec(rim.escape_root);
-        let clear = Clear {
-            need: rim.escape_clearance,
-            from_root: false,
-        };
         any_ray_free(root, -nn, v, poses, rim, clear, |pose, p, margin| {
             rims.near(pose.apply(p), rim, margin)
         })
@@ -369,12 +369,12 @@ pub fn plate_escapes(
     let reach = rim.band_depth.max(rim.band_lip).hypot(rim.band_half_width) + rim.escape_free;
     let bands = Sections::new(c1, n1, reach);
     let rims = Sections::new(c2, n2, 0.0);
+    let clear = Clear {
+        need: rim.plate_clearance,
+        from_root: true,
+    };
     rims.sections.iter().any(|sec| {
         let root = sec.apex - sec.normal.scalec(rim.plate_root);
-        let clear = Clear {
-            need: rim.plate_clearance,
-            from_root: true,
-        };
         any_ray_free(
             root,
             -sec.normal,
