@@ -27,10 +27,11 @@ use super::math::{Mat3, V3};
 /// Which form of this module's rules a printed-rim design was judged by: 2 since the
 /// island test reaches as far as the build's rays, the plates' escape is tested and lost
 /// runs are widened by [`LOST_EDGE_MM`] (2026-12-04); 3 since a plate's rays need
-/// [`PLATE_CLEARANCE_MM`] from their root on (2026-12-05). Caches of designs (`demo`) key
+/// [`PLATE_CLEARANCE_MM`] from their root on (2026-12-05); 4 since the cut test steps along
+/// each contact's path between instants ([`CUT_STEP_MM`], 2026-12-05). Caches of designs (`demo`) key
 /// on it, so a design judged by older rules is synthesized again rather than handed to a
 /// build that disowns it.
-pub const RULES: u32 = 3;
+pub const RULES: u32 = 4;
 
 /// Follower rim: half-ellipse semi-axis along the contact normal (how deep the rim is).
 /// 3 mm: deep enough that the driver's groove walls hold it, shallow enough to fit the 5 mm
@@ -53,6 +54,18 @@ pub const BAND_LIP_MM: f64 = 1.5;
 /// How far past a contact a rim must reach for the contact to count as cut, mm. 0.1 mm: the
 /// built parts' check calls a contact lost when its gap exceeds the clearance by as much.
 pub const CUT_TOLERANCE_MM: f64 = 0.1;
+/// Longest step between two tests along a contact's path through the follower's frame, mm.
+/// Between two of the file's instants a driver point moves about a millimetre past the rim,
+/// and a rim can cut it for less than one sample: on screw-bob's K = 7 design, pair 3's
+/// contacts at t = 0.264–0.283 are 0.104 mm deep a quarter sample after the instant three
+/// samples earlier and 0.067 mm at that instant, and the build lost them. Passing the rim's
+/// apex round (radius b²/a = 0.85 mm) a point's depth falls off as s²/(2 · 0.85 mm) either
+/// side of its deepest, so tests 0.25 mm apart miss at most 0.25²/(8 · 0.85) ≈ 0.009 mm of
+/// it, a tenth of [`CUT_TOLERANCE_MM`].
+pub const CUT_STEP_MM: f64 = 0.25;
+/// Most tests on one step of a contact's path between two instants: at [`CUT_STEP_MM`],
+/// 16 mm of relative travel per sample, ten times the examples' fastest.
+const MAX_CUT_STEPS: usize = 64;
 
 /// How far along a driver band from a lost contact the contacts beside it are lost too,
 /// mm: the built parts lose a little more than the tests, at the ends of the lost runs,
@@ -130,6 +143,8 @@ pub struct RimSection {
     pub plate_clearance: f64,
     /// [`LOST_EDGE_MM`] in model units.
     pub lost_edge: f64,
+    /// [`CUT_STEP_MM`] in model units.
+    pub cut_step: f64,
     /// The driver band's [`BAND_HALF_WIDTH_MM`] in model units.
     pub band_half_width: f64,
     /// [`BAND_DEPTH_MM`] in model units.
@@ -152,6 +167,7 @@ impl RimSection {
             plate_root: PLATE_ROOT_MM / scale_mm,
             plate_clearance: PLATE_CLEARANCE_MM / scale_mm,
             lost_edge: LOST_EDGE_MM / scale_mm,
+            cut_step: CUT_STEP_MM / scale_mm,
             band_half_width: BAND_HALF_WIDTH_MM / scale_mm,
             band_depth: BAND_DEPTH_MM / scale_mm,
             band_lip: BAND_LIP_MM / scale_mm,
@@ -199,7 +215,11 @@ const CHUNK: usize = 16;
 /// curve) are sampled at the instants of `poses[i]`, evenly over one period. Returns, per
 /// instant i, whether the rim at some other instant reaches more than `rim.tolerance` past
 /// c¹(i). The rim's section at each sample is tested within half the distance to the
-/// neighbouring samples along the tangent, so it is exact up to the curves' sampling.
+/// neighbouring samples along the tangent, so it is exact up to the curves' sampling. In
+/// time, c¹(i)'s path through the follower's frame is taken straight between two instants
+/// (the true path bows off that chord by r·θ²/8, about 0.006 mm at 150 mm from the
+/// driver's axis and 1° per sample) and tested every `rim.cut_step` along it
+/// ([`CUT_STEP_MM`]), so a cut shorter than one sample is seen.
 pub fn cut_contacts(
     c2: &[[f64; 3]],
     n2: &[[f64; 3]],
@@ -213,13 +233,18 @@ pub fn cut_contacts(
     }
     let rims = Sections::new(c2, n2, rim.depth + rim.half_width);
     let mut cut = vec![false; n];
-    for pose in poses {
+    for (i, pose) in poses.iter().enumerate() {
+        let next = &poses[(i + 1) % n];
         for (u, flag) in cut.iter_mut().enumerate() {
             if *flag {
                 continue;
             }
-            let y = pose.apply(V3::from(c1[u]));
-            *flag = rims.any(y, |s| s.cuts(y, rim));
+            let x = V3::from(c1[u]);
+            let (from, to) = (pose.apply(x), next.apply(x));
+            let steps = ((to - from).norm() / rim.cut_step).ceil() as usize;
+            *flag = rims.any_along(from, to, steps.clamp(1, MAX_CUT_STEPS), |s, y| {
+                s.cuts(y, rim)
+            });
         }
     }
     cut
@@ -487,6 +512,42 @@ impl Sections {
         self.any(x, |s| s.near_band(x, rim, margin))
     }
 
+    /// Whether `test(section, y)` holds at one of `steps` points evenly along the segment
+    /// from `from` (included) to `to` (excluded: the next segment's first point) for a
+    /// section whose chunk's sphere holds that point. The chunks the segment passes are
+    /// found once for all its points.
+    fn any_along(
+        &self,
+        from: V3<f64>,
+        to: V3<f64>,
+        steps: usize,
+        test: impl Fn(&Section, V3<f64>) -> bool,
+    ) -> bool {
+        let d = to - from;
+        let len2 = d.norm2();
+        let passed: Vec<_> = self
+            .chunks
+            .iter()
+            .filter(|(c, r, _)| {
+                let along = if len2 > 0.0 {
+                    ((*c - from).dot(d) / len2).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                (from + d.scalec(along) - *c).norm2() <= r * r
+            })
+            .collect();
+        if passed.is_empty() {
+            return false;
+        }
+        (0..steps).any(|j| {
+            let y = from + d.scalec(j as f64 / steps as f64);
+            passed.iter().any(|(c, r, range)| {
+                (y - *c).norm2() <= r * r && range.clone().any(|s| test(&self.sections[s], y))
+            })
+        })
+    }
+
     /// Whether `test` holds for a section whose chunk's sphere holds `y` (follower frame).
     fn any(&self, y: V3<f64>, test: impl Fn(&Section) -> bool) -> bool {
         self.chunks.iter().any(|(c, r, range)| {
@@ -637,6 +698,58 @@ mod tests {
         let flipped: Vec<[f64; 3]> = n2.iter().map(|v| (-V3::from(*v)).vals()).collect();
         let cut = cut_contacts(&c2, &flipped, &c1, &poses, &RimSection::printed(10.0));
         assert_eq!(cut.iter().filter(|c| **c).count(), 360);
+    }
+
+    /// A cut that lasts less than one sample: the contact's path through the follower's
+    /// frame crosses the rim 0.5 mm behind its apex between two instants, at each of which
+    /// it lies outside the rim, beyond its flank. `cut_contacts` steps along that path, so
+    /// the contact is cut; tested at the instants alone it would not be.
+    #[test]
+    fn a_cut_between_two_instants_is_seen() {
+        let n = 8;
+        let rim = RimSection::printed(10.0);
+        // The rim runs round a circle of radius 3 in the xy plane, its normal outward, so
+        // its half ellipse stands along z (the binormal) ±0.16 and 0.3 deep towards the axis.
+        let (c2, n2): (Vec<[f64; 3]>, Vec<[f64; 3]>) = (0..n)
+            .map(|i| {
+                let (s, c) = (TAU * i as f64 / n as f64).sin_cos();
+                ([3.0 * c, 3.0 * s, 0.0], [c, s, 0.0])
+            })
+            .unzip();
+        // Contact 0's path (the follower frame is the driver's, shifted): its own point,
+        // then above and below section 2's rim, crossing it 0.05 behind the apex between
+        // instants 3 and 4, then back down to its own point.
+        let inside = V3::from(c2[2]) - V3::from(n2[2]).scalec(0.05);
+        let z = V3::new(0.0, 0.0, 1.0);
+        let own = V3::from(c2[0]);
+        let path = [
+            own,
+            own + z.scalec(10.0),
+            inside + z.scalec(10.0),
+            inside + z.scalec(0.5),
+            inside - z.scalec(0.5),
+            inside - z.scalec(10.0),
+            own - z.scalec(10.0),
+            own - z.scalec(10.0),
+        ];
+        let identity = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        let poses: Vec<DriverToFollower> = path
+            .iter()
+            .map(|y| DriverToFollower {
+                a: identity,
+                b: (*y - own).vals(),
+            })
+            .collect();
+        let rims = Sections::new(&c2, &n2, rim.depth + rim.half_width);
+        assert!(
+            path.iter().all(|y| !rims.any(*y, |s| s.cuts(*y, &rim))),
+            "no instant alone cuts contact 0"
+        );
+        let cut = cut_contacts(&c2, &n2, &c2, &poses, &rim);
+        assert!(
+            cut[0],
+            "the crossing between instants 3 and 4 cuts contact 0"
+        );
     }
 
     /// The driver's outward normal n¹ of the wheels (−x in R at the contact).
