@@ -33,6 +33,13 @@ pub fn legend_room_y_range(lo: f64, span: f64) -> (f64, f64) {
     (lo - BELOW_DATA_MARGIN * span, lo + LEGEND_HEADROOM * span)
 }
 
+/// Legend text size, pixels: 14.
+pub const LEGEND_FONT_PX: u32 = 14;
+
+/// Spacing of the probes along a drawn line when the legend's corner is chosen, pixels: 3,
+/// finer than the 2 px lines are wide apart from their ends.
+pub const LEGEND_PROBE_PX: f64 = 3.0;
+
 /// Opacity of a [`Chart::zones`] shading: 0.15, a tint under the data.
 pub const ZONE_OPACITY: f64 = 0.15;
 
@@ -292,6 +299,101 @@ impl Chart {
         Ok((xr, yr))
     }
 
+    /// The legend's entries in the order `draw` adds them: labelled zones, labelled
+    /// reference lines, then labelled series that draw something.
+    fn legend_labels(&self) -> impl Iterator<Item = &str> {
+        let zones = self.zones.iter().map(|z| z.3.as_str());
+        let lines = self.h_lines.iter().map(|l| l.1.as_str());
+        let series = self
+            .series
+            .iter()
+            .filter(|s| s.points.iter().any(|(x, y)| x.is_finite() && y.is_finite()))
+            .map(|s| s.label.as_str());
+        zones.chain(lines).chain(series).filter(|l| !l.is_empty())
+    }
+
+    /// The corner for a legend box of `legend` pixels (width, height) in a plot area of
+    /// `plot` pixels showing `xr` × `yr`: of upper right, upper left, lower right and lower
+    /// left, in that order of preference, the one where the box hides the fewest marks
+    /// (points, and lines followed every [`LEGEND_PROBE_PX`]). A rising curve's legend
+    /// goes to the upper left, where it hides nothing, instead of over the curve's end.
+    fn legend_corner(
+        &self,
+        (xr, yr): ((f64, f64), (f64, f64)),
+        plot: (u32, u32),
+        legend: (i32, i32),
+    ) -> SeriesLabelPosition {
+        let (w, h) = (f64::from(plot.0), f64::from(plot.1));
+        let to_px = |(x, y): (f64, f64)| {
+            (
+                (x - xr.0) / (xr.1 - xr.0) * w,
+                (yr.1 - y) / (yr.1 - yr.0) * h,
+            )
+        };
+        // Every drawn mark as pixel probes: points as they are, lines and bars followed
+        // every LEGEND_PROBE_PX.
+        fn follow(a: (f64, f64), b: (f64, f64), probes: &mut Vec<(f64, f64)>) {
+            let len = (b.0 - a.0).hypot(b.1 - a.1);
+            let steps = (len / LEGEND_PROBE_PX).ceil().clamp(1.0, 1000.0) as usize;
+            probes.extend((0..=steps).map(|j| {
+                let f = j as f64 / steps as f64;
+                (a.0 + f * (b.0 - a.0), a.1 + f * (b.1 - a.1))
+            }));
+        }
+        let finite = |p: &&(f64, f64)| p.0.is_finite() && p.1.is_finite();
+        let mut probes = Vec::new();
+        for s in &self.series {
+            match s.mark {
+                Mark::Points(_) => probes.extend(s.points.iter().filter(finite).map(|p| to_px(*p))),
+                Mark::Bars => {
+                    for &(x, y) in s.points.iter().filter(finite) {
+                        follow(to_px((x, 0.0)), to_px((x, y)), &mut probes);
+                    }
+                }
+                Mark::Line | Mark::Dashed | Mark::Band(_) => {
+                    for pair in s.points.windows(2) {
+                        if finite(&&pair[0]) && finite(&&pair[1]) {
+                            follow(to_px(pair[0]), to_px(pair[1]), &mut probes);
+                        }
+                    }
+                }
+            }
+        }
+        for (y, _) in &self.h_lines {
+            follow(to_px((xr.0, *y)), to_px((xr.1, *y)), &mut probes);
+        }
+        // The boxes' top left corners as plotters lays them out (5 px in from the
+        // corner), in the order of preference; each grown by a marker's radius.
+        let (lw, lh) = (f64::from(legend.0), f64::from(legend.1));
+        let grow = 3.0;
+        let corners = [
+            (w - lw - 5.0, 5.0),
+            (5.0, 5.0),
+            (w - lw - 5.0, h - lh - 5.0),
+            (5.0, h - lh - 5.0),
+        ];
+        let hidden = |&(x0, y0): &(f64, f64)| {
+            probes
+                .iter()
+                .filter(|(px, py)| {
+                    *px >= x0 - grow
+                        && *px <= x0 + lw + grow
+                        && *py >= y0 - grow
+                        && *py <= y0 + lh + grow
+                })
+                .count()
+        };
+        let best = (0..corners.len())
+            .min_by_key(|&i| (hidden(&corners[i]), i))
+            .unwrap_or(0);
+        match best {
+            0 => SeriesLabelPosition::UpperRight,
+            1 => SeriesLabelPosition::UpperLeft,
+            2 => SeriesLabelPosition::LowerRight,
+            _ => SeriesLabelPosition::LowerLeft,
+        }
+    }
+
     fn draw<DB: DrawingBackend>(
         &self,
         root: &DrawingArea<DB, Shift>,
@@ -441,12 +543,30 @@ impl Chart {
             }
         }
         if any_label {
+            let font = TextStyle::from(("sans-serif", LEGEND_FONT_PX).into_font());
+            let area = chart.plotting_area();
+            let mut text_w = 0;
+            let mut lines = 0;
+            for label in self.legend_labels() {
+                let (w, _) = area
+                    .estimate_text_size(label, &font)
+                    .map_err(|e| e.to_string())?;
+                text_w = text_w.max(w as i32);
+                lines += 1;
+            }
+            // plotters' box: the text, its 30 px sample area and a 10 px margin all round;
+            // lines 1.25 font sizes apart.
+            let legend = (
+                text_w + 30 + 20,
+                (f64::from(lines) * 1.25 * f64::from(LEGEND_FONT_PX)).ceil() as i32 + 20,
+            );
+            let corner = self.legend_corner((xr, yr), area.dim_in_pixel(), legend);
             chart
                 .configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
+                .position(corner)
                 .background_style(WHITE.mix(0.85))
                 .border_style(BLACK)
-                .label_font(("sans-serif", 14))
+                .label_font(("sans-serif", LEGEND_FONT_PX))
                 .draw()
                 .map_err(|e| e.to_string())?;
         }
@@ -515,6 +635,30 @@ mod tests {
         let svg_text = std::fs::read_to_string(svg).unwrap();
         assert!(svg_text.contains("target path") && svg_text.contains("measured"));
         assert!(!svg_text.contains("keyframes"));
+    }
+
+    /// Guards the legend's placement: it goes to the corner where it hides no data, the
+    /// upper right when that one is free (a falling line) and the upper left over a rising
+    /// line's end (the follower chart hid its last 30° under the legend); a line through
+    /// every corner but the lower left sends it there.
+    #[test]
+    fn legend_goes_where_it_hides_nothing() {
+        let ranges = ((0.0, 10.0), (0.0, 10.0));
+        let (plot, legend) = ((900, 500), (200, 80));
+        let corner = |pts: Vec<(f64, f64)>| {
+            Chart::new("c", "x", "y")
+                .with(Series::line("data", pts, 0))
+                .legend_corner(ranges, plot, legend)
+        };
+        let falling = corner(vec![(0.0, 10.0), (10.0, 0.0)]);
+        assert!(matches!(falling, SeriesLabelPosition::UpperRight));
+        let rising = corner(vec![(0.0, 0.0), (10.0, 10.0)]);
+        assert!(matches!(rising, SeriesLabelPosition::UpperLeft));
+        let around = corner(vec![(9.5, 0.0), (9.5, 9.5), (0.0, 9.5)]);
+        assert!(
+            matches!(around, SeriesLabelPosition::LowerLeft),
+            "{around:?}"
+        );
     }
 
     /// Guards the error path: a chart without finite data is an error, not a panic.

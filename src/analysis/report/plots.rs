@@ -187,6 +187,21 @@ pub fn error_chart(
         chart.h_lines.push((-t, String::new()));
     }
     chart.h_lines.push((0.0, String::new()));
+    // Room above the data for the legend: both directions' errors fill the plot's height
+    // at both ends of the cycle, so no corner of it is free otherwise (the legend hid the
+    // reverse run's peak near 355°).
+    let ys = chart
+        .series
+        .iter()
+        .flat_map(|s| s.points.iter().map(|p| p.1))
+        .chain(chart.h_lines.iter().map(|l| l.0))
+        .filter(|y| y.is_finite());
+    let (lo, hi) = ys.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), y| {
+        (l.min(y), h.max(y))
+    });
+    if lo < hi {
+        chart.y_range = Some(crate::plot::legend_room_y_range(lo, hi - lo));
+    }
     let stem = dir.join(format!("error_{}", ch.name));
     chart.write(&stem)?;
     Ok((
