@@ -6,7 +6,7 @@
 //! `assemble`).
 //!
 //! **Loop order.** d_x is the outer loop ([`dx_grid`], per class) and K the inner one (from
-//! [`first_k`] up to dof + 1 + [`max_extra_k`]). Growing K only solves candidates for the
+//! [`first_k`] up to dof + 1 + [`max_extra_k`], two more for printed rims). Growing K only solves candidates for the
 //! new band (see `bands`); an empty band is skipped, so K counts curve pairs.
 //!
 //! **Acceptance.** The first (d_x, K) whose combination holds the paper's closure and the
@@ -110,13 +110,21 @@ pub fn first_k(class: Class) -> usize {
     }
 }
 
-/// How many K beyond the minimum the search tries for `class`.
-pub fn max_extra_k(class: Class) -> usize {
-    if class == Class::R1 {
+/// How many more K the search tries when closure counts only the contacts the printed rims
+/// keep (`printed_rim`): 2. The rims drop 4–65 % of each pair's contacts, so a printable
+/// design needs more pairs than the bare curves do: under `undercut::RULES` 4 screw-bob
+/// closes at no K ≤ 7 and at K = 8 (d_x = 7.5), whose build is printable (docs/build.md).
+pub const MAX_EXTRA_K_PRINTED: usize = 2;
+
+/// How many K beyond the minimum the search tries for `class`, with
+/// [`MAX_EXTRA_K_PRINTED`] more when closure counts the printed rims' contacts.
+pub fn max_extra_k(class: Class, printed_rim: bool) -> usize {
+    let bare = if class == Class::R1 {
         MAX_EXTRA_K_1R
     } else {
         MAX_EXTRA_K
-    }
+    };
+    bare + if printed_rim { MAX_EXTRA_K_PRINTED } else { 0 }
 }
 /// Largest band gap `--band-gap` accepts, model units. Default 5 (50 mm at 10 mm per unit):
 /// five times the band height; a wider gap only makes the stack taller and pushes the outer
@@ -396,7 +404,10 @@ impl Search<'_> {
     fn run(mut self) -> Result<Outcome, SynthError> {
         let k_list: Vec<usize> = match self.opts.k {
             Some(k) => vec![k],
-            None => (first_k(self.class)..=self.class.min_k() + max_extra_k(self.class)).collect(),
+            None => {
+                let extra = max_extra_k(self.class, self.opts.printed_rim);
+                (first_k(self.class)..=self.class.min_k() + extra).collect()
+            }
         };
         let dx_list: Vec<f64> = match self.opts.dx {
             Some(d) => vec![d],
