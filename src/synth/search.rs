@@ -6,8 +6,9 @@
 //! `assemble`).
 //!
 //! **Loop order.** d_x is the outer loop ([`dx_grid`], per class) and K the inner one (from
-//! [`first_k`] up to dof + 1 + [`max_extra_k`], two more for printed rims). Growing K only solves candidates for the
-//! new band (see `bands`); an empty band is skipped, so K counts curve pairs.
+//! [`first_k`] up to dof + 1 + [`max_extra_k`], two more for printed rims). Growing K only
+//! solves candidates for the new band (see `bands`); an empty band is skipped, so K counts
+//! curve pairs.
 //!
 //! **Acceptance.** The first (d_x, K) whose combination holds the paper's closure and the
 //! robust closure at every instant of the [`OVERSAMPLE`]× check, with E_maxDist (paper and

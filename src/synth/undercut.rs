@@ -28,9 +28,9 @@ use super::math::{Mat3, V3};
 /// island test reaches as far as the build's rays, the plates' escape is tested and lost
 /// runs are widened by [`LOST_EDGE_MM`] (2026-12-04); 3 since a plate's rays need
 /// [`PLATE_CLEARANCE_MM`] from their root on (2026-12-05); 4 since the cut test steps along
-/// each contact's path between instants ([`CUT_STEP_MM`], 2026-12-05). Caches of designs (`demo`) key
-/// on it, so a design judged by older rules is synthesized again rather than handed to a
-/// build that disowns it.
+/// each contact's path between instants ([`CUT_STEP_MM`], 2026-12-05). Caches of designs
+/// (`demo`) key on it, so a design judged by older rules is synthesized again rather than
+/// handed to a build that disowns it.
 pub const RULES: u32 = 4;
 
 /// Follower rim: half-ellipse semi-axis along the contact normal (how deep the rim is).
