@@ -18,17 +18,14 @@ use mpc_rig::analysis::{
 use mpc_rig::rig::config::RigConfig;
 use mpc_rig::rig::recording::TargetRef;
 
+#[path = "support/process.rs"]
+mod process;
+use process::peak_rss_mb;
+
 const CHILD_ENV: &str = "MPC_BENCH_ANALYSIS_DIR";
 
 fn repo(p: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(p)
-}
-
-fn peak_rss_mb() -> Option<f64> {
-    let s = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb / 1024.0)
 }
 
 fn child(dir: &Path) {
