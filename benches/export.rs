@@ -15,13 +15,8 @@ use mpc_rig::geometry::primitive_meshes::{cuboid, torus};
 use mpc_rig::geometry::render::{RenderOptions, Renderer, View};
 use mpc_rig::geometry::{Pose, Scene, ScenePart};
 
-fn peak_rss_mb() -> f64 {
-    let s = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
-    s.lines()
-        .find(|l| l.starts_with("VmHWM:"))
-        .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
-        .map_or(f64::NAN, |kb| kb / 1024.0)
-}
+#[path = "support/process.rs"]
+mod process;
 
 fn step<T>(what: &str, f: impl FnOnce() -> T) -> T {
     let t = Instant::now();
@@ -29,7 +24,7 @@ fn step<T>(what: &str, f: impl FnOnce() -> T) -> T {
     println!(
         "{what:<34} {:>8.3} s   peak RSS {:>6.0} MB",
         t.elapsed().as_secs_f64(),
-        peak_rss_mb()
+        process::peak_rss_mb().unwrap_or(f64::NAN)
     );
     out
 }
