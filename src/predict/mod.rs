@@ -408,8 +408,9 @@ pub fn predict(
     }
     let built = BuiltParts::load(parts_dir)?;
     let kin = Kinematics::new(mech, built.scale_mm)?;
-    // Each part is read and prepared on its own thread, as neither step is parallel
-    // inside: on the demo's parts `simulate` went from 55.6 to 48.4 s wall (2026-12-05).
+    // Each part is read and prepared on its own thread: reading the STL and building
+    // parry's BVH are serial inside. On the demo's parts `simulate` went from 55.6 to
+    // 48.4 s wall (2026-12-05).
     let load = |part: &str| -> Result<Solid, PredictError> {
         let mesh = read_stl(&parts_dir.join(format!("{part}.stl")))?;
         Ok(Solid::new(&mesh, part)?)
