@@ -37,6 +37,9 @@ pub const BAND: Section = Section::RoundedRect {
     round: BAND_ROUND_MM,
 };
 
+/// Length of the strips a web's fan is cut into along each sliver, mm ([`web`]). 2 mm: a
+/// few strips' boxes hold any point of the 2.4 mm plate.
+pub const WEB_STRIP_MM: f64 = 2.0;
 /// Spacing of the sample points a web is covered by, mm.
 const WEB_COVER_SPACING_MM: f64 = 1.4;
 
@@ -85,16 +88,31 @@ pub fn rim_core(rim: &Sweep) -> Vec<Vec3> {
         .collect()
 }
 
-/// The web closing `rim` into a plate: a fan from the core loop's centroid, thickened.
+/// The web closing `rim` into a plate: a fan from the core loop's centroid, thickened;
+/// and the fan's triangles (centre, core point, next core point).
+///
+/// The plate is built from the same fan cut into strips [`WEB_STRIP_MM`] long along each
+/// sliver: the same surface, but boxes small enough that a point inside the plate lies in
+/// a few of them, where a whole sliver's box (from the centre to the rim) holds about a
+/// quarter of the plate and the exact value inside (`ThickTriangles`) visited that many.
 pub fn web(rim: &Sweep) -> (ThickTriangles, Vec<[Vec3; 3]>) {
     let core = rim_core(rim);
     let c = core.iter().sum::<Vec3>() / core.len() as f64;
     let n = core.len();
     let tris: Vec<[Vec3; 3]> = (0..n).map(|i| [c, core[i], core[(i + 1) % n]]).collect();
-    (
-        ThickTriangles::new(tris.clone(), WEB_HALF_THICKNESS_MM),
-        tris,
-    )
+    let mut strips = Vec::new();
+    for &[c, a, b] in &tris {
+        let reach = (a - c).norm().max((b - c).norm());
+        let m = (reach / WEB_STRIP_MM).ceil().max(1.0) as usize;
+        let at = |q: Vec3, k: usize| c + (q - c) * (k as f64 / m as f64);
+        strips.push([c, at(a, 1), at(b, 1)]);
+        for k in 1..m {
+            let (a0, b0, a1, b1) = (at(a, k), at(b, k), at(a, k + 1), at(b, k + 1));
+            strips.push([a0, a1, b1]);
+            strips.push([a0, b1, b0]);
+        }
+    }
+    (ThickTriangles::new(strips, WEB_HALF_THICKNESS_MM), tris)
 }
 
 /// Balls covering a sweep: per frame, a small grid of balls over the section (two along
