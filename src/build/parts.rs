@@ -6,7 +6,7 @@
 //! 2. hubs, joint, couplings, sensor features and support by rule (`layout`);
 //! 3. for 3R, the support's post to the ball's cup, planned around both parts' sweeps;
 //! 4. the webs kept [`WEB_MARGIN_MM`] clear of the driver's swept bands (exactly, near
-//!    their edge) and the follower's struts, cap and pad joined through the space the
+//!    their edge, by cuts through their whole thickness: [`WEB_THROUGH_CUT_MM`]) and the follower's struts, cap and pad joined through the space the
 //!    driver and support never enter;
 //! 5. the driver's struts joined through the space the whole follower never enters, one
 //!    per piece the carve leaves of each band (`segments`).
@@ -1179,7 +1179,7 @@ impl Design {
             })
         };
         let mut add: Vec<Box<dyn Sdf>> = self.rims.iter().cloned().map(boxed).map(shrunk).collect();
-        // Webs and core-rooted struts, kept clear of the driver's swept bands.
+        // Core-rooted struts, trimmed clear of the driver's swept bands.
         let kept_clear = |solid: Arc<dyn Sdf>| -> Box<dyn Sdf> {
             shrunk(Box::new(KeptClear {
                 solid,
@@ -1188,7 +1188,14 @@ impl Design {
                 far: CARVE_CAP_CELLS * self.cell_mm + half,
             }))
         };
-        add.extend(self.webs.iter().map(|w| kept_clear(w.clone())));
+        // Webs are cut through their whole thickness (`WebCut`), not shaved.
+        add.extend(self.webs.iter().map(|w| -> Box<dyn Sdf> {
+            shrunk(Box::new(WebCut {
+                web: w.clone(),
+                clear: self.band_clearance.clone(),
+                far: CARVE_CAP_CELLS * self.cell_mm + half,
+            }))
+        }));
         for s in &self.follower_struts {
             add.push(shrunk(Box::new(s.clone())));
         }
@@ -1265,10 +1272,10 @@ impl Design {
     }
 }
 
-/// A web (or a strut rooted by its core) kept clear of the driver's swept bands, for the
+/// A strut rooted by its core, trimmed point by point clear of the driver's swept bands, for the
 /// mesher: inside it, values more than `far` from zero are only said to be that far.
 struct KeptClear {
-    /// The web or strut.
+    /// The strut.
     solid: Arc<dyn Sdf>,
     /// Its clearance from the driver's swept bands (and the rest of the driver).
     clear: Arc<BandClearance>,
@@ -1276,7 +1283,7 @@ struct KeptClear {
     /// mesher reads magnitudes only near the surface (as the driver's carve,
     /// [`CARVE_CAP_CELLS`] cells), and the union and difference the solid enters keep a
     /// value that is at least this far (in either direction) at least this far. The shrink
-    /// by half the clearance moves every value by that much, so the follower's webs pass
+    /// by half the clearance moves every value by that much, so the follower passes
     /// that half on top ([`Design::follower_solid`]).
     far: f64,
 }
@@ -1295,6 +1302,51 @@ impl Sdf for KeptClear {
     }
     fn bounds(&self) -> Aabb {
         self.solid.bounds()
+    }
+}
+
+/// A web kept clear of the driver's swept bands by cuts through its whole thickness, for
+/// the mesher: a point of the plate is kept where the clearance at its foot on the plate's
+/// mid-surface is at least [`WEB_THROUGH_CUT_MM`]; inside, values more than `far` from
+/// zero are only said to be that far (as [`KeptClear`]).
+///
+/// A web trimmed point by point ([`KeptClear`]) was shaved wherever the bands' sweep
+/// passes the plate at a slant or along it: demo's follower came out with its webs thinned
+/// to films and frayed into hundreds of crumbs (`follower.png` until 2026-12-05), which a
+/// slicer prints as stringy islands or not at all. Cut through, a web keeps its full
+/// thickness or is not there, and each cut's edge stands square to the plate.
+struct WebCut {
+    /// The web.
+    web: Arc<ThickTriangles>,
+    /// Its clearance from the driver's swept bands (and the rest of the driver).
+    clear: Arc<BandClearance>,
+    /// As [`KeptClear::far`].
+    far: f64,
+}
+
+/// The clearance from the driver's swept bands a web's mid-surface keeps where the web is
+/// kept, mm: the webs' margin plus their half thickness, so that every point of the plate,
+/// at most the half thickness from its foot (the clearance is 1-Lipschitz), keeps the
+/// margin, as the point-by-point trim did.
+pub const WEB_THROUGH_CUT_MM: f64 = WEB_MARGIN_MM + WEB_HALF_THICKNESS_MM;
+
+impl Sdf for WebCut {
+    fn dist(&self, p: Vec3) -> f64 {
+        // Inside the plate the mid-surface is within the half thickness: one search gives
+        // the foot and the value.
+        let h = self.web.half_thickness();
+        let Some((foot, d)) = self.web.nearest_within(p, h) else {
+            return self.web.dist(p);
+        };
+        let v = d - h;
+        // max(v, cut − clearance at the foot), the clearance needed only below cut − v
+        // (as in `KeptClear`).
+        let cut = WEB_THROUGH_CUT_MM;
+        let need = (cut - v).min(cut + self.far);
+        v.max(cut - self.clear.below(foot, need, cut - self.far))
+    }
+    fn bounds(&self) -> Aabb {
+        self.web.bounds()
     }
 }
 
@@ -1458,12 +1510,9 @@ mod tests {
         }
     }
 
-    /// Guards the follower's floor ([`BandClearance::below`], which [`KeptClear`] asks with
-    /// one): the clearance from the driver's swept bands is the one without a floor wherever
-    /// that is above the floor, and the floor wherever it is not, at points around the
-    /// follower's curves (in and out of the bands' sweep).
-    #[test]
-    fn band_clearance_above_its_floor_is_the_one_without() {
+    /// half-turn-2to1's clearance from the driver's swept bands (nothing else), its
+    /// mechanism and its rims.
+    fn half_turn_band_clearance() -> (Mechanism, Vec<Sweep>, BandClearance) {
         let (mech, kin) = half_turn();
         let kin = Arc::new(kin);
         let bands: Vec<Sweep> = mech
@@ -1496,8 +1545,95 @@ mod tests {
             kin: kin.clone(),
             bands,
             band_fields,
-            others: Arc::new(connect::clearance(&kin, &[], Frame::Follower, grid)),
+            // Nothing else of the driver near (a field of no obstacles would be infinite,
+            // and its interpolation NaN).
+            others: Arc::new(DistanceField {
+                grid,
+                values: vec![1e3; grid.len()],
+                outside: 1e3,
+            }),
         };
+        (mech, rims, clear)
+    }
+
+    /// Guards the webs' cut through their whole thickness ([`WebCut`]): on half-turn-2to1's
+    /// webs, at feet on their mid-surface, the plate is kept across its whole thickness
+    /// where the clearance from the driver's swept bands there is at least
+    /// [`WEB_THROUGH_CUT_MM`] and cut across it where it is less; every point kept keeps
+    /// [`WEB_MARGIN_MM`]. The point-by-point trim ([`KeptClear`]) leaves films on the same
+    /// webs: feet where part of the thickness is kept and part cut.
+    #[test]
+    fn webs_are_cut_through_their_whole_thickness() {
+        let (_, rims, clear) = half_turn_band_clearance();
+        let clear = Arc::new(clear);
+        let exact = |p: Vec3| clear.below(p, 10.0, f64::NEG_INFINITY);
+        let h = WEB_HALF_THICKNESS_MM;
+        let offsets = [-0.95 * h, -0.5 * h, 0.0, 0.5 * h, 0.95 * h];
+        let (mut kept, mut cut, mut films) = (0, 0, 0);
+        for rim in &rims {
+            let (web, tris) = shapes::web(rim);
+            let web = Arc::new(web);
+            let through = WebCut {
+                web: web.clone(),
+                clear: clear.clone(),
+                far: 10.0,
+            };
+            let shaved = KeptClear {
+                solid: web.clone(),
+                clear: clear.clone(),
+                far: 10.0,
+            };
+            for (i, [a, b, c]) in tris.iter().enumerate().step_by(7) {
+                let n = (b - a).cross(&(c - a)).normalize();
+                for w in [[0.6, 0.2, 0.2], [0.2, 0.6, 0.2], [0.3, 0.3, 0.4]] {
+                    let foot = a * w[0] + b * w[1] + c * w[2];
+                    let points = offsets.map(|s| foot + n * s);
+                    // Only where the plate's points have this foot (not at a fold of the
+                    // fan), and not at the edge of a cut.
+                    let own = points.iter().all(|&p| {
+                        web.nearest_within(p, 2.0 * h)
+                            .is_some_and(|(f, _)| (f - foot).norm() < 1e-6)
+                    });
+                    let c_foot = exact(foot);
+                    if !own || (c_foot - WEB_THROUGH_CUT_MM).abs() < 0.05 {
+                        continue;
+                    }
+                    let keep = c_foot >= WEB_THROUGH_CUT_MM;
+                    for &p in &points {
+                        let v = through.dist(p);
+                        assert_eq!(
+                            v < 0.0,
+                            keep,
+                            "web triangle {i}, {p:?}: value {v}, clearance at the foot {c_foot}"
+                        );
+                        if keep {
+                            assert!(exact(p) >= WEB_MARGIN_MM - 1e-9, "{p:?}: {}", exact(p));
+                        }
+                    }
+                    if keep {
+                        kept += 1;
+                    } else {
+                        cut += 1;
+                    }
+                    let signs: Vec<bool> = points.iter().map(|&p| shaved.dist(p) < 0.0).collect();
+                    films += usize::from(signs.iter().any(|&s| s != signs[0]));
+                }
+            }
+        }
+        assert!(kept >= 20 && cut >= 20, "{kept} feet kept, {cut} cut");
+        assert!(
+            films > 0,
+            "the point-by-point trim left no film to compare with"
+        );
+    }
+
+    /// Guards the follower's floor ([`BandClearance::below`], which [`KeptClear`] asks with
+    /// one): the clearance from the driver's swept bands is the one without a floor wherever
+    /// that is above the floor, and the floor wherever it is not, at points around the
+    /// follower's curves (in and out of the bands' sweep).
+    #[test]
+    fn band_clearance_above_its_floor_is_the_one_without() {
+        let (mech, _, clear) = half_turn_band_clearance();
         let (need, floor) = (2.0, 0.0);
         let (mut deep, mut between) = (0, 0);
         for i in 0..200 {
