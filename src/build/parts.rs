@@ -6,8 +6,9 @@
 //! 2. hubs, joint, couplings, sensor features and support by rule (`layout`);
 //! 3. for 3R, the support's post to the ball's cup, planned around both parts' sweeps;
 //! 4. the webs kept [`WEB_MARGIN_MM`] clear of the driver's swept bands (exactly, near
-//!    their edge, by cuts through their whole thickness: [`WEB_THROUGH_CUT_MM`]) and the follower's struts, cap and pad joined through the space the
-//!    driver and support never enter;
+//!    their edge, by cuts through their whole thickness: [`WEB_THROUGH_CUT_MM`]) and the
+//!    follower's struts, cap and pad joined through the space the driver and support never
+//!    enter;
 //! 5. the driver's struts joined through the space the whole follower never enters, one
 //!    per piece the carve leaves of each band (`segments`).
 //!
@@ -1272,8 +1273,9 @@ impl Design {
     }
 }
 
-/// A strut rooted by its core, trimmed point by point clear of the driver's swept bands, for the
-/// mesher: inside it, values more than `far` from zero are only said to be that far.
+/// A strut rooted by its core, trimmed point by point clear of the driver's swept bands,
+/// for the mesher: inside it, values more than `far` from zero are only said to be that
+/// far.
 struct KeptClear {
     /// The strut.
     solid: Arc<dyn Sdf>,
@@ -1310,11 +1312,12 @@ impl Sdf for KeptClear {
 /// mid-surface is at least [`WEB_THROUGH_CUT_MM`]; inside, values more than `far` from
 /// zero are only said to be that far (as [`KeptClear`]).
 ///
-/// A web trimmed point by point ([`KeptClear`]) was shaved wherever the bands' sweep
-/// passes the plate at a slant or along it: demo's follower came out with its webs thinned
-/// to films and frayed into hundreds of crumbs (`follower.png` until 2026-12-05), which a
-/// slicer prints as stringy islands or not at all. Cut through, a web keeps its full
-/// thickness or is not there, and each cut's edge stands square to the plate.
+/// A web trimmed point by point ([`KeptClear`]) is shaved wherever the bands' sweep passes
+/// the plate at a slant or along it, leaving part of its thickness as a film that a slicer
+/// prints as stringy islands or not at all (a test finds such films on half-turn-2to1's
+/// webs). Cut through, a web keeps its full thickness or is not there, and each cut's edge
+/// stands square to the plate. (Most of the "lace" of the webs until 2026-12-05 was not
+/// the trim but voids: `ThickTriangles`' value inside.)
 struct WebCut {
     /// The web.
     web: Arc<ThickTriangles>,
