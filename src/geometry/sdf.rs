@@ -490,19 +490,27 @@ impl ThickTriangles {
     /// The point of the triangles (the plate's mid-surface) nearest to `p` and its distance,
     /// when one is within `reach`; `None` otherwise, or for no triangles.
     pub fn nearest_within(&self, p: Vec3, reach: f64) -> Option<(Vec3, f64)> {
+        self.nearest_below(p, reach - self.half_thickness)
+            .map(|(foot, v)| (foot, v + self.half_thickness))
+    }
+
+    /// The foot on the mid-surface nearest to `p` and the plate's value there (distance
+    /// less the half thickness), when that value is below `limit`. Every triangle whose
+    /// plate holds `p` is visited, not only the first: the nearest foot is the deepest.
+    fn nearest_below(&self, p: Vec3, limit: f64) -> Option<(Vec3, f64)> {
         let mut nearest = None;
-        let mut best = reach;
+        let mut best = limit;
         // The boxes are the triangles' grown by the half thickness: their distance is a
-        // lower bound on a triangle's too.
-        self.bvh.min_over(arr(p), reach, false, |i, _| {
+        // lower bound on a triangle's plate value.
+        self.bvh.min_over(arr(p), limit, true, |i, _| {
             let [a, b, c] = self.tris[i];
             let q = closest_on_triangle(p, a, b, c);
-            let d = (p - q).norm();
-            if d <= best {
-                best = d;
-                nearest = Some((q, d));
+            let v = (p - q).norm() - self.half_thickness;
+            if v < best {
+                best = v;
+                nearest = Some((q, v));
             }
-            d
+            v
         });
         nearest
     }
@@ -516,19 +524,10 @@ impl Sdf for ThickTriangles {
     /// every value above −c/2 outside: demo's webs came out riddled with voids and films
     /// (a point on a web's mid-surface read −0.001 to −0.09 instead of −1.2).
     fn dist(&self, p: Vec3) -> f64 {
-        let v = self
-            .bvh
-            .min_over(arr(p), super::sweep::SWEEP_EXACT_WITHIN_MM, true, |i, _| {
-                let [a, b, c] = self.tris[i];
-                (p - closest_on_triangle(p, a, b, c)).norm() - self.half_thickness
-            });
-        if v < super::sweep::SWEEP_EXACT_WITHIN_MM {
-            v
-        } else {
-            self.bvh
-                .bounds()
-                .distance(arr(p))
-                .max(super::sweep::SWEEP_EXACT_WITHIN_MM)
+        let far = super::sweep::SWEEP_EXACT_WITHIN_MM;
+        match self.nearest_below(p, far) {
+            Some((_, v)) => v,
+            None => self.bvh.bounds().distance(arr(p)).max(far),
         }
     }
     fn bounds(&self) -> Aabb {
