@@ -658,8 +658,6 @@ mod tests {
         assert!(d.dist(Vec3::new(3.0, 0.0, 0.0)) < 0.0);
     }
 
-    /// The closest point on a triangle is right in each Voronoi region (vertex, edge, face),
-    /// checked against a dense sampling of the triangle.
     /// Guards [`ThickTriangles`]' value inside: on a web-like fan of 360 slivers from a
     /// centre to a wavy loop of 30 mm radius, every point of the mid-surface is the half
     /// thickness deep and every point half that far off it half as deep, whichever sliver
@@ -709,6 +707,8 @@ mod tests {
         assert!(checked >= 50, "{checked} points checked");
     }
 
+    /// The closest point on a triangle is right in each Voronoi region (vertex, edge, face),
+    /// checked against a dense sampling of the triangle.
     #[test]
     fn closest_point_on_triangle() {
         let (a, b, c) = (
