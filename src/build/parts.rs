@@ -22,7 +22,7 @@ use crate::geometry::mesh::Aabb;
 use crate::geometry::sdf::{
     Cylinder, Difference, Offset, Sdf, ThickPolyline, ThickTriangles, Union, Vec3,
 };
-use crate::geometry::sweep::Sweep;
+use crate::geometry::sweep::{Sweep, SWEEP_EXACT_WITHIN_MM};
 use crate::geometry::voxel::DistanceField;
 use crate::synth::closure::Class;
 use crate::synth::mechanism::Mechanism;
@@ -1335,13 +1335,15 @@ pub const WEB_THROUGH_CUT_MM: f64 = WEB_MARGIN_MM + WEB_HALF_THICKNESS_MM;
 
 impl Sdf for WebCut {
     fn dist(&self, p: Vec3) -> f64 {
-        // Inside the plate the mid-surface is within the half thickness: one search gives
-        // the foot and the value.
-        let h = self.web.half_thickness();
-        let Some((foot, d)) = self.web.nearest_within(p, h) else {
+        // One search gives the plate's value and, inside it, the foot. Outside the plate
+        // that value is the web's own (`ThickTriangles::dist`, which also falls back to
+        // the box beyond where values are exact).
+        let Some((foot, v)) = self.web.nearest_below(p, SWEEP_EXACT_WITHIN_MM) else {
             return self.web.dist(p);
         };
-        let v = d - h;
+        if v >= 0.0 {
+            return v;
+        }
         // max(v, cut − clearance at the foot), the clearance needed only below cut − v
         // (as in `KeptClear`).
         let cut = WEB_THROUGH_CUT_MM;

@@ -497,7 +497,7 @@ impl ThickTriangles {
     /// The foot on the mid-surface nearest to `p` and the plate's value there (distance
     /// less the half thickness), when that value is below `limit`. Every triangle whose
     /// plate holds `p` is visited, not only the first: the nearest foot is the deepest.
-    fn nearest_below(&self, p: Vec3, limit: f64) -> Option<(Vec3, f64)> {
+    pub fn nearest_below(&self, p: Vec3, limit: f64) -> Option<(Vec3, f64)> {
         let mut nearest = None;
         let mut best = limit;
         // The boxes are the triangles' grown by the half thickness: their distance is a
