@@ -1,17 +1,20 @@
-//! How far the follower can turn, at one driver angle, before its mesh touches the driver's.
+//! How far the follower can move, at one driver angle, before its mesh touches the driver's.
 //!
 //! Owns [`Solid`] (a part's mesh ready for distance queries, its vertices grouped in
-//! clusters) and [`free_turns`], which answers, for every sample time of a period and each
-//! sense of rotation, the largest turn δ ≤ a cap of the follower about its joint axis (R's
-//! z axis) from its design pose that leaves the two meshes apart. Both ways are tested:
-//! every follower vertex against the driver's mesh and every driver vertex against the
-//! follower's, so an edge of either part that would cut into a face of the other is seen.
+//! clusters), [`Screw`] (a motion the follower's joint allows: a turn about its axis, R's
+//! z axis, a slide along it, or both at once) and [`free_along`], which answers, for every
+//! sample time of a period and each sense of each given screw, the largest motion δ ≤ a
+//! cap from the design pose that leaves the two meshes apart ([`free_turns`] for a turn
+//! alone). Both ways are tested: every follower vertex against the driver's mesh and every
+//! driver vertex against the follower's, so an edge of either part that would cut into a
+//! face of the other is seen.
 //!
-//! A vertex is *sphere-traced* along its arc: at a turn δ its distance d to the other mesh
-//! is a ball it cannot leave before turning d / r more (r its distance from the axis), so
-//! the turn advances by d / r until d falls below [`HIT_MM`]. The result is exact to
-//! `HIT_MM / r` and never overshoots a contact. What makes it affordable, each step safe
-//! because it only uses lower bounds on distances:
+//! A vertex is *sphere-traced* along its path: at δ its distance d to the other mesh is a
+//! ball it cannot leave before the motion advances d / r more (r how far the vertex moves
+//! per unit of δ: its distance from the axis for a turn, 1 for a slide), so δ advances by
+//! d / r until d falls below [`HIT_MM`]. The result is exact to `HIT_MM / r` and never
+//! overshoots a contact. What makes it affordable, each step safe because it only uses
+//! lower bounds on distances:
 //! - clusters of vertices (cells of [`CLUSTER_MM`]) are skipped while a lower bound on
 //!   their distance, carried from their last query by the parts' speed bound, shows they
 //!   cannot touch within the search limit;
@@ -19,7 +22,7 @@
 //!   points more than about a millimetre away without a mesh query, and nearer the
 //!   surface the exact distance of the point's voxel centre, computed once for every
 //!   point and every sample that asks there (its own query the first time);
-//! - the search limit starts at twice the last sample's free turn (the whole cap only when
+//! - the search limit starts at twice the last sample's free motion (the whole cap only when
 //!   nothing touches within it), and the vertex that touched first at the last sample is
 //!   traced first;
 //! - a vertex whose faces all look away from its motion (its normal cone: the mean of its
@@ -68,7 +71,8 @@ const GRID_MARGIN_MM: f64 = 4.0;
 /// grid step is at most this much shorter than the exact one (the bound's slack), so a
 /// few wasted steps cost less than a query each.
 const FAR_MM: f64 = 1.0;
-/// Vertices nearer the axis than this do not move under a turn, mm.
+/// A vertex that moves less than this per unit of the motion is not traced, mm: one on the
+/// axis does not move under a turn.
 const ON_AXIS_MM: f64 = 1e-6;
 
 /// Error building a [`Solid`].
@@ -332,6 +336,64 @@ pub trait PartMotion: Sync {
     fn driver_reach(&self, p: &Point3<f64>) -> f64;
 }
 
+/// A motion of the follower its joint allows about R's z axis: per unit of the motion's
+/// parameter, a turn of `spin` rad (counter-clockwise about +z when positive) and a slide
+/// of `slide` mm along +z. A 1R follower only turns ([`Screw::TURN`], in rad); a 1R1T one
+/// also slides ([`Screw::SLIDE`], in mm) and screws (both at once).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Screw {
+    /// Turn per unit, rad.
+    pub spin: f64,
+    /// Slide per unit, mm.
+    pub slide: f64,
+}
+
+impl Screw {
+    /// A turn, its parameter in rad.
+    pub const TURN: Screw = Screw {
+        spin: 1.0,
+        slide: 0.0,
+    };
+    /// A slide along the axis, its parameter in mm.
+    pub const SLIDE: Screw = Screw {
+        spin: 0.0,
+        slide: 1.0,
+    };
+
+    /// The same motion the other way.
+    fn reversed(self) -> Screw {
+        Screw {
+            spin: -self.spin,
+            slide: -self.slide,
+        }
+    }
+
+    /// How far a point at distance `r` from the axis moves per unit of the parameter, mm
+    /// (exactly `|spin|·r` for a turn, so a turn traces as it always did).
+    fn lever(&self, r: f64) -> f64 {
+        if self.slide == 0.0 {
+            self.spin.abs() * r
+        } else {
+            (self.spin * r).hypot(self.slide)
+        }
+    }
+
+    /// The motion by `delta` units, as a map of R.
+    fn at(&self, delta: f64) -> Isometry3<f64> {
+        Isometry3::from_parts(
+            nalgebra::Translation3::new(0.0, 0.0, self.slide * delta),
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), self.spin * delta),
+        )
+    }
+
+    /// The velocity of the point `w` (R) per unit of the parameter, mm. The motion's
+    /// velocity field is carried along by the motion itself, so a point's velocity seen
+    /// from its own part does not change along its path.
+    fn velocity(&self, w: &Point3<f64>) -> Vector3<f64> {
+        Vector3::new(-w.y * self.spin, w.x * self.spin, self.slide)
+    }
+}
+
 /// The free turns of the follower over one period, at times `i / n`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FreeTurns {
@@ -375,38 +437,58 @@ pub fn free_turns(
     n: usize,
     cap: f64,
 ) -> FreeTurns {
-    let jobs = [
-        (Side::FollowerIntoDriver, 1.0),
-        (Side::FollowerIntoDriver, -1.0),
-        (Side::DriverIntoFollower, 1.0),
-        (Side::DriverIntoFollower, -1.0),
-    ];
+    free_along(motion, driver, follower, n, &[(Screw::TURN, cap)])
+        .pop()
+        .expect("one motion in, one out")
+}
+
+/// How far the follower is free to move along each of `motions` (a [`Screw`] and the cap
+/// on its parameter) both ways, at `n` times per period: one [`FreeTurns`] per motion, in
+/// the screw's units (rad for a turn, mm for a slide). The overlap is the parts' at the
+/// design pose (the same for every motion) and the queries are the whole run's, so both
+/// are set on every result alike.
+pub fn free_along(
+    motion: &dyn PartMotion,
+    driver: &Solid,
+    follower: &Solid,
+    n: usize,
+    motions: &[(Screw, f64)],
+) -> Vec<FreeTurns> {
+    let jobs: Vec<(Side, Screw, f64)> = motions
+        .iter()
+        .flat_map(|&(screw, cap)| {
+            [
+                (Side::FollowerIntoDriver, screw, cap),
+                (Side::FollowerIntoDriver, screw.reversed(), cap),
+                (Side::DriverIntoFollower, screw, cap),
+                (Side::DriverIntoFollower, screw.reversed(), cap),
+            ]
+        })
+        .collect();
     let centres_before =
         driver.centres.load(Ordering::Relaxed) + follower.centres.load(Ordering::Relaxed);
     let sweeps: Vec<Sweep> = jobs
         .par_iter()
-        .map(|&(side, sense)| sweep(motion, driver, follower, side, sense, n, cap))
-        .collect();
-    let plus = (0..n)
-        .map(|i| sweeps[0].free[i].min(sweeps[2].free[i]))
-        .collect();
-    let minus = (0..n)
-        .map(|i| sweeps[1].free[i].min(sweeps[3].free[i]))
+        .map(|&(side, screw, cap)| sweep(motion, driver, follower, side, screw, n, cap))
         .collect();
     let overlap = sweeps
         .iter()
         .map(|s| s.overlap)
         .fold((0.0, 0.0), |a, b| if b.0 > a.0 { b } else { a });
-    FreeTurns {
-        plus,
-        minus,
-        overlap_mm: overlap.0,
-        overlap_t: overlap.1,
-        queries: sweeps.iter().map(|s| s.queries).sum::<u64>()
-            + driver.centres.load(Ordering::Relaxed)
-            + follower.centres.load(Ordering::Relaxed)
-            - centres_before,
-    }
+    let queries = sweeps.iter().map(|s| s.queries).sum::<u64>()
+        + driver.centres.load(Ordering::Relaxed)
+        + follower.centres.load(Ordering::Relaxed)
+        - centres_before;
+    sweeps
+        .chunks(4)
+        .map(|s| FreeTurns {
+            plus: (0..n).map(|i| s[0].free[i].min(s[2].free[i])).collect(),
+            minus: (0..n).map(|i| s[1].free[i].min(s[3].free[i])).collect(),
+            overlap_mm: overlap.0,
+            overlap_t: overlap.1,
+            queries,
+        })
+        .collect()
 }
 
 /// One side and sense over the period, in time order so each cluster's last distance
@@ -416,7 +498,7 @@ fn sweep(
     driver: &Solid,
     follower: &Solid,
     side: Side,
-    sense: f64,
+    screw: Screw,
     n: usize,
     cap: f64,
 ) -> Sweep {
@@ -424,10 +506,10 @@ fn sweep(
         Side::FollowerIntoDriver => (follower, driver),
         Side::DriverIntoFollower => (driver, follower),
     };
-    // The follower turning by +δ is, seen from the follower, the driver turning by −δ.
-    let turn_sense = match side {
-        Side::FollowerIntoDriver => sense,
-        Side::DriverIntoFollower => -sense,
+    // The follower moving by +δ is, seen from the follower, the driver moving by −δ.
+    let screw = match side {
+        Side::FollowerIntoDriver => screw,
+        Side::DriverIntoFollower => screw.reversed(),
     };
     let speed: Vec<f64> = moving
         .clusters
@@ -437,15 +519,19 @@ fn sweep(
             Side::DriverIntoFollower => motion.driver_speed(&c.center),
         })
         .collect();
+    // How far each cluster's points can move per unit of the screw, from the bound on
+    // their distance from the axis.
     let reach: Vec<f64> = moving
         .clusters
         .iter()
         .map(|c| {
-            c.radius
-                + match side {
-                    Side::FollowerIntoDriver => motion.follower_reach(&c.center),
-                    Side::DriverIntoFollower => motion.driver_reach(&c.center),
-                }
+            screw.lever(
+                c.radius
+                    + match side {
+                        Side::FollowerIntoDriver => motion.follower_reach(&c.center),
+                        Side::DriverIntoFollower => motion.driver_reach(&c.center),
+                    },
+            )
         })
         .collect();
     // Each cluster's last measured distance to the fixed part and when: with the speed
@@ -467,7 +553,7 @@ fn sweep(
             fixed,
             to_r: &to_r,
             r_to_fixed: &r_to_fixed,
-            turn_sense,
+            screw,
             t,
             speed: &speed,
             reach: &reach,
@@ -478,7 +564,7 @@ fn sweep(
         };
         // Free turns change little from one sample to the next: search first within
         // twice the last one, and the whole cap only when nothing touches within that.
-        let limit = (2.0 * previous + SEARCH_FLOOR).min(cap);
+        let limit = (2.0 * previous + cap * SEARCH_FLOOR).min(cap);
         let mut best = at.free_within(limit);
         if best >= limit && limit < cap {
             best = at.free_within(cap);
@@ -498,9 +584,10 @@ fn sweep(
     }
 }
 
-/// Smallest search limit, rad (0.5°): a free turn near zero (parts nearly touching)
-/// still searches a useful span at the next sample.
-const SEARCH_FLOOR: f64 = 0.5 * std::f64::consts::PI / 180.0;
+/// Smallest search limit, a fraction of the cap (0.5° of the default 10° cap): a free
+/// motion near zero (parts nearly touching) still searches a useful span at the next
+/// sample.
+const SEARCH_FLOOR: f64 = 0.05;
 
 /// One (side, sense) test at one time.
 struct AtTime<'a> {
@@ -508,7 +595,7 @@ struct AtTime<'a> {
     fixed: &'a Solid,
     to_r: &'a Isometry3<f64>,
     r_to_fixed: &'a Isometry3<f64>,
-    turn_sense: f64,
+    screw: Screw,
     t: f64,
     speed: &'a [f64],
     reach: &'a [f64],
@@ -522,8 +609,8 @@ impl AtTime<'_> {
     /// Largest free turn up to `limit` (returns `limit` when nothing touches within it).
     fn free_within(&mut self, limit: f64) -> f64 {
         let moving = self.moving;
-        // Clusters that may touch within the limit, nearest first, with the largest
-        // distance of their vertices from the axis now.
+        // Clusters that may touch within the limit, nearest first, with the farthest any of
+        // their vertices moves per unit of the screw now.
         let mut active: Vec<(f64, f64, f64, usize)> = Vec::new();
         for (ci, c) in moving.clusters.iter().enumerate() {
             let (d_last, t_last) = self.last[ci];
@@ -532,7 +619,7 @@ impl AtTime<'_> {
                 continue;
             }
             let w = self.to_r * c.center;
-            let r_max = w.coords.xy().norm() + c.radius;
+            let r_max = self.screw.lever(w.coords.xy().norm() + c.radius);
             let q = self.r_to_fixed * w;
             // The grid's bound first; the mesh only for clusters it cannot rule out.
             let mut d = self.fixed.lower_bound(&q);
@@ -578,13 +665,13 @@ impl AtTime<'_> {
     /// `best` (and note the vertex) if it touches sooner.
     fn try_vertex(&mut self, vi: usize, bound: f64, best: &mut f64, touch: &mut Option<usize>) {
         let w = self.to_r * self.moving.verts[vi];
-        let r = w.coords.xy().norm();
+        let r = self.screw.lever(w.coords.xy().norm());
         if r < ON_AXIS_MM || bound > r * *best {
             return;
         }
-        // The arc's direction and the faces turn together about z, so a vertex that
-        // trails at the start trails along the whole arc.
-        let dir = Vector3::new(-w.y, w.x, 0.0) * (self.turn_sense / r);
+        // The path's direction and the faces move together, so a vertex that trails at
+        // the start trails along the whole path.
+        let dir = self.screw.velocity(&w) / r;
         let dir_in_part = self.to_r.rotation.inverse_transform_vector(&dir);
         if self.moving.cones[vi].trails(&dir_in_part) {
             return;
@@ -592,7 +679,7 @@ impl AtTime<'_> {
         if self.fixed.lower_bound(&(self.r_to_fixed * w)) > r * *best {
             return;
         }
-        let (hit, q, deep) = trace(self.fixed, self.r_to_fixed, &w, r, self.turn_sense, *best);
+        let (hit, q, deep) = trace(self.fixed, self.r_to_fixed, &w, r, self.screw, *best);
         self.queries += q;
         if let Some(depth) = deep {
             if depth > self.overlap.0 {
@@ -607,23 +694,22 @@ impl AtTime<'_> {
     }
 }
 
-/// Sphere-trace one vertex (at `w` in R, distance `r` from the axis) turning about z in
-/// `sense` against `fixed` (R → its frame by `r_to_fixed`), up to `limit` rad. Returns the
-/// turn where it touches (or `limit`), the queries made, and the depth if it starts
+/// Sphere-trace one vertex (at `w` in R, moving `r` mm per unit of `screw`) along the
+/// screw against `fixed` (R → its frame by `r_to_fixed`), up to `limit` units. Returns the
+/// parameter where it touches (or `limit`), the queries made, and the depth if it starts
 /// inside the fixed part.
 fn trace(
     fixed: &Solid,
     r_to_fixed: &Isometry3<f64>,
     w: &Point3<f64>,
     r: f64,
-    sense: f64,
+    screw: Screw,
     limit: f64,
 ) -> (f64, u64, Option<f64>) {
     let mut delta = 0.0;
     let mut queries = 0;
     for step in 0..MAX_STEPS {
-        let turn = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), sense * delta);
-        let p = r_to_fixed * (turn * w);
+        let p = r_to_fixed * (screw.at(delta) * w);
         // Far from the part the grid's bound is a safe step and costs no mesh query.
         let far = fixed.lower_bound(&p);
         if step > 0 && far > FAR_MM {
@@ -720,6 +806,51 @@ mod tests {
             );
         }
         assert_eq!(f.overlap_mm, 0.0);
+    }
+
+    /// Guards the slide and the screw against closed forms: a bar (faces at z = ±1) between
+    /// two wide plates whose faces are at z = 1.5 and z = −2.5 slides 0.5 mm up and 1.5 mm
+    /// down; screwing (a turn of 0.02 rad and a slide of 0.8 mm per unit) it meets the same
+    /// faces after 0.5 / 0.8 units up and 1.5 / 0.8 down, since the plates cover every turn
+    /// (each within the trace's `HIT_MM`, which is HIT_MM / 0.8 units of the screw).
+    #[test]
+    fn a_bar_between_two_plates_slides_and_screws_to_the_closed_form() {
+        let bar = cuboid([0.0, -0.5, -1.0], [20.0, 0.5, 1.0]);
+        let plates = joined(&[
+            cuboid([-30.0, -30.0, 1.5], [30.0, 30.0, 3.0]),
+            cuboid([-30.0, -30.0, -4.0], [30.0, 30.0, -2.5]),
+        ]);
+        let driver = Solid::new(&plates, "driver").unwrap();
+        let follower = Solid::new(&bar, "follower").unwrap();
+        let screw = Screw {
+            spin: 0.02,
+            slide: 0.8,
+        };
+        let f = free_along(
+            &Still,
+            &driver,
+            &follower,
+            3,
+            &[(Screw::SLIDE, 3.0), (screw, 3.0)],
+        );
+        for i in 0..3 {
+            assert!((f[0].plus[i] - 0.5).abs() <= HIT_MM, "{}", f[0].plus[i]);
+            assert!((f[0].minus[i] - 1.5).abs() <= HIT_MM, "{}", f[0].minus[i]);
+            assert!(
+                (f[1].plus[i] - 0.5 / 0.8).abs() <= HIT_MM / 0.8,
+                "{}",
+                f[1].plus[i]
+            );
+            assert!(
+                (f[1].minus[i] - 1.5 / 0.8).abs() <= HIT_MM / 0.8,
+                "{}",
+                f[1].minus[i]
+            );
+        }
+        // A turn alone never meets the plates: the whole cap both ways.
+        let t = free_turns(&Still, &driver, &follower, 3, 0.3);
+        assert_eq!(t.plus, vec![0.3; 3]);
+        assert_eq!(t.minus, vec![0.3; 3]);
     }
 
     /// Guards the cap and the driver-side test: a bar with nothing to hit one way turns the
