@@ -7,7 +7,9 @@ use anyhow::Context;
 use clap::Args;
 
 use crate::predict::law::Load;
-use crate::predict::{self, output, PredictOptions, DEFAULT_SAMPLES, DRIVE_LOST_DEG};
+use crate::predict::{
+    self, output, PredictOptions, DEFAULT_SAMPLES, DRIVE_LOST_DEG, DRIVE_LOST_MM,
+};
 use crate::synth::mechanism::Mechanism;
 
 /// The output folder beside the parts when `-o` is not given.
@@ -71,11 +73,35 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<ExitCode> {
         "worst play {:.3}° at driver {:.2}°; worst deviation from the target {:.3}° at driver {:.2}°",
         p.worst_play.deg, p.worst_play.driver_deg, p.worst_deviation.deg, p.worst_deviation.driver_deg
     );
+    let (held, lost_by) = match &p.slide {
+        None => (
+            format!("play ≤ {DRIVE_LOST_DEG}°"),
+            format!("play > {DRIVE_LOST_DEG}°"),
+        ),
+        Some(s) => {
+            println!(
+                "worst play of the slide {:.3} mm at driver {:.2}°, along a screw {:.3} mm at \
+                 driver {:.2}° (a turn counting at {} mm); worst height deviation {:.3} mm at \
+                 driver {:.2}°",
+                s.worst_slide_play.mm,
+                s.worst_slide_play.driver_deg,
+                s.worst_screw_play.mm,
+                s.worst_screw_play.driver_deg,
+                s.lever_mm,
+                s.worst_height_deviation.mm,
+                s.worst_height_deviation.driver_deg
+            );
+            (
+                format!("play along every line ≤ {DRIVE_LOST_MM:.2} mm"),
+                format!("play along a line > {DRIVE_LOST_MM:.2} mm"),
+            )
+        }
+    };
     if lost == 0 {
-        println!("the driver holds the follower at every angle (play ≤ {DRIVE_LOST_DEG}°)");
+        println!("the driver holds the follower at every angle ({held})");
     } else {
         println!(
-            "drive lost at {lost} of {} angles (play > {DRIVE_LOST_DEG}°): driver {}",
+            "drive lost at {lost} of {} angles ({lost_by}): driver {}",
             p.samples.len(),
             p.lost_windows_text()
         );

@@ -8,10 +8,14 @@
 //! follower: the instant is reported as `drive_lost`, the paper's dynamic form closure
 //! failing on the parts as printed.
 //!
-//! So far it handles 1R mechanisms, under a drag (friction that opposes motion, the
-//! default), a constant torque or a spring ([`law::Load`]); the cylindrical and spherical
-//! joints are issue 15's next steps, and [`predict`] says so instead of guessing. It reads no serial port and does not
-//! build parts; `cli::simulate` writes its files.
+//! It handles 1R mechanisms under a drag (friction that opposes motion, the default), a
+//! constant torque or a spring ([`law::Load`]), and 1R1T mechanisms under a drag. A 1R1T
+//! follower turns and slides, so its play is traced along eight rays of the plane of its
+//! two deviations (a turn, a slide and the screws between them, weighed by
+//! [`SCREW_LEVER_MM`]), and the drag moves it within the region they outline. The
+//! spherical joint (3R) is issue 15's next step, and [`predict`] says so instead of
+//! guessing. It reads no serial port and does not build parts; `cli::simulate` writes its
+//! files.
 
 pub mod law;
 pub mod output;
@@ -29,7 +33,7 @@ use crate::geometry::io::stl::{read_stl, StlError};
 use crate::synth::closure::Class;
 use crate::synth::mechanism::Mechanism;
 
-use play::{free_turns, PartMotion, Solid, SolidError};
+use play::{free_along, FreeTurns, PartMotion, Screw, Solid, SolidError};
 
 /// Driver angles per period. 1 440 (every 0.25°): the issue's floor, four times the
 /// mechanism file's 360 samples, so a loss of drive shorter than one file sample shows.
@@ -44,14 +48,28 @@ pub const DRIVE_LOST_DEG: f64 = 5.0;
 /// is seen clearly and the trace stays short. A side that reaches it is free (no contact
 /// holds the follower that way within the cap).
 pub const FREE_CAP_DEG: f64 = 10.0;
+/// The lever that weighs a 1R1T follower's turn against its slide, mm: a turn of δ rad
+/// counts as `SCREW_LEVER_MM`·δ mm. 30 mm: the middle of the 20–40 mm levers the examples'
+/// contacts act at, where a turn of δ moves the contact points about as far as a slide of
+/// 30·δ mm. The rays of the free region are laid evenly in this plane (its two screws turn
+/// 1 rad per 30 mm of slide), and a drag moves the follower to the region's nearest point
+/// in it.
+pub const SCREW_LEVER_MM: f64 = 30.0;
+/// A 1R1T follower free to move farther than this along a ray and back, both ways
+/// together in the plane of [`SCREW_LEVER_MM`], is not driven, mm: [`DRIVE_LOST_DEG`] at
+/// that lever (2.6 mm), so a turn alone is judged as a 1R follower's is.
+pub const DRIVE_LOST_MM: f64 = DRIVE_LOST_DEG * std::f64::consts::PI / 180.0 * SCREW_LEVER_MM;
+/// Largest free motion traced along each ray of a 1R1T follower, mm in the plane of
+/// [`SCREW_LEVER_MM`]: [`FREE_CAP_DEG`] at that lever (5.2 mm).
+pub const FREE_CAP_MM: f64 = FREE_CAP_DEG * std::f64::consts::PI / 180.0 * SCREW_LEVER_MM;
 
 /// Error of [`predict`].
 #[derive(Debug, thiserror::Error)]
 pub enum PredictError {
     /// The mechanism's class is not handled yet.
     #[error(
-        "simulate handles 1R mechanisms so far; this one is {}: its cylindrical or spherical \
-         joint needs the free motion in more than one coordinate, which is not built yet",
+        "simulate handles 1R and 1R1T mechanisms so far; this one is {}: its spherical joint \
+         needs the free rotation about every axis, which is not built yet",
         class.label()
     )]
     Class {
@@ -231,6 +249,33 @@ pub struct Sample {
     /// The paper's dist(t) from the mechanism file at the nearest file sample, with the
     /// curve pairs the parts have (> 0: the design contacts do not hold the follower).
     pub file_dist: f64,
+    /// 1R1T: the target height along the joint axis, mm.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub target_mm: Option<f64>,
+    /// 1R1T: the predicted height driven forward, mm.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub forward_mm: Option<f64>,
+    /// 1R1T: the predicted height driven in reverse, mm.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reverse_mm: Option<f64>,
+    /// 1R1T: free slide from the design pose along +z, mm (capped at [`FREE_CAP_MM`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub free_up_mm: Option<f64>,
+    /// 1R1T: free slide along −z, mm (a magnitude, capped).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub free_down_mm: Option<f64>,
+    /// 1R1T: the whole free slide, mm.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub slide_play_mm: Option<f64>,
+    /// 1R1T: the larger whole free motion along either screw, mm in the plane of
+    /// [`SCREW_LEVER_MM`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub screw_play_mm: Option<f64>,
+    /// 1R1T: the free region, how far each of its eight rays reaches, mm in the plane of
+    /// [`SCREW_LEVER_MM`] (ray k at k·45° from the positive turn towards the upward slide;
+    /// [`law::FreeRegion`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub region_mm: Option<[f64; law::RAYS]>,
 }
 
 /// A figure and the driver angle where it occurs.
@@ -238,6 +283,15 @@ pub struct Sample {
 pub struct Worst {
     /// The figure, degrees.
     pub deg: f64,
+    /// Where, driver degrees.
+    pub driver_deg: f64,
+}
+
+/// A length and the driver angle where it occurs.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct WorstMm {
+    /// The figure, mm.
+    pub mm: f64,
     /// Where, driver degrees.
     pub driver_deg: f64,
 }
@@ -278,6 +332,22 @@ pub struct Prediction {
     /// The same against the closure of only the contacts the build's check found the parts
     /// keep (`build.json` `check.gaps[].lost_t`).
     pub kept_closure: ClosureAgreement,
+    /// 1R1T: the figures of the slide and the screws.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub slide: Option<SlideFigures>,
+}
+
+/// The figures of a 1R1T prediction beyond the turn's.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct SlideFigures {
+    /// [`SCREW_LEVER_MM`], which weighs the turn against the slide.
+    pub lever_mm: f64,
+    /// Largest whole free slide.
+    pub worst_slide_play: WorstMm,
+    /// Largest whole free motion along a screw (mm in the plane of the lever).
+    pub worst_screw_play: WorstMm,
+    /// Largest |predicted − target| height of either direction.
+    pub worst_height_deviation: WorstMm,
 }
 
 /// How the predicted loss of drive agrees with the paper's dynamic form closure computed
@@ -391,14 +461,79 @@ fn turn_about_z(a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>) -> f64 {
     axis * d.angle()
 }
 
+/// The motions a 1R1T follower's play is traced along, in the order of the rays of
+/// [`law::FreeRegion`] (line k gives ray k its plus side and ray k + 4 its minus side): a
+/// turn (rad), a screw at 45° in the plane of [`SCREW_LEVER_MM`], a slide and the other
+/// screw (mm in that plane); and the factor from each one's unit to mm in the plane.
+fn plane_lines() -> [(Screw, f64, f64); 4] {
+    let c = std::f64::consts::FRAC_1_SQRT_2;
+    let screw = |sense: f64| Screw {
+        spin: sense * c / SCREW_LEVER_MM,
+        slide: c,
+    };
+    [
+        (Screw::TURN, FREE_CAP_DEG.to_radians(), SCREW_LEVER_MM),
+        (screw(1.0), FREE_CAP_MM, 1.0),
+        (Screw::SLIDE, FREE_CAP_MM, 1.0),
+        (screw(-1.0), FREE_CAP_MM, 1.0),
+    ]
+}
+
+/// The free regions of a 1R1T follower per sample, from the free motions along
+/// [`plane_lines`].
+fn free_regions(lines: &[FreeTurns]) -> Vec<law::FreeRegion> {
+    let scale = plane_lines().map(|l| l.2);
+    (0..lines[0].plus.len())
+        .map(|i| {
+            let mut reach = [0.0; law::RAYS];
+            for k in 0..4 {
+                reach[k] = lines[k].plus[i] * scale[k];
+                reach[k + 4] = lines[k].minus[i] * scale[k];
+            }
+            law::FreeRegion { reach }
+        })
+        .collect()
+}
+
+/// A 1R1T follower's law along its axis: per sample, the target height (mm), the
+/// predicted deviations from it driven forward and in reverse (mm), and the free region.
+struct Plane {
+    height: Vec<f64>,
+    forward: Vec<f64>,
+    reverse: Vec<f64>,
+    regions: Vec<law::FreeRegion>,
+}
+
+/// The largest of `f` over `samples`, and where (the first sample when nothing is above 0).
+fn worst_of(samples: &[Sample], f: impl Fn(&Sample) -> f64) -> (f64, f64) {
+    samples.iter().fold((0.0, 0.0), |w, s| {
+        let v = f(s);
+        if v > w.0 {
+            (v, s.driver_deg)
+        } else {
+            w
+        }
+    })
+}
+
 /// Predict how the parts in `parts_dir` (built from `mech`) move the follower.
 pub fn predict(
     mech: &Mechanism,
     parts_dir: &Path,
     opts: &PredictOptions,
 ) -> Result<Prediction, PredictError> {
-    if mech.class != Class::R1 {
-        return Err(PredictError::Class { class: mech.class });
+    let slides = match mech.class {
+        Class::R1 => false,
+        Class::R1T1 => true,
+        Class::R3 => return Err(PredictError::Class { class: mech.class }),
+    };
+    if slides && opts.load != law::Load::Drag {
+        return Err(PredictError::BadOption {
+            option: format!("--load {}", opts.load.label()),
+            message: "a 1R1T follower takes the drag only so far: a torque or a spring about \
+                      its axis leaves its height to friction alone, which is not modelled"
+                .to_string(),
+        });
     }
     if opts.samples < MIN_SAMPLES {
         return Err(PredictError::BadOption {
@@ -418,28 +553,53 @@ pub fn predict(
     let (driver, follower) = rayon::join(|| load("driver"), || load("follower"));
     let (driver, follower) = (driver?, follower?);
     let n = opts.samples;
-    let cap = FREE_CAP_DEG.to_radians();
+    let motions: Vec<(Screw, f64)> = if slides {
+        plane_lines().iter().map(|l| (l.0, l.1)).collect()
+    } else {
+        vec![(Screw::TURN, FREE_CAP_DEG.to_radians())]
+    };
     let started = Instant::now();
-    let free = free_turns(&PartsMotion(&kin), &driver, &follower, n, cap);
+    let lines = free_along(&PartsMotion(&kin), &driver, &follower, n, &motions);
     let seconds = started.elapsed().as_secs_f64();
+    let free = &lines[0];
 
     // The target law as steps between samples, and unwrapped from its first pose.
-    let rot: Vec<UnitQuaternion<f64>> = (0..=n)
-        .map(|i| kin.follower(i as f64 / n as f64).rotation)
+    let poses: Vec<Isometry3<f64>> = (0..=n).map(|i| kin.follower(i as f64 / n as f64)).collect();
+    let step: Vec<f64> = (0..n)
+        .map(|i| turn_about_z(&poses[i].rotation, &poses[i + 1].rotation))
         .collect();
-    let step: Vec<f64> = (0..n).map(|i| turn_about_z(&rot[i], &rot[i + 1])).collect();
     let mut target = Vec::with_capacity(n);
-    let mut angle = turn_about_z(&UnitQuaternion::identity(), &rot[0]);
+    let mut angle = turn_about_z(&UnitQuaternion::identity(), &poses[0].rotation);
     for s in &step {
         target.push(angle);
         angle += s;
     }
-    let fwd = law::under(opts.load, &target, &step, &free.plus, &free.minus, true);
-    let rev = law::under(opts.load, &target, &step, &free.plus, &free.minus, false);
+    let (fwd, rev, plane) = if slides {
+        // Deviations in the plane of the lever: the turn's times the lever, the slide's.
+        let height: Vec<f64> = poses.iter().map(|p| p.translation.z).collect();
+        let plane_step: Vec<[f64; 2]> = (0..n)
+            .map(|i| [step[i] * SCREW_LEVER_MM, height[i + 1] - height[i]])
+            .collect();
+        let regions = free_regions(&lines);
+        let fwd = law::drag_plane(&plane_step, &regions, true);
+        let rev = law::drag_plane(&plane_step, &regions, false);
+        let turn = |e: &[[f64; 2]]| e.iter().map(|d| d[0] / SCREW_LEVER_MM).collect();
+        let plane = Plane {
+            height,
+            forward: fwd.iter().map(|d| d[1]).collect(),
+            reverse: rev.iter().map(|d| d[1]).collect(),
+            regions,
+        };
+        (turn(&fwd), turn(&rev), Some(plane))
+    } else {
+        let fwd = law::under(opts.load, &target, &step, &free.plus, &free.minus, true);
+        let rev = law::under(opts.load, &target, &step, &free.plus, &free.minus, false);
+        (fwd, rev, None)
+    };
     let mut samples: Vec<Sample> = (0..n)
         .map(|i| {
             let play = (free.plus[i] + free.minus[i]).to_degrees();
-            Sample {
+            let mut s = Sample {
                 driver_deg: 360.0 * i as f64 / n as f64,
                 target_deg: target[i].to_degrees(),
                 forward_deg: (target[i] + fwd[i]).to_degrees(),
@@ -449,33 +609,54 @@ pub fn predict(
                 play_deg: play,
                 drive_lost: play > DRIVE_LOST_DEG,
                 file_dist: 0.0,
+                target_mm: None,
+                forward_mm: None,
+                reverse_mm: None,
+                free_up_mm: None,
+                free_down_mm: None,
+                slide_play_mm: None,
+                screw_play_mm: None,
+                region_mm: None,
+            };
+            if let Some(p) = &plane {
+                let r = p.regions[i].reach;
+                // Both ways together along each of the region's four lines.
+                let line = |k: usize| r[k] + r[k + 4];
+                s.drive_lost = (0..4).any(|k| line(k) > DRIVE_LOST_MM);
+                s.target_mm = Some(p.height[i]);
+                s.forward_mm = Some(p.height[i] + p.forward[i]);
+                s.reverse_mm = Some(p.height[i] + p.reverse[i]);
+                s.free_up_mm = Some(r[2]);
+                s.free_down_mm = Some(r[6]);
+                s.slide_play_mm = Some(line(2));
+                s.screw_play_mm = Some(line(1).max(line(3)));
+                s.region_mm = Some(r);
             }
+            s
         })
         .collect();
     let worst = |f: &dyn Fn(&Sample) -> f64| {
-        samples.iter().fold(
-            Worst {
-                deg: 0.0,
-                driver_deg: 0.0,
-            },
-            |w, s| {
-                let v = f(s);
-                if v > w.deg {
-                    Worst {
-                        deg: v,
-                        driver_deg: s.driver_deg,
-                    }
-                } else {
-                    w
-                }
-            },
-        )
+        let (deg, driver_deg) = worst_of(&samples, f);
+        Worst { deg, driver_deg }
+    };
+    let worst_mm = |f: &dyn Fn(&Sample) -> f64| {
+        let (mm, driver_deg) = worst_of(&samples, f);
+        WorstMm { mm, driver_deg }
     };
     let worst_play = worst(&|s| s.play_deg);
     let worst_deviation = worst(&|s| {
         (s.forward_deg - s.target_deg)
             .abs()
             .max((s.reverse_deg - s.target_deg).abs())
+    });
+    let slide = slides.then(|| SlideFigures {
+        lever_mm: SCREW_LEVER_MM,
+        worst_slide_play: worst_mm(&|s| s.slide_play_mm.unwrap_or(0.0)),
+        worst_screw_play: worst_mm(&|s| s.screw_play_mm.unwrap_or(0.0)),
+        worst_height_deviation: worst_mm(&|s| match (s.target_mm, s.forward_mm, s.reverse_mm) {
+            (Some(t), Some(f), Some(r)) => (f - t).abs().max((r - t).abs()),
+            _ => 0.0,
+        }),
     });
     let flags: Vec<bool> = samples.iter().map(|s| s.drive_lost).collect();
     let drive_lost_windows = lost_windows_deg(&flags);
@@ -504,6 +685,7 @@ pub fn predict(
         seconds,
         closure,
         kept_closure,
+        slide,
     })
 }
 
@@ -521,6 +703,43 @@ mod tests {
             "290.5–292.25°, 359.75–0.25°, 10–12°"
         );
         assert_eq!(lost_windows_text(&[]), "");
+    }
+
+    /// Guards the glue between the traced motions and the free region: line k of
+    /// [`plane_lines`], per unit of its parameter and divided by its factor to mm, moves the
+    /// follower along ray k of [`law::FreeRegion`] (k·45° in the plane of the turn times
+    /// [`SCREW_LEVER_MM`] and the slide), by 1 mm; and [`free_regions`] puts each line's
+    /// plus side on ray k and its minus side on ray k + 4, in mm.
+    #[test]
+    fn the_traced_lines_are_the_free_region_s_rays() {
+        for (k, (screw, cap, factor)) in plane_lines().into_iter().enumerate() {
+            let a = k as f64 * std::f64::consts::FRAC_PI_4;
+            // A turn's parameter is in rad, and one rad moves `factor` mm along its ray.
+            let step = [screw.spin * SCREW_LEVER_MM / factor, screw.slide / factor];
+            assert!((step[0] - a.cos()).abs() < 1e-12, "line {k}: {step:?}");
+            assert!((step[1] - a.sin()).abs() < 1e-12, "line {k}: {step:?}");
+            assert!(
+                (cap * factor - FREE_CAP_MM).abs() < 1e-9,
+                "line {k}: cap {cap}"
+            );
+        }
+        let line = |plus: f64, minus: f64| FreeTurns {
+            plus: vec![plus],
+            minus: vec![minus],
+            overlap_mm: 0.0,
+            overlap_t: 0.0,
+            queries: 0,
+        };
+        let regions = free_regions(&[
+            line(0.01, 0.02),
+            line(0.3, 0.4),
+            line(0.5, 0.6),
+            line(0.7, 0.8),
+        ]);
+        let want = [0.3, 0.3, 0.5, 0.7, 0.6, 0.4, 0.6, 0.8];
+        for (k, (got, want)) in regions[0].reach.iter().zip(want).enumerate() {
+            assert!((got - want).abs() < 1e-12, "ray {k}: {got} vs {want}");
+        }
     }
 
     /// Guards the sign of the target's steps: a turn of +0.3 rad about +z reads +0.3, and

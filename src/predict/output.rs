@@ -1,15 +1,17 @@
 //! The files of a prediction: `prediction.json` and its charts.
 //!
 //! Owns [`write()`] and [`PREDICTION_FORMAT`]: `prediction.json`, the charts and
-//! `prediction.md` (the figures and charts for a person). It draws the predicted deviation from the
-//! target (forward and reverse) and the play over the driver angle, both with the limits
-//! that matter marked, and the predicted laws over the target. It computes nothing.
+//! `prediction.md` (the figures and charts for a person). It draws the predicted deviation
+//! from the target (forward and reverse) and the play over the driver angle, both with the
+//! limits that matter marked, and the predicted laws over the target; for a 1R1T follower
+//! also its predicted heights' deviation and the play of its slide and screws. It computes
+//! nothing.
 
 use std::path::{Path, PathBuf};
 
 use serde_json::json;
 
-use super::{Prediction, DRIVE_LOST_DEG};
+use super::{Prediction, DRIVE_LOST_DEG, DRIVE_LOST_MM};
 use crate::plot::{legend_room_y_range, Chart, PlotError, Series};
 
 /// The `format` of `prediction.json`.
@@ -56,6 +58,11 @@ pub fn write(
         "free_cap_deg": super::FREE_CAP_DEG,
         "prediction": p,
     });
+    let mut doc = doc;
+    if p.slide.is_some() {
+        doc["drive_lost_play_mm"] = json!(DRIVE_LOST_MM);
+        doc["free_cap_mm"] = json!(super::FREE_CAP_MM);
+    }
     let text = serde_json::to_string_pretty(&doc).expect("a prediction serializes");
     std::fs::write(&json_path, text + "\n").map_err(io(&json_path))?;
     files.push(json_path);
@@ -135,6 +142,77 @@ pub fn write(
     play.h_lines = vec![(DRIVE_LOST_DEG, "drive lost above".to_string())];
     files.extend(play.write(&out.join("play"))?);
 
+    if let Some(slide) = &p.slide {
+        let mm = |f: &dyn Fn(&super::Sample) -> Option<f64>| -> Vec<(f64, f64)> {
+            p.samples
+                .iter()
+                .filter_map(|s| f(s).map(|v| (s.driver_deg, v)))
+                .collect()
+        };
+        let dev_mm = |forward: bool| {
+            mm(&move |s: &super::Sample| {
+                let h = if forward { s.forward_mm } else { s.reverse_mm };
+                Some(h? - s.target_mm?)
+            })
+        };
+        let mut height = Chart::new(
+            format!(
+                "Predicted − target height: worst {:.3} mm at driver {:.1}°",
+                slide.worst_height_deviation.mm, slide.worst_height_deviation.driver_deg
+            ),
+            x_label,
+            "height deviation [mm]",
+        )
+        .with(Series::line("driven forward", dev_mm(true), 1))
+        .with(Series::line("driven in reverse", dev_mm(false), 2));
+        height.x_range = Some((0.0, 360.0));
+        let (low, high) = height
+            .series
+            .iter()
+            .flat_map(|s| s.points.iter().map(|p| p.1))
+            .fold((0.0f64, 0.0f64), |(lo, hi), d| (lo.min(d), hi.max(d)));
+        height.y_range = Some(legend_room_y_range(low, (high - low).max(0.01)));
+        height.h_lines = vec![(0.0, "target".to_string())];
+        files.extend(height.write(&out.join("height"))?);
+
+        let mut slide_play = Chart::new(
+            format!(
+                "Free slide and screw: worst slide {:.3} mm (driver {:.1}°), screw {:.3} mm ({:.1}°)",
+                slide.worst_slide_play.mm,
+                slide.worst_slide_play.driver_deg,
+                slide.worst_screw_play.mm,
+                slide.worst_screw_play.driver_deg
+            ),
+            x_label,
+            format!("free motion [mm; a turn counts at {} mm]", slide.lever_mm),
+        )
+        .with(Series::line(
+            "slide (both ways)",
+            mm(&|s| s.slide_play_mm),
+            0,
+        ))
+        .with(Series::line(
+            "screws (the larger)",
+            mm(&|s| s.screw_play_mm),
+            1,
+        ))
+        .with(Series::line(
+            "turn (both ways)",
+            x(&|s| s.play_deg.to_radians() * slide.lever_mm),
+            2,
+        ));
+        slide_play.x_range = Some((0.0, 360.0));
+        let top = slide
+            .worst_slide_play
+            .mm
+            .max(slide.worst_screw_play.mm)
+            .max(p.worst_play.deg.to_radians() * slide.lever_mm)
+            .max(DRIVE_LOST_MM);
+        slide_play.y_range = Some(legend_room_y_range(0.0, top));
+        slide_play.h_lines = vec![(DRIVE_LOST_MM, "drive lost above".to_string())];
+        files.extend(slide_play.write(&out.join("play-slide"))?);
+    }
+
     let md_path = out.join("prediction.md");
     std::fs::write(&md_path, markdown(p, mechanism, parts)).map_err(io(&md_path))?;
     files.push(md_path);
@@ -156,22 +234,42 @@ fn markdown(p: &Prediction, mechanism: &Path, parts: &Path) -> String {
             .map_or(String::new(), |k| format!(", without curve pair {k}")),
         p.load
     );
+    let (held, lost_by) = match &p.slide {
+        None => (
+            format!("play ≤ {DRIVE_LOST_DEG}°"),
+            format!("play > {DRIVE_LOST_DEG}°"),
+        ),
+        Some(s) => (
+            format!(
+                "play along every line of the free region ≤ {DRIVE_LOST_MM:.2} mm, a turn \
+                 counting at {} mm: {DRIVE_LOST_DEG}°",
+                s.lever_mm
+            ),
+            format!(
+                "play along a line of the free region > {DRIVE_LOST_MM:.2} mm, a turn \
+                 counting at {} mm: {DRIVE_LOST_DEG}°",
+                s.lever_mm
+            ),
+        ),
+    };
     if lost == 0 {
-        md += &format!(
-            "**The driver holds the follower at every angle** (play ≤ {DRIVE_LOST_DEG}°).\n\n"
-        );
+        md += &format!("**The driver holds the follower at every angle** ({held}).\n\n");
     } else {
         md += &format!(
-            "**The drive is lost at {lost} of {n} angles** (play > {DRIVE_LOST_DEG}°): driver \
-             {}.\n\n",
+            "**The drive is lost at {lost} of {n} angles** ({lost_by}): driver {}.\n\n",
             p.lost_windows_text()
         );
     }
     md += &format!(
         "| figure | value | at driver |\n|---|---|---|\n\
-         | worst play | {:.3}° | {:.2}° |\n\
+         | worst play{} | {:.3}° | {:.2}° |\n\
          | worst deviation from the target | {:.3}° | {:.2}° |\n\
          | deepest overlap of the meshes at the design pose | {:.3} mm | {:.2}° |\n\n",
+        if p.slide.is_some() {
+            " of the turn"
+        } else {
+            ""
+        },
         p.worst_play.deg,
         p.worst_play.driver_deg,
         p.worst_deviation.deg,
@@ -179,6 +277,21 @@ fn markdown(p: &Prediction, mechanism: &Path, parts: &Path) -> String {
         p.overlap_mm,
         p.overlap_driver_deg
     );
+    if let Some(s) = &p.slide {
+        md.truncate(md.len() - 1);
+        md += &format!(
+            "| worst play of the slide | {:.3} mm | {:.2}° |\n\
+             | worst play along a screw (a turn counting at {} mm) | {:.3} mm | {:.2}° |\n\
+             | worst height deviation from the target | {:.3} mm | {:.2}° |\n\n",
+            s.worst_slide_play.mm,
+            s.worst_slide_play.driver_deg,
+            s.lever_mm,
+            s.worst_screw_play.mm,
+            s.worst_screw_play.driver_deg,
+            s.worst_height_deviation.mm,
+            s.worst_height_deviation.driver_deg
+        );
+    }
     md += "At the mechanism file's samples, the parts' drive against the paper's closure:\n\n\
            | closure from | lost by both | lost by it only | lost by the parts only | held by both |\n\
            |---|---|---|---|---|\n";
@@ -192,6 +305,9 @@ fn markdown(p: &Prediction, mechanism: &Path, parts: &Path) -> String {
         );
     }
     md += "\n![deviation](deviation.svg)\n\n![play](play.svg)\n\n![law](law.svg)\n\n";
+    if p.slide.is_some() {
+        md += "![height](height.svg)\n\n![play of the slide and screws](play-slide.svg)\n\n";
+    }
     md += &format!(
         "{} + {} vertices (driver + follower), {} mesh distance queries, {:.1} s.\n",
         p.vertices[0], p.vertices[1], p.queries, p.seconds
