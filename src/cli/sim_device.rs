@@ -211,7 +211,7 @@ pub(super) fn plant_from(faults: &[String]) -> anyhow::Result<PlantConfig> {
 }
 
 /// The plant of `faults`, moved by the built parts when `geometry` names a prediction
-/// (refused unless the target is 1R).
+/// (refused for a 3R target, and for a prediction of another class than the target's).
 pub(super) fn geometry_plant(
     faults: &[String],
     geometry: &GeometryArgs,
@@ -219,15 +219,29 @@ pub(super) fn geometry_plant(
 ) -> anyhow::Result<PlantConfig> {
     let mut plant = plant_from(faults)?;
     if let Some(path) = &geometry.prediction {
-        if motion.class() != crate::motion::MotionClass::R1 {
+        use crate::motion::MotionClass;
+        if motion.class() == MotionClass::R3 {
             anyhow::bail!(
-                "--prediction {}: the geometry plant handles 1R mechanisms; this target is {}",
+                "--prediction {}: the geometry plant handles 1R and 1R1T mechanisms; this \
+                 target is {}",
                 path.display(),
                 motion.class()
             );
         }
         let table =
             PlayTable::load(path).context("reading the prediction for the geometry plant")?;
+        if table.region_at(0.0).is_some() != (motion.class() == MotionClass::R1T1) {
+            anyhow::bail!(
+                "--prediction {}: a prediction of a {} mechanism, but this target is {}",
+                path.display(),
+                if table.region_at(0.0).is_some() {
+                    "1R1T"
+                } else {
+                    "1R"
+                },
+                motion.class()
+            );
+        }
         plant.play = Some(std::sync::Arc::new(table));
     }
     Ok(plant)

@@ -1,9 +1,11 @@
 //! A prediction read back as a table of free intervals over the driver angle, for the
 //! simulated benches' geometry plant (`sim-device … --prediction FILE`).
 //!
-//! Owns [`PlayTable`]: the follower's free turn each way at each predicted driver angle,
-//! interpolated linearly between them (periodic), loaded from `prediction.json` with its
-//! format and class checked, with the load the prediction was made under. A bench at
+//! Owns [`PlayTable`]: the follower's free turn each way at each predicted driver angle
+//! (and a 1R1T follower's free region), interpolated linearly between them (periodic),
+//! loaded from `prediction.json` with its format and class checked, with the load the
+//! prediction was made under; and [`PredictedDeviation`], the predicted laws'
+//! deviations from the target that `analyze --prediction` compares a run with. A bench at
 //! 1 kHz looks up two numbers per reading instead of tracing meshes. It does not decide
 //! where the follower is: the plant applies the load (`predict::law` says how each one
 //! leaves it).
@@ -13,7 +15,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
-use super::law::Load;
+use super::law::{FreeRegion, Load, RAYS};
 use super::output::PREDICTION_FORMAT;
 
 /// Error loading a [`PlayTable`].
@@ -66,6 +68,16 @@ struct Row {
     free_minus_deg: f64,
     #[serde(default)]
     drive_lost: bool,
+    /// 1R1T: the target height and the predicted ones, mm.
+    #[serde(default)]
+    target_mm: Option<f64>,
+    #[serde(default)]
+    forward_mm: Option<f64>,
+    #[serde(default)]
+    reverse_mm: Option<f64>,
+    /// 1R1T: the free region's rays, mm in the plane of the lever.
+    #[serde(default)]
+    region_mm: Option<[f64; RAYS]>,
 }
 
 /// The rows of a prediction file, checked.
@@ -85,14 +97,23 @@ fn read(path: &Path) -> Result<(Load, Vec<Row>), TableError> {
             file.format
         )));
     }
-    if file.prediction.class != "1R" {
-        return Err(bad(format!(
-            "a {} prediction; predictions are of 1R mechanisms so far",
-            file.prediction.class
-        )));
-    }
+    let slides = match file.prediction.class.as_str() {
+        "1R" => false,
+        "1R1T" => true,
+        class => {
+            return Err(bad(format!(
+                "a {class} prediction; the geometry plant takes 1R and 1R1T predictions so far"
+            )))
+        }
+    };
     let load =
         Load::parse(&file.prediction.load).map_err(|e| bad(format!("prediction.load: {e}")))?;
+    if slides && load != Load::Drag {
+        return Err(bad(format!(
+            "prediction.load: {}, but a 1R1T prediction is made under the drag only",
+            file.prediction.load
+        )));
+    }
     let rows = file.prediction.samples;
     let n = rows.len();
     if n == 0 {
@@ -111,6 +132,19 @@ fn read(path: &Path) -> Result<(Load, Vec<Row>), TableError> {
                 "samples[{i}]: free turns must be ≥ 0, got {} and {}",
                 r.free_plus_deg, r.free_minus_deg
             )));
+        }
+        if slides {
+            let complete =
+                r.target_mm.is_some() && r.forward_mm.is_some() && r.reverse_mm.is_some();
+            match r.region_mm {
+                Some(region) if complete && region.iter().all(|v| *v >= 0.0) => {}
+                _ => {
+                    return Err(bad(format!(
+                        "samples[{i}]: a 1R1T sample needs target_mm, forward_mm, reverse_mm \
+                         and region_mm (eight reaches ≥ 0), as mpc-rig simulate writes them"
+                    )))
+                }
+            }
         }
     }
     Ok((load, rows))
@@ -132,6 +166,8 @@ fn periodic(values: &[f64], phi: f64) -> f64 {
 pub struct PredictedDeviation {
     forward: Vec<f64>,
     reverse: Vec<f64>,
+    /// 1R1T: the height's, mm (forward, reverse).
+    heights: Option<(Vec<f64>, Vec<f64>)>,
     lost_windows_deg: Vec<[f64; 2]>,
 }
 
@@ -140,11 +176,34 @@ impl PredictedDeviation {
     pub fn load(path: &Path) -> Result<PredictedDeviation, TableError> {
         let (_, rows) = read(path)?;
         let lost: Vec<bool> = rows.iter().map(|r| r.drive_lost).collect();
+        let height = |f: fn(&Row) -> Option<f64>| -> Option<Vec<f64>> {
+            rows.iter().map(|r| Some(f(r)? - r.target_mm?)).collect()
+        };
+        let heights = height(|r| r.forward_mm).zip(height(|r| r.reverse_mm));
         Ok(PredictedDeviation {
             forward: rows.iter().map(|r| r.forward_deg - r.target_deg).collect(),
             reverse: rows.iter().map(|r| r.reverse_deg - r.target_deg).collect(),
+            heights,
             lost_windows_deg: super::lost_windows_deg(&lost),
         })
+    }
+
+    /// The predicted − target of analysis channel `channel` at driver angle `phi_deg`:
+    /// `rz` ([`at`](Self::at), degrees) or `tz` ([`height_at`](Self::height_at), mm);
+    /// `None` for another channel or a 1R prediction's `tz`.
+    pub fn of(&self, channel: &str, phi_deg: f64, forward: bool) -> Option<f64> {
+        match channel {
+            "rz" => Some(self.at(phi_deg, forward)),
+            "tz" => self.height_at(phi_deg, forward),
+            _ => None,
+        }
+    }
+
+    /// 1R1T: predicted − target height (mm) at driver angle `phi_deg`, driven forward or in
+    /// reverse; `None` for a 1R prediction.
+    pub fn height_at(&self, phi_deg: f64, forward: bool) -> Option<f64> {
+        let (f, r) = self.heights.as_ref()?;
+        Some(periodic(if forward { f } else { r }, phi_deg.to_radians()))
     }
 
     /// The driver angles (first and last sample, degrees) where the prediction says the
@@ -174,6 +233,9 @@ pub struct PlayTable {
     minus: Vec<f64>,
     /// The load the prediction was made under, for the plant to apply the same.
     load: Load,
+    /// 1R1T: at driver angle 2π·i/n, the free region's rays, mm in the plane of
+    /// [`super::SCREW_LEVER_MM`].
+    regions: Option<Vec<[f64; RAYS]>>,
 }
 
 impl PlayTable {
@@ -184,7 +246,35 @@ impl PlayTable {
             plus.len() == minus.len() && !plus.is_empty(),
             "one free interval per angle, at least one"
         );
-        PlayTable { plus, minus, load }
+        PlayTable {
+            plus,
+            minus,
+            load,
+            regions: None,
+        }
+    }
+
+    /// A 1R1T table: as [`PlayTable::new`] under a drag, with the free region (mm in the
+    /// plane of [`super::SCREW_LEVER_MM`]) at each angle.
+    pub fn with_regions(plus: Vec<f64>, minus: Vec<f64>, regions: Vec<[f64; RAYS]>) -> PlayTable {
+        assert!(regions.len() == plus.len(), "one free region per angle");
+        PlayTable {
+            regions: Some(regions),
+            ..PlayTable::new(plus, minus, Load::Drag)
+        }
+    }
+
+    /// 1R1T: the free region at driver angle `phi` (rad, any real), each ray linear
+    /// between the table's angles; `None` for a 1R table.
+    pub fn region_at(&self, phi: f64) -> Option<FreeRegion> {
+        let regions = self.regions.as_ref()?;
+        let n = regions.len();
+        let x = phi.rem_euclid(TAU) / TAU * n as f64;
+        let i = (x.floor() as usize).min(n - 1);
+        let (a, b, f) = (&regions[i], &regions[(i + 1) % n], x - i as f64);
+        Some(FreeRegion {
+            reach: std::array::from_fn(|k| a[k] + f * (b[k] - a[k])),
+        })
     }
 
     /// The load the prediction was made under.
@@ -196,11 +286,14 @@ impl PlayTable {
     /// spaced driver angles from 0).
     pub fn load(path: &Path) -> Result<PlayTable, TableError> {
         let (load, rows) = read(path)?;
-        Ok(PlayTable::new(
-            rows.iter().map(|r| r.free_plus_deg.to_radians()).collect(),
-            rows.iter().map(|r| r.free_minus_deg.to_radians()).collect(),
-            load,
-        ))
+        let plus = rows.iter().map(|r| r.free_plus_deg.to_radians()).collect();
+        let minus = rows.iter().map(|r| r.free_minus_deg.to_radians()).collect();
+        // `read` checked that a 1R1T prediction has every region.
+        let regions: Option<Vec<[f64; RAYS]>> = rows.iter().map(|r| r.region_mm).collect();
+        Ok(match regions {
+            Some(regions) => PlayTable::with_regions(plus, minus, regions),
+            None => PlayTable::new(plus, minus, load),
+        })
     }
 
     /// Free turns (plus, minus) at driver angle `phi` (rad, any real), linear between
@@ -234,8 +327,8 @@ mod tests {
         assert!((p - 0.2).abs() < 1e-12, "{p}");
     }
 
-    /// Guards what a wrong file gets: a prediction of another class is refused with the
-    /// file and the reason.
+    /// Guards what a wrong file gets: a prediction of another class, or a 1R1T one without
+    /// its free region, is refused with the file and the reason.
     #[test]
     fn a_prediction_of_another_class_is_refused() {
         let dir = tempfile::tempdir().unwrap();
@@ -251,7 +344,27 @@ mod tests {
         assert_eq!(
             e,
             format!(
-                "{}: a 3R prediction; predictions are of 1R mechanisms so far",
+                "{}: a 3R prediction; the geometry plant takes 1R and 1R1T predictions so far",
+                path.display()
+            )
+        );
+        // A 1R1T prediction without its free region (a file older than the region, or
+        // edited) is refused too, naming the sample and what it lacks.
+        std::fs::write(
+            &path,
+            format!(
+                r#"{{"format": "{PREDICTION_FORMAT}", "prediction": {{"class": "1R1T",
+                    "samples": [{{"driver_deg": 0, "target_deg": 0, "forward_deg": 0,
+                    "reverse_deg": 0, "free_plus_deg": 0.1, "free_minus_deg": 0.1,
+                    "target_mm": 0, "forward_mm": 0, "reverse_mm": 0}}]}}}}"#
+            ),
+        )
+        .unwrap();
+        assert_eq!(
+            PlayTable::load(&path).unwrap_err().to_string(),
+            format!(
+                "{}: samples[0]: a 1R1T sample needs target_mm, forward_mm, reverse_mm and \
+                 region_mm (eight reaches ≥ 0), as mpc-rig simulate writes them",
                 path.display()
             )
         );

@@ -633,6 +633,13 @@ fn headline_blocks(s: &Summary, pictures: &[plots::Picture], b: &mut Vec<Block>)
     if let Some(r) = h.rms_error_mm {
         lines.push(format!("Height error after alignment: RMS **{r:.3} mm**."));
     }
+    if let Some(p) = s.prediction.as_ref().and_then(|p| p.height) {
+        lines.push(format!(
+            "Height against the predicted law: RMS **{:.3} mm**, max {:.3} mm (against the \
+             target on the same samples: RMS {:.3} mm).",
+            p.rms_mm, p.max_mm, p.rms_vs_target_mm
+        ));
+    }
     lines.push(format!(
         "Phase lag {}° of driver angle{}; {}.",
         f3(h.phase_lag_deg),
@@ -1120,7 +1127,9 @@ pub fn write_report(
         };
         let predicted = predicted_deviation
             .as_ref()
-            .filter(|_| ch.name == "rz" && a.class == "1R")
+            .filter(|p| {
+                (a.class == "1R" || a.class == "1R1T") && p.of(&ch.name, 0.0, true).is_some()
+            })
             .map(|p| (p, a.alignment.driver_offset_deg.value));
         pics.push(plots::error_chart(out_dir, run, ch, m, tol, predicted)?);
         pics.push(plots::cycles_chart(out_dir, m)?);

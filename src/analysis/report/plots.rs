@@ -174,9 +174,9 @@ pub fn error_chart(
             // The measured x is the recorded driver angle; the prediction's is the
             // mechanism's, `offset_deg` behind it (as `prediction::compare` reads it).
             let pts: Vec<(f64, f64)> = (0..=PREDICTED_POINTS)
-                .map(|i| {
+                .filter_map(|i| {
                     let x = 360.0 * i as f64 / PREDICTED_POINTS as f64;
-                    (x, p.at(x - offset_deg, forward))
+                    Some((x, p.of(&ch.name, x - offset_deg, forward)?))
                 })
                 .collect();
             chart = chart.with(Series::line(label, pts, color));

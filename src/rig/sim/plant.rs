@@ -138,7 +138,8 @@ pub struct PlantConfig {
     /// The geometry plant: the built parts' free turn over the driver angle (from
     /// `mpc-rig simulate`). With it a 1R follower is not on the target law but where the
     /// prediction's load (a drag, a torque, a spring) leaves it inside that free interval,
-    /// as the printed parts would move it.
+    /// as the printed parts would move it; a 1R1T follower is where a drag leaves it in
+    /// its free region, height and turn together.
     pub play: Option<std::sync::Arc<PlayTable>>,
 }
 
@@ -400,6 +401,9 @@ pub struct Plant {
     /// Geometry plant: the target angle at the last call and the follower's deviation
     /// from it (rad).
     drag: Option<(f64, f64)>,
+    /// Geometry plant, 1R1T: the target at the last call and the follower's deviation from
+    /// it, both in the plane of the prediction's lever (turn × lever, height; mm).
+    drag_plane: Option<([f64; 2], [f64; 2])>,
     sensor_rng: ChaCha8Rng,
     link_rng: ChaCha8Rng,
     step_rng: ChaCha8Rng,
@@ -421,6 +425,7 @@ impl Plant {
             jammed: None,
             last: None,
             drag: None,
+            drag_plane: None,
             sensor_rng: stream(1),
             link_rng: stream(2),
             step_rng: stream(3),
@@ -475,7 +480,22 @@ impl Plant {
         self.input = Some(input);
         let effective = input - self.cfg.phase_lag_deg.to_radians();
         let mut state = self.target.follower_at(effective / TAU);
-        if let Some(table) = &self.cfg.play {
+        if let Some(region) = self.cfg.play.as_ref().and_then(|t| t.region_at(effective)) {
+            // 1R1T: a dragged follower stays where it was unless the parts push it, to the
+            // nearest point of the free region (`predict::law::drag_plane`).
+            let lever = crate::predict::SCREW_LEVER_MM;
+            let now = [state.angle_z * lever, state.height * self.cfg.scale_mm];
+            let e = self.drag_plane.map_or([0.0, 0.0], |(was, e)| {
+                [e[0] + was[0] - now[0], e[1] + was[1] - now[1]]
+            });
+            let e = region.clamp(e);
+            self.drag_plane = Some((now, e));
+            let turn = e[0] / lever;
+            state.angle_z += turn;
+            state.rotation =
+                UnitQuaternion::from_axis_angle(&Vector3::z_axis(), turn) * state.rotation;
+            state.height += e[1] / self.cfg.scale_mm;
+        } else if let Some(table) = &self.cfg.play {
             // The follower's deviation from the target, within the free interval at this
             // angle, where the prediction's load leaves it (`predict::law`).
             let (plus, minus) = table.at(effective);
@@ -774,6 +794,53 @@ mod tests {
         let r = plant.follower(phi).rotation;
         let z = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), plant.follower(phi).angle_z);
         assert!(r.angle_to(&z) < 1e-9, "the rotation turns with the angle");
+    }
+
+    /// Guards the 1R1T geometry plant: with the same free region everywhere (a regular
+    /// octagon of 0.2 mm in the plane of the lever) and a target that screws at 45° in that
+    /// plane, a follower driven forward rests in the region's corner behind the motion,
+    /// turn and height together, and driven back in the corner ahead, as
+    /// `predict::law::drag_plane` leaves it.
+    #[test]
+    fn the_geometry_plant_drags_a_1r1t_follower_through_its_free_region() {
+        struct Screwing;
+        impl PlantLaw for Screwing {
+            fn follower_at(&self, t: f64) -> FollowerState {
+                // Per radian of the driver: 0.1 rad of turn (3 mm at the 30 mm lever) and
+                // 0.3 units of height (3 mm at 10 mm per unit).
+                let a = 0.1 * TAU * t;
+                FollowerState {
+                    angle_z: a,
+                    height: 0.3 * TAU * t,
+                    rotation: UnitQuaternion::from_axis_angle(&Vector3::z_axis(), a),
+                }
+            }
+        }
+        let lever = crate::predict::SCREW_LEVER_MM;
+        assert_eq!(lever, 30.0, "the law above is laid out for this lever");
+        let table = PlayTable::with_regions(vec![0.0; 8], vec![0.0; 8], vec![[0.2; 8]; 8]);
+        let cfg = PlantConfig {
+            play: Some(std::sync::Arc::new(table)),
+            scale_mm: 10.0,
+            ..PlantConfig::default()
+        };
+        let mut plant = Plant::new(Screwing, cfg);
+        let corner = 0.2 * std::f64::consts::FRAC_1_SQRT_2;
+        let mut phi = 0.0;
+        for _ in 0..200 {
+            phi += 0.01;
+            plant.follower(phi);
+        }
+        let (got, want) = (plant.follower(phi), plant.ideal(phi));
+        assert!(((got.angle_z - want.angle_z) * lever + corner).abs() < 1e-9);
+        assert!(((got.height - want.height) * 10.0 + corner).abs() < 1e-9);
+        for _ in 0..200 {
+            phi -= 0.01;
+            plant.follower(phi);
+        }
+        let (got, want) = (plant.follower(phi), plant.ideal(phi));
+        assert!(((got.angle_z - want.angle_z) * lever - corner).abs() < 1e-9);
+        assert!(((got.height - want.height) * 10.0 - corner).abs() < 1e-9);
     }
 
     /// Guards the geometry plant under the other loads a prediction can be made with (issue
