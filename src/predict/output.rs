@@ -16,6 +16,8 @@ use crate::plot::{legend_room_y_range, Chart, PlotError, Series};
 
 /// The `format` of `prediction.json`.
 pub const PREDICTION_FORMAT: &str = "mpcmech-prediction/1";
+/// The charts' x axis.
+const X_LABEL: &str = "driver angle within the period [deg]";
 /// The prediction's file name in its folder.
 pub const PREDICTION_FILE: &str = "prediction.json";
 
@@ -70,7 +72,7 @@ pub fn write(
     let x = |f: &dyn Fn(&super::Sample) -> f64| -> Vec<(f64, f64)> {
         p.samples.iter().map(|s| (s.driver_deg, f(s))).collect()
     };
-    let x_label = "driver angle within the period [deg]";
+    let x_label = X_LABEL;
     let mut law = Chart::new(
         "Follower angle: target and predicted (drag load)",
         x_label,
@@ -82,33 +84,18 @@ pub fn write(
     law.x_range = Some((0.0, 360.0));
     files.extend(law.write(&out.join("law"))?);
 
-    let mut dev = Chart::new(
+    let dev = deviation_chart(
         format!(
             "Predicted − target: worst {:.3}° at driver {:.1}°",
             p.worst_deviation.deg, p.worst_deviation.driver_deg
         ),
-        x_label,
         "deviation [deg]",
-    )
-    .with(Series::line(
-        "driven forward",
-        x(&|s| s.forward_deg - s.target_deg),
-        1,
-    ))
-    .with(Series::line(
-        "driven in reverse",
-        x(&|s| s.reverse_deg - s.target_deg),
-        2,
-    ));
-    dev.x_range = Some((0.0, 360.0));
-    let deviations = p
-        .samples
-        .iter()
-        .flat_map(|s| [s.forward_deg - s.target_deg, s.reverse_deg - s.target_deg]);
-    let (low, high) = deviations.fold((0.0f64, 0.0f64), |(lo, hi), d| (lo.min(d), hi.max(d)));
-    let span = (high - low).max(0.1);
-    dev.y_range = Some(legend_room_y_range(low, span));
-    dev.h_lines = vec![(0.0, "target".to_string())];
+        [
+            x(&|s| s.forward_deg - s.target_deg),
+            x(&|s| s.reverse_deg - s.target_deg),
+        ],
+        0.1,
+    );
     files.extend(dev.write(&out.join("deviation"))?);
 
     let lost = p.samples.iter().filter(|s| s.drive_lost).count();
@@ -155,24 +142,15 @@ pub fn write(
                 Some(h? - s.target_mm?)
             })
         };
-        let mut height = Chart::new(
+        let height = deviation_chart(
             format!(
                 "Predicted − target height: worst {:.3} mm at driver {:.1}°",
                 slide.worst_height_deviation.mm, slide.worst_height_deviation.driver_deg
             ),
-            x_label,
             "height deviation [mm]",
-        )
-        .with(Series::line("driven forward", dev_mm(true), 1))
-        .with(Series::line("driven in reverse", dev_mm(false), 2));
-        height.x_range = Some((0.0, 360.0));
-        let (low, high) = height
-            .series
-            .iter()
-            .flat_map(|s| s.points.iter().map(|p| p.1))
-            .fold((0.0f64, 0.0f64), |(lo, hi), d| (lo.min(d), hi.max(d)));
-        height.y_range = Some(legend_room_y_range(low, (high - low).max(0.01)));
-        height.h_lines = vec![(0.0, "target".to_string())];
+            [dev_mm(true), dev_mm(false)],
+            0.01,
+        );
         files.extend(height.write(&out.join("height"))?);
 
         let mut slide_play = Chart::new(
@@ -217,6 +195,27 @@ pub fn write(
     std::fs::write(&md_path, markdown(p, mechanism, parts)).map_err(io(&md_path))?;
     files.push(md_path);
     Ok(files)
+}
+
+/// A chart of the predicted deviations from the target over the driver angle, forward and
+/// reverse, the target's zero marked, at least `min_span` tall.
+fn deviation_chart(
+    title: String,
+    y_label: &str,
+    [forward, reverse]: [Vec<(f64, f64)>; 2],
+    min_span: f64,
+) -> Chart {
+    let (low, high) = forward
+        .iter()
+        .chain(&reverse)
+        .fold((0.0f64, 0.0f64), |(lo, hi), p| (lo.min(p.1), hi.max(p.1)));
+    let mut chart = Chart::new(title, X_LABEL, y_label)
+        .with(Series::line("driven forward", forward, 1))
+        .with(Series::line("driven in reverse", reverse, 2));
+    chart.x_range = Some((0.0, 360.0));
+    chart.y_range = Some(legend_room_y_range(low, (high - low).max(min_span)));
+    chart.h_lines = vec![(0.0, "target".to_string())];
+    chart
 }
 
 /// `prediction.md`: the figures and charts for a person.
