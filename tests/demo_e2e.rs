@@ -130,8 +130,8 @@ fn refused_demo(out: &Path, args: &[&str]) -> String {
     stderr
 }
 
-/// Guards the plant's refusals before step 1, writing nothing: `--plant geometry` on a
-/// 1R1T example (the parts' prediction does not handle it) says why and what measures it
+/// Guards the plant's refusals before step 1, writing nothing: `--plant geometry` on a 3R
+/// example (the parts' prediction does not handle it) says why and what measures it
 /// instead; a build option out of range is refused before minutes of synthesis.
 #[test]
 fn the_geometry_plant_is_refused_for_a_class_it_cannot_predict() {
@@ -139,10 +139,10 @@ fn the_geometry_plant_is_refused_for_a_class_it_cannot_predict() {
     assert_eq!(
         refused_demo(
             tmp.path(),
-            &["--example", "screw-bob", "--plant", "geometry"]
+            &["--example", "spherical-four-bar", "--plant", "geometry"]
         ),
-        "error: --plant geometry: the parts' prediction (`mpc-rig simulate`) handles 1R \
-         mechanisms; this motion is 1R1T. `--plant target` measures it on the target law\n"
+        "error: --plant geometry: the parts' prediction (`mpc-rig simulate`) handles 1R and \
+         1R1T mechanisms; this motion is 3R. `--plant target` measures it on the target law\n"
     );
     // A build option out of range is refused before the synthesis, in the build's words.
     assert_eq!(

@@ -155,6 +155,13 @@ pub fn print_summary(s: &Summary, report_dir: &Path) {
     if let Some(r) = h.rms_error_mm {
         println!("height:   RMS {r:.3} mm");
     }
+    if let Some(p) = s.prediction.as_ref().and_then(|p| p.height) {
+        println!(
+            "predict:  RMS {:.3} mm, max {:.3} mm of height from the parts' predicted law (vs \
+             {:.3} mm from the target)",
+            p.rms_mm, p.max_mm, p.rms_vs_target_mm
+        );
+    }
     print!("offsets:  driver {}°", f3(s.alignment.driver_offset_deg));
     if let Some(c) = s.alignment.sensor_offset_rz_deg {
         print!(", sensor rz {}°", f3(c));

@@ -3,7 +3,7 @@
 //! Synthesizes the example mechanism (or reuses the cached one under `out/demo/`, keyed by
 //! the motion file's SHA-256, the seed, the synthesis settings and the tool version), or
 //! takes the one `--mechanism` names (its parts cached under `out/demo/mechanisms/`). For a
-//! 1R motion it then builds the printable parts (`mpc-rig build`, cached beside the
+//! 1R or 1R1T motion it then builds the printable parts (`mpc-rig build`, cached beside the
 //! mechanism, keyed by the mechanism file, the build settings and the executable's hash) and
 //! predicts how they move the follower (`mpc-rig simulate`): the *geometry plant*, so the
 //! simulated bench's follower moves as the printed parts would move it. It starts a
@@ -40,7 +40,7 @@ use crate::synth::{Mechanism, Outcome, SynthOptions};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum DemoPlant {
     /// The printable parts of the mechanism, as `mpc-rig simulate` predicts they move the
-    /// follower (1R): the mechanism is synthesized with the printable layout
+    /// follower (1R, 1R1T): the mechanism is synthesized with the printable layout
     /// (`synth --printable`) and built (`mpc-rig build`).
     Geometry,
     /// The target law (plus the injected faults): no parts are built.
@@ -103,8 +103,8 @@ pub struct DemoArgs {
         default_value = "out/demo"
     )]
     pub out: PathBuf,
-    /// What moves the follower (default: `geometry` for a 1R motion, `target` for 1R1T and
-    /// 3R, whose parts and prediction are not built yet, and with `--quick`).
+    /// What moves the follower (default: `geometry` for a 1R or 1R1T motion, `target` for
+    /// 3R, whose prediction is not built yet, and with `--quick`).
     #[arg(long, value_enum)]
     pub plant: Option<DemoPlant>,
     /// Print clearance of the parts, mm (geometry plant).
@@ -165,13 +165,13 @@ fn rig_for(bench: DemoBench, class: MotionClass) -> &'static str {
     }
 }
 
-/// The plant the demo runs with: `--plant`, or the geometry for 1R and the target law
-/// otherwise or with `--quick`. Refuses the geometry for 1R1T and 3R, and with `--quick`,
-/// before anything runs.
+/// The plant the demo runs with: `--plant`, or the geometry for 1R and 1R1T and the target
+/// law for 3R or with `--quick`. Refuses the geometry for 3R, and with `--quick`, before
+/// anything runs.
 fn plant_for(args: &DemoArgs, class: MotionClass) -> anyhow::Result<DemoPlant> {
     match args.plant {
-        Some(DemoPlant::Geometry) if class != MotionClass::R1 => bail!(
-            "--plant geometry: the parts' prediction (`mpc-rig simulate`) handles 1R \
+        Some(DemoPlant::Geometry) if class == MotionClass::R3 => bail!(
+            "--plant geometry: the parts' prediction (`mpc-rig simulate`) handles 1R and 1R1T \
              mechanisms; this motion is {class}. `--plant target` measures it on the target law"
         ),
         // Measured: half-turn-2to1 with the printable layout and the quick search (d_x 6,
@@ -181,7 +181,7 @@ fn plant_for(args: &DemoArgs, class: MotionClass) -> anyhow::Result<DemoPlant> {
              one finds no printable design); drop --quick, or measure with `--plant target`"
         ),
         Some(p) => Ok(p),
-        None if class == MotionClass::R1 && !args.quick => Ok(DemoPlant::Geometry),
+        None if class != MotionClass::R3 && !args.quick => Ok(DemoPlant::Geometry),
         None => Ok(DemoPlant::Target),
     }
 }
@@ -774,20 +774,20 @@ mod tests {
         Cli::parse_from(std::iter::once("demo").chain(extra.iter().copied())).demo
     }
 
-    /// Guards the demo's plant choice: the parts for 1R by default, the target law for the
-    /// classes the prediction does not handle yet, `--plant` obeyed where it can be, and
+    /// Guards the demo's plant choice: the parts for 1R and 1R1T by default, the target law
+    /// for 3R, which the prediction does not handle yet, `--plant` obeyed where it can be, and
     /// only the geometry plant synthesizes the printable layout (the target plant keeps
     /// the default one, and its cache key, so the earlier demos' mechanisms are reused).
     #[test]
-    fn the_plant_is_the_parts_for_1r_and_the_target_law_otherwise() {
+    fn the_plant_is_the_parts_for_1r_and_1r1t_and_the_target_law_otherwise() {
         let default = demo_args(&[]);
-        assert_eq!(
-            plant_for(&default, MotionClass::R1).unwrap(),
-            DemoPlant::Geometry
-        );
-        for class in [MotionClass::R1T1, MotionClass::R3] {
-            assert_eq!(plant_for(&default, class).unwrap(), DemoPlant::Target);
+        for class in [MotionClass::R1, MotionClass::R1T1] {
+            assert_eq!(plant_for(&default, class).unwrap(), DemoPlant::Geometry);
         }
+        assert_eq!(
+            plant_for(&default, MotionClass::R3).unwrap(),
+            DemoPlant::Target
+        );
         let target = demo_args(&["--plant", "target"]);
         assert_eq!(
             plant_for(&target, MotionClass::R1).unwrap(),
