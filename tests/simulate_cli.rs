@@ -145,3 +145,144 @@ fn parts_that_never_meet_lose_the_drive_everywhere() {
     assert_eq!(p["closure"]["lost_by_parts_only"], 90);
     assert_eq!(p["closure"]["held_both"], 0);
 }
+
+/// A 1R1T mechanism: screw-bob synthesized at 90 samples per period (`mpc-rig synth
+/// data/motions/screw-bob.toml --samples 90`: K = 4, d_x = 6), small enough to keep here.
+const SCREW_MECHANISM: &str = "tests/data/mechanism/screw-bob";
+
+/// Two blocks as the parts of [`SCREW_MECHANISM`] (a small one on each part's axis, 60 mm
+/// apart, which never meet), with the `build.json` fields `simulate` reads, in `parts`.
+fn blocks_that_never_meet(parts: &std::path::Path) {
+    use mpc_rig::geometry::io::stl::write_stl;
+    use mpc_rig::geometry::primitive_meshes::cuboid;
+    std::fs::create_dir_all(parts).unwrap();
+    let block = cuboid([-2.0, -2.0, -2.0], [2.0, 2.0, 2.0]);
+    write_stl(&parts.join("driver.stl"), &block, "driver").unwrap();
+    write_stl(&parts.join("follower.stl"), &block, "follower").unwrap();
+    std::fs::write(
+        parts.join("build.json"),
+        r#"{"scale_mm": 10.0, "clearance_mm": 0.2, "cell_mm": 0.4, "without_pair": null,
+            "check": {"gaps": []}}"#,
+    )
+    .unwrap();
+}
+
+/// Guards the 1R1T prediction end to end on parts that never meet: every ray of the free
+/// region (turn, slide and both screws, each way) reaches the cap (5.24 mm in the plane of
+/// the 30 mm lever), so the drive is lost at every angle, and the stdout line says so in
+/// the region's terms. `prediction.json` carries each sample's heights, slides and region,
+/// and the slide's figures; the height and slide charts are written. A torque is refused
+/// for 1R1T with the reason, before anything is traced.
+#[test]
+fn a_1r1t_follower_on_parts_that_never_meet_is_free_along_every_ray() {
+    use mpc_rig::predict::{FREE_CAP_MM, SCREW_LEVER_MM};
+    let dir = tempfile::tempdir().unwrap();
+    let parts = dir.path().join("parts");
+    blocks_that_never_meet(&parts);
+    let out = dir.path().join("prediction");
+    let (parts_arg, out_arg) = (parts.to_str().unwrap(), out.to_str().unwrap());
+    let assert = Command::cargo_bin("mpc-rig")
+        .unwrap()
+        .args([
+            "simulate",
+            SCREW_MECHANISM,
+            "--parts",
+            parts_arg,
+            "-o",
+            out_arg,
+        ])
+        .assert()
+        .success();
+    let stdout = String::from_utf8_lossy(&assert.get_output().stdout).to_string();
+    assert!(
+        stdout.contains(
+            "drive lost at 1440 of 1440 angles (play along a line > 2.62 mm): driver 0–359.75°"
+        ),
+        "stdout:\n{stdout}"
+    );
+    for f in [
+        "height.png",
+        "height.svg",
+        "play-slide.png",
+        "play-slide.svg",
+    ] {
+        assert!(out.join(f).is_file(), "{f} written");
+    }
+    let doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("prediction.json")).unwrap())
+            .unwrap();
+    let p = &doc["prediction"];
+    assert_eq!(p["class"], "1R1T");
+    assert_eq!(p["slide"]["lever_mm"].as_f64().unwrap(), SCREW_LEVER_MM);
+    let samples = p["samples"].as_array().unwrap();
+    assert_eq!(samples.len(), 1440);
+    for s in samples {
+        let region = s["region_mm"].as_array().unwrap();
+        assert_eq!(region.len(), 8);
+        for r in region {
+            assert!((r.as_f64().unwrap() - FREE_CAP_MM).abs() < 1e-9, "{s}");
+        }
+        assert_eq!(s["free_up_mm"].as_f64().unwrap(), FREE_CAP_MM);
+        assert_eq!(s["slide_play_mm"].as_f64().unwrap(), 2.0 * FREE_CAP_MM);
+        assert_eq!(s["drive_lost"], true);
+        // The dragged heights stay within the region's reach of the target.
+        let target = s["target_mm"].as_f64().unwrap();
+        for side in ["forward_mm", "reverse_mm"] {
+            let dev = s[side].as_f64().unwrap() - target;
+            assert!(dev.abs() <= FREE_CAP_MM + 1e-9, "{side}: {s}");
+        }
+    }
+    let (_, stderr) = refused(&[
+        "simulate",
+        SCREW_MECHANISM,
+        "--parts",
+        parts_arg,
+        "-o",
+        out_arg,
+        "--load",
+        "torque+",
+    ]);
+    assert_eq!(
+        stderr,
+        format!(
+            "error: simulating the parts in {parts_arg}\n  caused by: --load torque+: a 1R1T \
+             follower takes the drag only so far: a torque or a spring about its axis leaves \
+             its height to friction alone, which is not modelled\n"
+        )
+    );
+}
+
+/// Guards the geometry plant's class check: a 1R prediction given for a 1R1T target is
+/// refused, naming both classes, before any device is served.
+#[test]
+fn a_bench_refuses_a_prediction_of_another_class() {
+    let dir = tempfile::tempdir().unwrap();
+    let parts = dir.path().join("parts");
+    blocks_that_never_meet(&parts);
+    let out = dir.path().join("prediction");
+    Command::cargo_bin("mpc-rig")
+        .unwrap()
+        .args(simulate_args(
+            parts.to_str().unwrap(),
+            out.to_str().unwrap(),
+        ))
+        .assert()
+        .success();
+    let file = out.join("prediction.json");
+    let (stdout, stderr) = refused(&[
+        "sim-device",
+        "stepper",
+        "--mechanism",
+        SCREW_MECHANISM,
+        "--prediction",
+        file.to_str().unwrap(),
+    ]);
+    assert_eq!(
+        stderr,
+        format!(
+            "error: --prediction {}: a prediction of a 1R mechanism, but this target is 1R1T\n",
+            file.display()
+        )
+    );
+    assert!(stdout.is_empty(), "no device path printed");
+}
