@@ -8,6 +8,8 @@
 use std::path::{Path, PathBuf};
 use std::sync::Once;
 
+use plotters::coord::ranged1d::ValueFormatter;
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -42,10 +44,26 @@ pub const LEGEND_PROBE_PX: f64 = 3.0;
 
 /// Opacity of a [`Chart::zones`] shading: 0.15, a tint under the data.
 pub const ZONE_OPACITY: f64 = 0.15;
+/// A y label this close to zero, as a fraction of the y range, is labelled as zero: plotters
+/// places key points by adding steps, so the one meant at zero can land 1e-17 off it and be
+/// printed "-0.0". 1e-9 of the range is far below any label's own precision.
+const ZERO_LABEL_FRACTION: f64 = 1e-9;
 
 /// Opacity of a [`Mark::Band`]: 0.35, pale enough that points of any palette colour
 /// drawn on it stand out, dark enough to read as the reference where none are.
 pub const BAND_OPACITY: f64 = 0.35;
+
+/// The label of y value `y` on an axis `span` long: plotters' own, except that a key point
+/// a rounding error off zero reads "0.0" and not "-0.0" (it did on deviation charts whose
+/// range crosses zero).
+fn y_label(y: f64, span: f64) -> String {
+    let y = if y.abs() <= span * ZERO_LABEL_FRACTION {
+        0.0
+    } else {
+        y
+    };
+    <RangedCoordf64 as ValueFormatter<f64>>::format(&y)
+}
 
 /// Error while drawing or writing a chart.
 #[derive(Debug, thiserror::Error)]
@@ -414,7 +432,10 @@ impl Chart {
                 String::new()
             }
         };
+        let span = (yr.1 - yr.0).abs();
+        let y_label = |y: &f64| y_label(*y, span);
         let mut mesh = chart.configure_mesh();
+        mesh.y_label_formatter(&y_label);
         mesh.x_desc(self.x_label.as_str())
             .y_desc(self.y_label.as_str())
             .label_style(("sans-serif", 14))
@@ -601,6 +622,18 @@ pub fn register_font() {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Guards the y labels: a key point a rounding error below zero reads "0.0" (plotters
+    /// printed "-0.0" on a height deviation chart), and other values read as plotters
+    /// prints them.
+    #[test]
+    fn a_y_label_near_zero_reads_zero() {
+        assert_eq!(y_label(-1.4e-17, 0.6), "0.0");
+        assert_eq!(y_label(0.0, 0.6), "0.0");
+        assert_eq!(y_label(-0.1, 0.6), "-0.1");
+        assert_eq!(y_label(0.25, 0.6), "0.25");
+        assert_eq!(y_label(14.0, 16.0), "14.0");
+    }
 
     /// Guards the embedded font and both backends: a chart with a gap (NaN) and a reference
     /// line writes a PNG and an SVG that contain text.
