@@ -87,20 +87,9 @@ fn a_bench_with_a_missing_prediction_is_refused_before_it_starts() {
 /// `prediction.json` has the documented shape.
 #[test]
 fn parts_that_never_meet_lose_the_drive_everywhere() {
-    use mpc_rig::geometry::io::stl::write_stl;
-    use mpc_rig::geometry::primitive_meshes::cuboid;
     let dir = tempfile::tempdir().unwrap();
     let parts = dir.path().join("parts");
-    std::fs::create_dir_all(&parts).unwrap();
-    let block = cuboid([-2.0, -2.0, -2.0], [2.0, 2.0, 2.0]);
-    write_stl(&parts.join("driver.stl"), &block, "driver").unwrap();
-    write_stl(&parts.join("follower.stl"), &block, "follower").unwrap();
-    std::fs::write(
-        parts.join("build.json"),
-        r#"{"scale_mm": 10.0, "clearance_mm": 0.2, "cell_mm": 0.4, "without_pair": null,
-            "check": {"gaps": []}}"#,
-    )
-    .unwrap();
+    blocks_that_never_meet(&parts);
     let out = dir.path().join("prediction");
     let assert = Command::cargo_bin("mpc-rig")
         .unwrap()
@@ -150,7 +139,7 @@ fn parts_that_never_meet_lose_the_drive_everywhere() {
 /// data/motions/screw-bob.toml --samples 90`: K = 4, d_x = 6), small enough to keep here.
 const SCREW_MECHANISM: &str = "tests/data/mechanism/screw-bob";
 
-/// Two blocks as the parts of [`SCREW_MECHANISM`] (a small one on each part's axis, 60 mm
+/// Two blocks as the parts of either test mechanism (a small one on each part's axis, 60 mm
 /// apart, which never meet), with the `build.json` fields `simulate` reads, in `parts`.
 fn blocks_that_never_meet(parts: &std::path::Path) {
     use mpc_rig::geometry::io::stl::write_stl;
