@@ -230,15 +230,11 @@ pub(super) fn geometry_plant(
         }
         let table =
             PlayTable::load(path).context("reading the prediction for the geometry plant")?;
-        if table.region_at(0.0).is_some() != (motion.class() == MotionClass::R1T1) {
+        if table.slides() != (motion.class() == MotionClass::R1T1) {
             anyhow::bail!(
                 "--prediction {}: a prediction of a {} mechanism, but this target is {}",
                 path.display(),
-                if table.region_at(0.0).is_some() {
-                    "1R1T"
-                } else {
-                    "1R"
-                },
+                if table.slides() { "1R1T" } else { "1R" },
                 motion.class()
             );
         }

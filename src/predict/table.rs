@@ -152,11 +152,16 @@ fn read(path: &Path) -> Result<(Load, Vec<Row>), TableError> {
 
 /// Linear interpolation in a periodic table of n values at driver angles 2π·i/n.
 fn periodic(values: &[f64], phi: f64) -> f64 {
-    let n = values.len();
+    let (i, j, f) = periodic_between(values.len(), phi);
+    values[i] + f * (values[j] - values[i])
+}
+
+/// Where driver angle `phi` (rad, any real) falls in a periodic table of `n` entries at
+/// 2π·i/n: the entries before and after it and the fraction of the way between them.
+fn periodic_between(n: usize, phi: f64) -> (usize, usize, f64) {
     let x = phi.rem_euclid(TAU) / TAU * n as f64;
     let i = (x.floor() as usize).min(n - 1);
-    let j = (i + 1) % n;
-    values[i] + (x - i as f64) * (values[j] - values[i])
+    (i, (i + 1) % n, x - i as f64)
 }
 
 /// The predicted deviation of the follower from its target, driven forward and in
@@ -197,6 +202,12 @@ impl PredictedDeviation {
             "tz" => self.height_at(phi_deg, forward),
             _ => None,
         }
+    }
+
+    /// Whether analysis channel `channel` has a prediction ([`of`](Self::of) gives a value):
+    /// `rz` always, `tz` for a 1R1T prediction.
+    pub fn predicts(&self, channel: &str) -> bool {
+        channel == "rz" || (channel == "tz" && self.heights.is_some())
     }
 
     /// 1R1T: predicted − target height (mm) at driver angle `phi_deg`, driven forward or in
@@ -264,14 +275,17 @@ impl PlayTable {
         }
     }
 
+    /// Whether the table is a 1R1T prediction's (it has free regions).
+    pub fn slides(&self) -> bool {
+        self.regions.is_some()
+    }
+
     /// 1R1T: the free region at driver angle `phi` (rad, any real), each ray linear
     /// between the table's angles; `None` for a 1R table.
     pub fn region_at(&self, phi: f64) -> Option<FreeRegion> {
         let regions = self.regions.as_ref()?;
-        let n = regions.len();
-        let x = phi.rem_euclid(TAU) / TAU * n as f64;
-        let i = (x.floor() as usize).min(n - 1);
-        let (a, b, f) = (&regions[i], &regions[(i + 1) % n], x - i as f64);
+        let (i, j, f) = periodic_between(regions.len(), phi);
+        let (a, b) = (&regions[i], &regions[j]);
         Some(FreeRegion {
             reach: std::array::from_fn(|k| a[k] + f * (b[k] - a[k])),
         })

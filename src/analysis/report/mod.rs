@@ -1127,9 +1127,7 @@ pub fn write_report(
         };
         let predicted = predicted_deviation
             .as_ref()
-            .filter(|p| {
-                (a.class == "1R" || a.class == "1R1T") && p.of(&ch.name, 0.0, true).is_some()
-            })
+            .filter(|p| (a.class == "1R" || a.class == "1R1T") && p.predicts(&ch.name))
             .map(|p| (p, a.alignment.driver_offset_deg.value));
         pics.push(plots::error_chart(out_dir, run, ch, m, tol, predicted)?);
         pics.push(plots::cycles_chart(out_dir, m)?);
