@@ -13,7 +13,8 @@
 //! two look the same), c_j a constant sensor offset per DOF, and, only when both directions
 //! were recorded, λ a direction-dependent driver-angle offset (half a dead band between
 //! driver and follower, plus any time lag times the driver speed) and β_j a dead band on the
-//! follower side (follower units). The fit is a weighted
+//! follower side (follower units), a width and so never negative: where the free fit puts
+//! one below zero it is held at zero and the rest fitted again. The fit is a weighted
 //! Gauss–Newton least-squares over all measured samples, started from a grid search over δ₀;
 //! standard errors come from the normal matrix. Parameters that the data cannot separate
 //! (e.g. δ₀ and c for a uniform law) are flagged, not guessed.
@@ -123,8 +124,12 @@ pub struct DofOffsets {
     pub sensor_offset: Estimate,
     /// Whole turns removed from the sensor offset (degrees, a multiple of 360; 0 for tz).
     pub turn_shift: f64,
-    /// Follower-side dead band β (DOF units), when both directions were recorded.
+    /// Follower-side dead band β (DOF units), when both directions were recorded. Never
+    /// negative: where the free fit gave a negative width it is held at 0 (standard error 0)
+    /// and the other parameters fitted again.
     pub backlash: Option<Estimate>,
+    /// The free fit's negative β when [`Self::backlash`] was held at 0 for it.
+    pub backlash_free: Option<f64>,
 }
 
 impl DofOffsets {
@@ -275,67 +280,96 @@ fn align_scalar(run: &MeasuredRun, dofs: &[ScalarDof<'_>], idx: &[usize], both: 
             .sum::<f64>()
             / n;
     }
-    let mut jtj = DMatrix::<f64>::zeros(np, np);
-    let mut ssr = 0.0;
-    let mut row = vec![0.0; np];
-    for _ in 0..ALIGN_MAX_ITERATIONS {
-        jtj.fill(0.0);
-        let mut jtr = DVector::<f64>::zeros(np);
-        ssr = 0.0;
-        for &i in idx {
-            let dir = run.phase[i].direction();
-            let lag = if both { p[1] } else { 0.0 };
-            let phi = run.driver_deg[i] - p[0] - dir * lag;
-            for (j, d) in dofs.iter().enumerate() {
-                let (f, fp) = d.table.eval(phi);
-                let s = if fp.abs() <= DWELL_SLOPE {
-                    0.0
-                } else {
-                    fp.signum()
-                };
-                let cj = c_at(j);
-                let beta = if both { p[cj + 1] } else { 0.0 };
-                let pred = f + p[cj] - dir * s * beta / 2.0;
-                let w = d.weight;
-                let r = w * (d.y[i] - pred);
-                row.iter_mut().for_each(|v| *v = 0.0);
-                row[0] = -fp * w;
-                if both {
-                    row[1] = -dir * fp * w;
-                    row[cj + 1] = -dir * s / 2.0 * w;
-                }
-                row[cj] = w;
-                for a in 0..np {
-                    if row[a] == 0.0 {
-                        continue;
+    // Gauss–Newton with the parameters marked in `held` kept where they are (their column of
+    // the Jacobian is zero, so the minimum-norm step leaves them alone).
+    let fit = |p: &mut DVector<f64>, held: &[bool]| -> (DMatrix<f64>, f64) {
+        let mut jtj = DMatrix::<f64>::zeros(np, np);
+        let mut ssr = 0.0;
+        let mut row = vec![0.0; np];
+        for _ in 0..ALIGN_MAX_ITERATIONS {
+            jtj.fill(0.0);
+            let mut jtr = DVector::<f64>::zeros(np);
+            ssr = 0.0;
+            for &i in idx {
+                let dir = run.phase[i].direction();
+                let lag = if both { p[1] } else { 0.0 };
+                let phi = run.driver_deg[i] - p[0] - dir * lag;
+                for (j, d) in dofs.iter().enumerate() {
+                    let (f, fp) = d.table.eval(phi);
+                    let s = if fp.abs() <= DWELL_SLOPE {
+                        0.0
+                    } else {
+                        fp.signum()
+                    };
+                    let cj = c_at(j);
+                    let beta = if both { p[cj + 1] } else { 0.0 };
+                    let pred = f + p[cj] - dir * s * beta / 2.0;
+                    let w = d.weight;
+                    let r = w * (d.y[i] - pred);
+                    row.iter_mut().for_each(|v| *v = 0.0);
+                    row[0] = -fp * w;
+                    if both {
+                        row[1] = -dir * fp * w;
+                        row[cj + 1] = -dir * s / 2.0 * w;
                     }
-                    jtr[a] += row[a] * r;
-                    for b in a..np {
-                        jtj[(a, b)] += row[a] * row[b];
+                    row[cj] = w;
+                    for (v, h) in row.iter_mut().zip(held) {
+                        if *h {
+                            *v = 0.0;
+                        }
                     }
+                    for a in 0..np {
+                        if row[a] == 0.0 {
+                            continue;
+                        }
+                        jtr[a] += row[a] * r;
+                        for b in a..np {
+                            jtj[(a, b)] += row[a] * row[b];
+                        }
+                    }
+                    ssr += r * r;
                 }
-                ssr += r * r;
+            }
+            for a in 0..np {
+                for b in 0..a {
+                    jtj[(a, b)] = jtj[(b, a)];
+                }
+            }
+            let step = solve_pinv(&jtj, &jtr);
+            let mut step = step;
+            let lim = |v: f64| v.clamp(-ALIGN_MAX_STEP_DEG, ALIGN_MAX_STEP_DEG);
+            step[0] = lim(step[0]);
+            if both {
+                step[1] = lim(step[1]);
+            }
+            *p += &step;
+            let small = step[0].abs() < ALIGN_TOLERANCE_DEG
+                && (!both || step[1].abs() < ALIGN_TOLERANCE_DEG);
+            if small {
+                break;
             }
         }
-        for a in 0..np {
-            for b in 0..a {
-                jtj[(a, b)] = jtj[(b, a)];
-            }
+        (jtj, ssr)
+    };
+    // A dead band is a width: one the free fit puts below zero is held at zero and the rest
+    // fitted again (the two directions' gap is then the driver side's), until none is.
+    let mut held = vec![false; np];
+    let mut free_backlash = vec![None; nd];
+    let (jtj, ssr) = loop {
+        let (jtj, ssr) = fit(&mut p, &held);
+        let negative: Vec<usize> = (0..nd)
+            .filter(|&j| both && !held[c_at(j) + 1] && p[c_at(j) + 1] < 0.0)
+            .collect();
+        if negative.is_empty() {
+            break (jtj, ssr);
         }
-        let step = solve_pinv(&jtj, &jtr);
-        let mut step = step;
-        let lim = |v: f64| v.clamp(-ALIGN_MAX_STEP_DEG, ALIGN_MAX_STEP_DEG);
-        step[0] = lim(step[0]);
-        if both {
-            step[1] = lim(step[1]);
+        for j in negative {
+            let k = c_at(j) + 1;
+            free_backlash[j] = Some(p[k]);
+            held[k] = true;
+            p[k] = 0.0;
         }
-        p += &step;
-        let small =
-            step[0].abs() < ALIGN_TOLERANCE_DEG && (!both || step[1].abs() < ALIGN_TOLERANCE_DEG);
-        if small {
-            break;
-        }
-    }
+    };
     let dof_count = (idx.len() * nd) as f64;
     let sigma2 = ssr / (dof_count - np as f64).max(1.0);
     let cov = covariance(&jtj, sigma2);
@@ -356,7 +390,14 @@ fn align_scalar(run: &MeasuredRun, dofs: &[ScalarDof<'_>], idx: &[usize], both: 
                 dof: d.dof,
                 sensor_offset: e,
                 turn_shift,
-                backlash: both.then(|| est(cj + 1)),
+                backlash: both.then(|| {
+                    if held[cj + 1] {
+                        Estimate::new(0.0, 0.0)
+                    } else {
+                        est(cj + 1)
+                    }
+                }),
+                backlash_free: free_backlash[j],
             }
         })
         .collect();
@@ -639,6 +680,43 @@ mod tests {
             al.driver_offset_deg
         );
         assert!(al.driver_offset_deg.determined);
+    }
+
+    /// Guards the dead band's sign: a follower-side dead band is a width. A run whose
+    /// directions are swapped shows a 1° dead band as a −1° one to the free fit; the fit
+    /// then holds it at 0 (reporting the free value) and refits, where the true run keeps
+    /// its 1° and nothing held.
+    #[test]
+    fn a_negative_dead_band_is_held_at_zero() {
+        let law = smooth_turn();
+        let run = SyntheticBench {
+            backlash: 1.0,
+            reverse_cycles: 3.0,
+            noise: 0.01,
+            seed: 5,
+            ..Default::default()
+        }
+        .generate(&law);
+        let dof = |al: &Alignment| al.dofs[0];
+        let al = align(&run, &law).unwrap();
+        let b = dof(&al).backlash.unwrap();
+        assert!((b.value - 1.0).abs() < 0.02, "{b:?}");
+        assert_eq!(dof(&al).backlash_free, None);
+
+        let mut swapped = run.clone();
+        for ph in &mut swapped.phase {
+            *ph = match *ph {
+                Phase::Forward => Phase::Reverse,
+                Phase::Reverse => Phase::Forward,
+                Phase::Settle => Phase::Settle,
+            };
+        }
+        let al = align(&swapped, &law).unwrap();
+        let b = dof(&al).backlash.unwrap();
+        assert_eq!((b.value, b.std_err, b.determined), (0.0, 0.0, true));
+        let free = dof(&al).backlash_free.expect("the free fit's value");
+        assert!((free + 1.0).abs() < 0.02, "free fit {free}");
+        assert!(al.driver_offset_deg.value.is_finite());
     }
 
     /// Guards the input checks: a 3R target without an IMU column is a clear mismatch.

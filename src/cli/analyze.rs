@@ -44,7 +44,7 @@ pub struct AnalyzeArgs {
     #[arg(long, value_parser = positive)]
     pub tol_ratio: Option<f64>,
     /// Also compare with the law `mpc-rig simulate` predicted for the built parts (its
-    /// prediction.json; 1R).
+    /// prediction.json; 1R and 1R1T: the turn, and for 1R1T the height).
     #[arg(long, value_name = "FILE")]
     pub prediction: Option<PathBuf>,
     /// The folder `mpc-rig build` wrote the measured parts into: the report shows their
@@ -177,7 +177,10 @@ pub fn print_summary(s: &Summary, report_dir: &Path) {
         println!(
             "backlash: {}° of driver angle{} (forward vs reverse)",
             crate::analysis::report::backlash_with_error(b, s.lag.backlash_driver_std_err_deg),
-            crate::analysis::report::follower_play(h)
+            crate::analysis::report::follower_play(
+                h.backlash_follower_deg,
+                h.backlash_follower_free_deg
+            )
         );
     }
     println!(

@@ -126,6 +126,9 @@ pub struct Headline {
     /// Follower-side dead band about z (its play: printed parts' clearance shows here, not
     /// in the driver-side figure), when both directions were run.
     pub backlash_follower_deg: Option<f64>,
+    /// The free fit's negative dead band about z, when it was held at 0 (see
+    /// `align::DofOffsets::backlash`); `backlash_follower_deg` is then 0.
+    pub backlash_follower_free_deg: Option<f64>,
     /// Complete forward/reverse cycles analysed.
     pub cycles: usize,
     /// Mean sample rate.
@@ -194,6 +197,10 @@ pub struct LagSummary {
     pub backlash_follower_rz_deg: Option<f64>,
     /// Follower-side dead band in tz.
     pub backlash_follower_tz_mm: Option<f64>,
+    /// The free fit's negative dead band in rz, when it was held at 0.
+    pub backlash_follower_rz_free_deg: Option<f64>,
+    /// The free fit's negative dead band in tz, when it was held at 0.
+    pub backlash_follower_tz_free_mm: Option<f64>,
     /// 3R forward/reverse difference of the error rotation.
     pub rotation_hysteresis: Option<Hysteresis>,
 }
@@ -434,6 +441,7 @@ pub fn summarize(
                 .map(|(_, e)| e.value)
         })
     };
+    let follower_free = |d: Dof| off(d).and_then(|o| o.backlash_free);
     Summary {
         format: SUMMARY_FORMAT.into(),
         pass,
@@ -450,6 +458,7 @@ pub fn summarize(
             phase_lag_deg: a.phase_lag.driver_deg.value,
             backlash_driver_deg: bl.map(|b| b.driver_deg.value),
             backlash_follower_deg: follower_bl(Dof::Rz),
+            backlash_follower_free_deg: follower_free(Dof::Rz),
             cycles,
             sample_rate_hz: a.sampling.mean_rate_hz,
             not_enough_data,
@@ -475,6 +484,8 @@ pub fn summarize(
             backlash_driver_std_err_deg: bl.map(|b| b.driver_deg.std_err),
             backlash_follower_rz_deg: follower_bl(Dof::Rz),
             backlash_follower_tz_mm: follower_bl(Dof::Tz),
+            backlash_follower_rz_free_deg: follower_free(Dof::Rz),
+            backlash_follower_tz_free_mm: follower_free(Dof::Tz),
             rotation_hysteresis: a.rotation_hysteresis,
         },
         errors: a.channels.clone(),
@@ -519,10 +530,28 @@ fn counters_text(counts: &serde_json::Value) -> String {
     }
 }
 
-/// The follower-side dead band after the driver-side backlash, when it was fitted.
-pub fn follower_play(h: &Headline) -> String {
-    h.backlash_follower_deg.map_or(String::new(), |f| {
-        format!(" and {}° of follower (its dead band)", f3(f))
+/// The follower-side dead band after the driver-side backlash, when it was fitted; one the
+/// free fit put below zero reads as none, with that value.
+pub fn follower_play(dead_band_deg: Option<f64>, free_deg: Option<f64>) -> String {
+    match (dead_band_deg, free_deg) {
+        (Some(_), Some(free)) => format!(
+            " and no follower-side dead band (the free fit's {}° held at 0)",
+            f3(free)
+        ),
+        (Some(f), None) => format!(" and {}° of follower (its dead band)", f3(f)),
+        (None, _) => String::new(),
+    }
+}
+
+/// The note beside a follower-side dead band in the offsets table: where a free fit's
+/// negative width was held at 0, that width.
+fn held_note(free: Option<f64>, unit: &str) -> String {
+    free.map_or(String::new(), |v| {
+        format!(
+            "held at 0: the free fit gave {} {unit} (a width cannot be negative; the \
+             directions' gap is the driver side's)",
+            f3(v)
+        )
     })
 }
 
@@ -651,7 +680,7 @@ fn headline_blocks(s: &Summary, pictures: &[plots::Picture], b: &mut Vec<Block>)
                 format!(
                     "backlash {}° of driver angle{}",
                     backlash_with_error(v, s.lag.backlash_driver_std_err_deg),
-                    follower_play(h)
+                    follower_play(h.backlash_follower_deg, h.backlash_follower_free_deg)
                 )
             })
     ));
@@ -806,14 +835,14 @@ fn alignment_blocks(s: &Summary, b: &mut Vec<Block>) {
         rows.push(vec![
             "follower-side dead band rz".into(),
             format!("{} °", f3(v)),
-            String::new(),
+            held_note(s.lag.backlash_follower_rz_free_deg, "°"),
         ]);
     }
     if let Some(v) = s.lag.backlash_follower_tz_mm {
         rows.push(vec![
             "follower-side dead band tz".into(),
             format!("{} mm", f3(v)),
-            String::new(),
+            held_note(s.lag.backlash_follower_tz_free_mm, "mm"),
         ]);
     }
     b.push(Block::Table(
@@ -1168,7 +1197,7 @@ pub fn write_report(
 
 #[cfg(test)]
 mod tests {
-    use super::{backlash_with_error, f3};
+    use super::{backlash_with_error, f3, follower_play, held_note};
 
     /// Guards the sentence the report and `analyze` give the prediction's loss of drive:
     /// every window, in driver degrees to the samples' 0.25° (as `simulate` writes them),
@@ -1201,5 +1230,27 @@ mod tests {
         assert_eq!(backlash_with_error(2.0134, Some(0.0042)), "2.013 ± 0.004");
         assert_eq!(backlash_with_error(2.0134, None), "2.013");
         assert_eq!(backlash_with_error(2.0134, Some(f64::NAN)), "2.013");
+    }
+
+    /// Guards the follower-side dead band's words: a fitted width reads as such; one the
+    /// free fit put below zero reads as none, with the value that was held, in the
+    /// sentence and in the table's note.
+    #[test]
+    fn a_held_dead_band_reads_as_none() {
+        assert_eq!(
+            follower_play(Some(0.5004), None),
+            " and 0.500° of follower (its dead band)"
+        );
+        assert_eq!(
+            follower_play(Some(0.0), Some(-0.0861)),
+            " and no follower-side dead band (the free fit's -0.086° held at 0)"
+        );
+        assert_eq!(follower_play(None, None), "");
+        assert_eq!(held_note(None, "mm"), "");
+        assert_eq!(
+            held_note(Some(-0.0581), "mm"),
+            "held at 0: the free fit gave -0.058 mm (a width cannot be negative; the \
+             directions' gap is the driver side's)"
+        );
     }
 }
