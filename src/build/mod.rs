@@ -44,7 +44,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use crate::geometry::mesh::{Mesh, MeshCheck};
-use crate::geometry::mesher::{mesh_solid_reporting, MeshProgress, MesherError};
+use crate::geometry::mesher::{mesh_solid_trimmed, MeshProgress, MesherError};
 use crate::geometry::sdf::{Sdf, Vec3};
 use crate::geometry::sweep::SweepError;
 use crate::synth::closure::Class;
@@ -335,6 +335,7 @@ pub fn build(
             &f,
             Loose::Anchored(&anchors),
             opts.cell_mm,
+            None,
             progress,
         )?);
     }
@@ -348,6 +349,7 @@ pub fn build(
             &d,
             Loose::LeaveOut,
             opts.cell_mm,
+            Some(dims::SLIVER_MM),
             progress,
         )?);
     }
@@ -359,6 +361,7 @@ pub fn build(
             &s,
             Loose::Whole,
             opts.cell_mm,
+            None,
             progress,
         )?);
     }
@@ -429,12 +432,14 @@ enum Loose<'a> {
     Whole,
 }
 
-/// Mesh one part, check it, and sort out loose shells as `loose` says.
+/// Mesh one part (leaving out material thinner than `sliver`, when given: see
+/// [`mesh_solid_trimmed`]), check it, and sort out loose shells as `loose` says.
 fn mesh_part(
     name: &'static str,
     solid: &dyn Sdf,
     loose: Loose<'_>,
     cell: f64,
+    sliver: Option<f64>,
     progress: &dyn Fn(&str),
 ) -> Result<Part, BuildError> {
     let t = Instant::now();
@@ -452,7 +457,7 @@ fn mesh_part(
             ));
         }
     };
-    let mesh = mesh_solid_reporting(&f, solid.bounds(), cell, &mut report)
+    let mesh = mesh_solid_trimmed(&f, solid.bounds(), cell, sliver, &mut report)
         .map_err(|source| BuildError::Mesh { part: name, source })?;
     let check = mesh.check();
     if !check.is_closed_manifold() {

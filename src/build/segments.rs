@@ -20,9 +20,11 @@ use crate::geometry::sweep::{Frame, Section, Sweep};
 const SECTION_STEP_MM: f64 = 0.8;
 /// The samples keep this far inside the section's outline, mm.
 const SECTION_INSET_MM: f64 = 0.4;
-/// Material thinner than this between two samples is not trusted to join them, mm: the
-/// mesher's default cell (0.4 mm) would print it as a sliver or not at all.
-pub const BRIDGE_MM: f64 = 0.4;
+/// How far inside the carve a sample must lie to count as material, mm: half the sliver
+/// the driver's mesh leaves out ([`super::dims::SLIVER_MM`]), so a chain of such samples
+/// has about a sliver's thickness of material around it and thinner material does not
+/// join two samples.
+pub const BRIDGE_MM: f64 = 0.5 * super::dims::SLIVER_MM;
 
 /// One piece of a carved band.
 #[derive(Clone, Debug, PartialEq)]

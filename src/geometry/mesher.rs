@@ -1,4 +1,5 @@
-//! From an implicit solid to a closed triangle mesh: marching tetrahedra on a sparse grid.
+//! From an implicit solid to a closed triangle mesh: marching tetrahedra on a sparse grid,
+//! optionally leaving out slivers ([`mesh_solid_trimmed`]).
 //!
 //! Owns [`mesh_solid`] (and [`mesh_solid_reporting`], the same with progress). The grid's
 //! cubes are cut into six tetrahedra along their main diagonal (the Kuhn triangulation, the
@@ -185,6 +186,26 @@ impl Grid {
     fn index(&self, i: [usize; 3]) -> u64 {
         (i[0] + self.n[0] * (i[1] + self.n[1] * i[2])) as u64
     }
+    /// Block `b`'s number.
+    fn block_index(&self, b: [usize; 3]) -> usize {
+        b[0] + self.nb[0] * (b[1] + self.nb[1] * b[2])
+    }
+    /// The block numbered `i`.
+    fn block(&self, i: usize) -> [usize; 3] {
+        [
+            i % self.nb[0],
+            (i / self.nb[0]) % self.nb[1],
+            i / (self.nb[0] * self.nb[1]),
+        ]
+    }
+    /// The grid point at block `b`'s centre.
+    fn block_centre(&self, b: [usize; 3]) -> Vec3 {
+        self.point([
+            b[0] * BLOCK + BLOCK / 2,
+            b[1] * BLOCK + BLOCK / 2,
+            b[2] * BLOCK + BLOCK / 2,
+        ])
+    }
 }
 
 /// What one block produced.
@@ -198,19 +219,54 @@ struct BlockOut {
     mixed_faces: [bool; 6],
     /// A grid point on the grid's outer boundary inside the solid, if any.
     open_at: Option<Vec3>,
+    /// The block, and its grid values when they are kept for trimming (see
+    /// [`mesh_solid_trimmed`]); empty once its triangles are made.
+    block: [usize; 3],
+    vals: Vec<f64>,
 }
 
-fn process_block(f: &(dyn Fn(Vec3) -> f64 + Sync), g: &Grid, b: [usize; 3]) -> BlockOut {
-    let m = BLOCK + 1;
+/// Grid points per block edge, the block's boundary points included.
+const M: usize = BLOCK + 1;
+
+/// Index of local point (i, j, k) in a block's values.
+fn at(i: usize, j: usize, k: usize) -> usize {
+    i + M * (j + M * k)
+}
+
+/// The cells a block spans per axis (fewer than [`BLOCK`] at the grid's far faces).
+fn extent(g: &Grid, b: [usize; 3]) -> ([usize; 3], [usize; 3]) {
     let base = [b[0] * BLOCK, b[1] * BLOCK, b[2] * BLOCK];
     let ext = [
         (g.n[0] - 1 - base[0]).min(BLOCK),
         (g.n[1] - 1 - base[1]).min(BLOCK),
         (g.n[2] - 1 - base[2]).min(BLOCK),
     ];
+    (base, ext)
+}
+
+/// Evaluate a block and make its triangles, keeping its values if `keep` (for trimming,
+/// which makes the triangles later from the trimmed values).
+fn process_block(
+    f: &(dyn Fn(Vec3) -> f64 + Sync),
+    g: &Grid,
+    b: [usize; 3],
+    keep: bool,
+) -> BlockOut {
+    let mut out = evaluate_block(f, g, b);
+    if !keep {
+        let vals = std::mem::take(&mut out.vals);
+        triangulate_block(g, &vals, &mut out);
+    }
+    out
+}
+
+/// A block's grid values, the sign changes on its faces and any inside point on the grid's
+/// outer boundary.
+fn evaluate_block(f: &(dyn Fn(Vec3) -> f64 + Sync), g: &Grid, b: [usize; 3]) -> BlockOut {
+    let m = M;
+    let (base, ext) = extent(g, b);
     let delta = ZERO_OFFSET * g.h;
     let mut vals = vec![0.0f64; m * m * m];
-    let at = |i: usize, j: usize, k: usize| i + m * (j + m * k);
     for k in 0..=ext[2] {
         for j in 0..=ext[1] {
             for i in 0..=ext[0] {
@@ -252,6 +308,14 @@ fn process_block(f: &(dyn Fn(Vec3) -> f64 + Sync), g: &Grid, b: [usize; 3]) -> B
         }
         out.mixed_faces[face] = neg && pos;
     }
+    out.block = b;
+    out.vals = vals;
+    out
+}
+
+/// The triangles of a block from its grid values `vals`, into `out`.
+fn triangulate_block(g: &Grid, vals: &[f64], out: &mut BlockOut) {
+    let (base, ext) = extent(g, out.block);
     let table = table();
     let mut seen: HashMap<u64, ()> = HashMap::new();
     for k in 0..ext[2] {
@@ -305,7 +369,140 @@ fn process_block(f: &(dyn Fn(Vec3) -> f64 + Sync), g: &Grid, b: [usize; 3]) -> B
             }
         }
     }
-    out
+}
+
+/// How far from a thick grid point a shallow inside point is still kept, mm, for a sliver
+/// threshold `sliver` and cells of `h`: (sliver/2 + h)·√3. The thick points of a solid lie
+/// at least sliver/2 inside its surface, and the one nearest a surface point can be a cell
+/// farther along each axis at a convex corner; within that reach, no face of a solid
+/// thicker than the sliver moves, only material farther than that from any thick point.
+pub fn trim_reach(sliver: f64, h: f64) -> f64 {
+    (0.5 * sliver + h) * 3f64.sqrt()
+}
+
+/// Trim the evaluated blocks' values (see [`mesh_solid_trimmed`]) and make their triangles.
+fn trim(f: &(dyn Fn(Vec3) -> f64 + Sync), g: &Grid, outs: &mut [BlockOut], sliver: f64) {
+    let deep = -0.5 * sliver;
+    let reach = trim_reach(sliver, g.h);
+    let k = (reach / g.h).ceil() as i64;
+    let flat = |b: [usize; 3]| g.block_index(b);
+    let slot: HashMap<usize, usize> = outs
+        .iter()
+        .enumerate()
+        .map(|(i, o)| (flat(o.block), i))
+        .collect();
+    // Blocks the meshing skipped lie wholly on one side: which, from their centre's value
+    // (beyond half a block's diagonal from the surface, or they would have been meshed).
+    // Those within the search's reach of an evaluated block are the ones asked about.
+    let ring = (k as usize).div_ceil(BLOCK);
+    let side = 2 * ring + 1;
+    let mut skipped: Vec<usize> = Vec::new();
+    for o in outs.iter() {
+        for d in 0..side * side * side {
+            let off = [d % side, d / side % side, d / (side * side)];
+            let nb: Option<Vec<usize>> = (0..3)
+                .map(|a| {
+                    (o.block[a] + off[a])
+                        .checked_sub(ring)
+                        .filter(|&v| v < g.nb[a])
+                })
+                .collect();
+            if let Some(nb) = nb {
+                let j = flat([nb[0], nb[1], nb[2]]);
+                if !slot.contains_key(&j) {
+                    skipped.push(j);
+                }
+            }
+        }
+    }
+    skipped.sort_unstable();
+    skipped.dedup();
+    let inside: HashMap<usize, bool> = skipped
+        .par_iter()
+        .map(|&j| (j, f(g.block_centre(g.block(j))) < 0.0))
+        .collect();
+    // Whether the grid point `p` is thick.
+    let thick = |p: [i64; 3]| -> bool {
+        if (0..3).any(|a| p[a] < 0 || p[a] >= g.n[a] as i64) {
+            return false;
+        }
+        let p = [p[0] as usize, p[1] as usize, p[2] as usize];
+        // The point may lie on the faces of up to eight blocks (q·BLOCK ≤ p ≤ q·BLOCK +
+        // BLOCK); any evaluated one holds its value.
+        let mut home = None;
+        for d in 0..8usize {
+            let mut q = [0; 3];
+            let mut ok = true;
+            for a in 0..3 {
+                let lower = d >> a & 1 == 1;
+                q[a] = p[a] / BLOCK;
+                if lower {
+                    ok &= p[a] % BLOCK == 0 && q[a] > 0;
+                    q[a] = q[a].saturating_sub(1);
+                }
+                ok &= q[a] < g.nb[a];
+            }
+            if !ok {
+                continue;
+            }
+            if let Some(&i) = slot.get(&flat(q)) {
+                let l = [
+                    p[0] - q[0] * BLOCK,
+                    p[1] - q[1] * BLOCK,
+                    p[2] - q[2] * BLOCK,
+                ];
+                return outs[i].vals[at(l[0], l[1], l[2])] < deep;
+            }
+            home.get_or_insert(q);
+        }
+        home.is_some_and(|q| inside.get(&flat(q)).copied().unwrap_or(false))
+    };
+    let mut offsets: Vec<[i64; 3]> = Vec::new();
+    for dz in -k..=k {
+        for dy in -k..=k {
+            for dx in -k..=k {
+                let r = ((dx * dx + dy * dy + dz * dz) as f64).sqrt() * g.h;
+                if r <= reach {
+                    offsets.push([dx, dy, dz]);
+                }
+            }
+        }
+    }
+    offsets.sort_by_key(|o| o[0] * o[0] + o[1] * o[1] + o[2] * o[2]);
+    let outside = 0.5 * g.h;
+    let trimmed: Vec<Vec<f64>> = outs
+        .par_iter()
+        .map(|o| {
+            let (base, ext) = extent(g, o.block);
+            let mut vals = o.vals.clone();
+            for kk in 0..=ext[2] {
+                for j in 0..=ext[1] {
+                    for i in 0..=ext[0] {
+                        let v = &mut vals[at(i, j, kk)];
+                        if !(*v < 0.0 && *v >= deep) {
+                            continue;
+                        }
+                        let p = [
+                            (base[0] + i) as i64,
+                            (base[1] + j) as i64,
+                            (base[2] + kk) as i64,
+                        ];
+                        let near = offsets
+                            .iter()
+                            .any(|o| thick([p[0] + o[0], p[1] + o[1], p[2] + o[2]]));
+                        if !near {
+                            *v = outside;
+                        }
+                    }
+                }
+            }
+            vals
+        })
+        .collect();
+    outs.par_iter_mut().zip(trimmed).for_each(|(o, vals)| {
+        o.vals = Vec::new();
+        triangulate_block(g, &vals, o);
+    });
 }
 
 /// Mesh the solid `f < 0` inside `bounds` with cells of `h` mm. `f` must be a signed
@@ -327,6 +524,31 @@ pub fn mesh_solid_reporting(
     h: f64,
     report: &mut dyn FnMut(MeshProgress),
 ) -> Result<Mesh, MesherError> {
+    mesh_solid_trimmed(f, bounds, h, None, report)
+}
+
+/// [`mesh_solid_reporting`], leaving out material thinner than `sliver_mm` that is not
+/// near thicker material, when `sliver_mm` is given.
+///
+/// A grid point counts as *thick* when its value is below −`sliver_mm`/2 (it lies at least
+/// that deep; a block the meshing skipped because it is wholly inside counts as thick). A
+/// point inside but shallower is kept when a thick point lies within [`trim_reach`] of it,
+/// and otherwise moved outside: that is a morphological opening of the solid by a ball of
+/// half the sliver's thickness, read on the grid. A slab thinner than `sliver_mm` has no
+/// thick point and goes (beyond the reach from thicker material); one thicker than
+/// `sliver_mm` + h always has one (some grid point lies within h/2 of its middle); between
+/// the two, it depends on how the slab lies on the grid. Points outside are never changed,
+/// so every face the meshing makes of thick material is made exactly as without trimming;
+/// and the decision at a point depends only on grid values, so the blocks that share the
+/// point agree on it and the mesh stays closed.
+pub fn mesh_solid_trimmed(
+    f: &(dyn Fn(Vec3) -> f64 + Sync),
+    bounds: Aabb,
+    h: f64,
+    sliver_mm: Option<f64>,
+    report: &mut dyn FnMut(MeshProgress),
+) -> Result<Mesh, MesherError> {
+    let keep = sliver_mm.is_some();
     // Two cells of margin so the outermost grid points are outside the solid.
     let b = bounds.inflate(2.0 * h);
     let size = b.size();
@@ -355,23 +577,12 @@ pub fn mesh_solid_reporting(
         ],
     };
     let nblocks = g.nb[0] * g.nb[1] * g.nb[2];
-    let unflat = |i: usize| {
-        [
-            i % g.nb[0],
-            (i / g.nb[0]) % g.nb[1],
-            i / (g.nb[0] * g.nb[1]),
-        ]
-    };
+    let unflat = |i: usize| g.block(i);
     let half_diag = 0.5 * (BLOCK as f64) * h * 3f64.sqrt();
     let mut wave: Vec<usize> = (0..nblocks)
         .into_par_iter()
         .filter(|&i| {
-            let bi = unflat(i);
-            let c = g.point([
-                bi[0] * BLOCK + BLOCK / 2,
-                bi[1] * BLOCK + BLOCK / 2,
-                bi[2] * BLOCK + BLOCK / 2,
-            ]);
+            let c = g.block_centre(unflat(i));
             f(c).abs() <= SKIP_SAFETY * half_diag + h
         })
         .collect();
@@ -387,7 +598,7 @@ pub fn mesh_solid_reporting(
         for part in wave.chunks(chunk) {
             results.par_extend(
                 part.par_iter()
-                    .map(|&i| (i, process_block(f, &g, unflat(i)))),
+                    .map(|&i| (i, process_block(f, &g, unflat(i), keep))),
             );
             report(MeshProgress {
                 done: outs.len() + results.len(),
@@ -414,7 +625,7 @@ pub fn mesh_solid_reporting(
                         continue;
                     }
                 }
-                let j = nbi[0] + g.nb[0] * (nbi[1] + g.nb[1] * nbi[2]);
+                let j = g.block_index(nbi);
                 if !done[j] {
                     done[j] = true;
                     next.push(j);
@@ -433,6 +644,9 @@ pub fn mesh_solid_reporting(
             y: p.y,
             z: p.z,
         });
+    }
+    if let Some(sliver) = sliver_mm {
+        trim(f, &g, &mut outs, sliver);
     }
     // Weld: one vertex per edge key.
     let total_verts: usize = outs.iter().map(|o| o.verts.len()).sum();
@@ -462,6 +676,7 @@ mod tests {
     use super::*;
     use crate::geometry::sdf::{Cuboid, Cylinder, Difference, Sdf, Sphere};
     use crate::geometry::sweep::{Frame, Section, Sweep};
+    use nalgebra::Rotation3;
 
     /// Every sign pattern of every tetrahedron gives outward faces: checked by the meshes
     /// below having positive volume and no misoriented edge; here, that the table has the
@@ -532,6 +747,70 @@ mod tests {
         assert!(seen.iter().all(|r| r.done <= r.known), "{seen:?}");
         let last = seen.last().unwrap();
         assert_eq!(last.done, last.known);
+    }
+
+    /// Guards trimming (`mesh_solid_trimmed`): a tilted box, a fin 0.25 mm thick standing
+    /// 6 mm off one face and a loose sheet 0.2 mm thick, trimmed at a 0.4 mm sliver. The
+    /// sheet goes whole and the fin beyond the reach from the box; the box alone meshes to
+    /// exactly the same vertices and triangles trimmed or not (no face of thick material
+    /// moves, its corners included); every mesh is a closed manifold.
+    #[test]
+    fn trimming_drops_slivers_and_leaves_thick_material_alone() {
+        let tilt = Rotation3::from_euler_angles(0.3, -0.2, 0.5);
+        let cube = Cuboid {
+            center: Vec3::new(0.0, 0.0, 0.0),
+            half: Vec3::new(4.0, 3.0, 2.5),
+            rotation: tilt,
+        };
+        let fin = Cuboid {
+            center: tilt * Vec3::new(4.0 + 3.0, 0.0, 0.0),
+            half: Vec3::new(3.0 + 0.5, 2.0, 0.125),
+            rotation: tilt,
+        };
+        let sheet = Cuboid {
+            center: Vec3::new(0.0, 0.0, 9.0),
+            half: Vec3::new(3.0, 3.0, 0.1),
+            rotation: Rotation3::identity(),
+        };
+        let (h, sliver) = (0.25, 0.4);
+        let all = |p: Vec3| cube.dist(p).min(fin.dist(p)).min(sheet.dist(p));
+        let bounds = cube.bounds().union(&fin.bounds()).union(&sheet.bounds());
+        let plain = mesh_solid(&all, bounds, h).unwrap();
+        let trimmed = mesh_solid_trimmed(&all, bounds, h, Some(sliver), &mut |_| {}).unwrap();
+        for m in [&plain, &trimmed] {
+            let c = m.check();
+            assert!(c.is_closed_manifold(), "{}", c.summary());
+        }
+        assert_eq!(plain.check().shells, 2, "the sheet meshes untrimmed");
+        let c = trimmed.check();
+        assert_eq!(c.shells, 1, "the sheet is left out");
+        // What is left of the fin: at most the reach out from the box's face.
+        let cube_volume = 8.0 * 6.0 * 5.0;
+        let stub = 4.0 * 0.25 * trim_reach(sliver, h);
+        assert!(
+            c.volume_mm3 > cube_volume * 0.99 && c.volume_mm3 < cube_volume * 1.01 + stub,
+            "trimmed volume {} (box {cube_volume}, stub at most {stub})",
+            c.volume_mm3
+        );
+        let fin_tip = tilt * Vec3::new(4.0 + 6.0 - 0.5, 0.0, 0.0);
+        assert!(plain.contains([fin_tip.x, fin_tip.y, fin_tip.z]));
+        assert!(!trimmed.contains([fin_tip.x, fin_tip.y, fin_tip.z]));
+        // The box alone, at cells that put the grid's last point on a block's face at
+        // some of them (the lookup of points shared by blocks).
+        let alone = |p: Vec3| cube.dist(p);
+        for h in [0.25, 0.26, 0.27, 0.28, 0.29, 0.3, 0.31, 0.32, 0.33] {
+            let a = mesh_solid(&alone, cube.bounds(), h).unwrap();
+            let b =
+                mesh_solid_trimmed(&alone, cube.bounds(), h, Some(sliver), &mut |_| {}).unwrap();
+            assert!(
+                a.vertices == b.vertices && a.triangles == b.triangles,
+                "trimming changed the box at {h} mm cells: {} / {} vertices, {} / {} triangles",
+                a.vertices.len(),
+                b.vertices.len(),
+                a.triangles.len(),
+                b.triangles.len()
+            );
+        }
     }
 
     /// A box with a through hole (genus 1, sharp edges) is still a closed manifold, with
