@@ -11,6 +11,8 @@
 
 use std::collections::HashMap;
 
+use rayon::prelude::*;
+
 /// Smallest face area, mm², below which a face counts as degenerate. Default 1e-10 mm²: the
 /// mesher's smallest legitimate faces (slivers next to a grid vertex) are several orders
 /// larger, and an STL stores f32 coordinates, which resolve ~1e-5 mm at 100 mm, so a face
@@ -173,6 +175,56 @@ impl MeshCheck {
         }
         parts.join(", ")
     }
+}
+
+/// One use of an undirected edge by a triangle: the edge's lower and higher vertex, the
+/// triangle, and which of its edges it is (k: from corner k to corner k + 1 mod 3).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub(crate) struct EdgeUse {
+    /// Lower vertex index.
+    pub lo: u32,
+    /// Higher vertex index.
+    pub hi: u32,
+    /// Triangle index.
+    pub triangle: u32,
+    /// Edge k of the triangle.
+    pub k: u8,
+}
+
+impl EdgeUse {
+    /// Whether the triangle runs along the edge from its lower to its higher vertex.
+    pub fn forward(&self, triangles: &[[u32; 3]]) -> bool {
+        let t = triangles[self.triangle as usize];
+        t[self.k as usize] < t[(self.k as usize + 1) % 3]
+    }
+}
+
+/// Every edge use of the triangles `keep` accepts, sorted so the uses of one undirected
+/// edge come together, in triangle order: group them with
+/// `chunk_by(|a, b| (a.lo, a.hi) == (b.lo, b.hi))`. The one edge table of the mesh check
+/// and of the distance queries' pseudo-normals (`query`).
+pub(crate) fn edge_uses(
+    triangles: &[[u32; 3]],
+    keep: impl Fn(&[u32; 3]) -> bool + Sync,
+) -> Vec<EdgeUse> {
+    let mut uses: Vec<EdgeUse> = triangles
+        .par_iter()
+        .enumerate()
+        .filter(|(_, t)| keep(t))
+        .flat_map_iter(|(i, t)| {
+            (0..3).map(move |k| {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                EdgeUse {
+                    lo: a.min(b),
+                    hi: a.max(b),
+                    triangle: i as u32,
+                    k: k as u8,
+                }
+            })
+        })
+        .collect();
+    uses.par_sort_unstable();
+    uses
 }
 
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
@@ -372,9 +424,6 @@ impl Mesh {
             triangles: self.triangles.len(),
             ..MeshCheck::default()
         };
-        // Directed edge counts per undirected edge (lo, hi): uses in lo→hi and hi→lo.
-        let mut edges: HashMap<(u32, u32), (u32, u32)> =
-            HashMap::with_capacity(self.triangles.len() * 3 / 2 + 1);
         let mut used = vec![false; nv];
         let mut good_faces = Vec::with_capacity(self.triangles.len());
         for (i, t) in self.triangles.iter().enumerate() {
@@ -394,19 +443,14 @@ impl Mesh {
                 out.degenerate_faces += 1;
             }
             good_faces.push(i);
-            for (u, v) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
-                let e = edges.entry((u.min(v), u.max(v))).or_insert((0, 0));
-                if u < v {
-                    e.0 += 1;
-                } else {
-                    e.1 += 1;
-                }
-            }
         }
         out.vertices = used.iter().filter(|&&u| u).count();
-        out.edges = edges.len();
-        for &(fwd, back) in edges.values() {
-            match fwd + back {
+        // Each undirected edge's uses, lo→hi (forward) and hi→lo.
+        let uses = edge_uses(&self.triangles, |t| t.iter().all(|&v| (v as usize) < nv));
+        for group in uses.chunk_by(|a, b| (a.lo, a.hi) == (b.lo, b.hi)) {
+            out.edges += 1;
+            let fwd = group.iter().filter(|u| u.forward(&self.triangles)).count();
+            match group.len() {
                 1 => out.boundary_edges += 1,
                 2 if fwd == 1 => {}
                 2 => out.misoriented_edges += 1,

@@ -16,7 +16,7 @@ use parry3d_f64::query::{PointProjection, PointQueryWithLocation};
 use parry3d_f64::shape::{TriMesh, TriMeshFlags, Triangle, TrianglePointLocation};
 use rayon::prelude::*;
 
-use super::mesh::Mesh;
+use super::mesh::{edge_uses, Mesh};
 
 /// A closed mesh ready for signed-distance queries.
 pub struct MeshQuery {
@@ -110,32 +110,18 @@ fn pseudo_normals(verts: &[PVec], tris: &[[u32; 3]]) -> (Vec<PVec>, Vec<[PVec; 3
             }
         }
     }
-    // Every triangle edge as (lower vertex, higher vertex, triangle, which edge), sorted:
-    // the faces on one edge come together, in the triangles' order.
-    let mut edges: Vec<(u32, u32, u32, u8)> = tris
-        .par_iter()
-        .enumerate()
-        .flat_map_iter(|(t, idx)| {
-            [(0, 1), (1, 2), (2, 0)]
-                .into_iter()
-                .enumerate()
-                .map(move |(e, (a, b))| {
-                    let (a, b) = (idx[a], idx[b]);
-                    (a.min(b), a.max(b), t as u32, e as u8)
-                })
-        })
-        .collect();
-    edges.par_sort_unstable();
+    // The faces on one edge come together, in the triangles' order.
+    let edges = edge_uses(tris, |_| true);
     let mut edge_normals = vec![[PVec::ZERO; 3]; tris.len()];
-    for group in edges.chunk_by(|x, y| (x.0, x.1) == (y.0, y.1)) {
+    for group in edges.chunk_by(|a, b| (a.lo, a.hi) == (b.lo, b.hi)) {
         let mut sum = PVec::ZERO;
-        for &(_, _, t, _) in group {
-            if let Some((n, _)) = faces[t as usize] {
+        for u in group {
+            if let Some((n, _)) = faces[u.triangle as usize] {
                 sum += n;
             }
         }
-        for &(_, _, t, e) in group {
-            edge_normals[t as usize][e as usize] = sum;
+        for u in group {
+            edge_normals[u.triangle as usize][u.k as usize] = sum;
         }
     }
     (vertex_normals, edge_normals)
