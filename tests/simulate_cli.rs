@@ -104,21 +104,19 @@ fn parts_that_never_meet_lose_the_drive_everywhere() {
         stdout.contains("drive lost at 1440 of 1440 angles (play > 5°): driver 0–359.75°"),
         "stdout:\n{stdout}"
     );
-    for f in [
-        "prediction.json",
-        "law.png",
-        "law.svg",
-        "deviation.png",
-        "deviation.svg",
-        "play.png",
-        "play.svg",
-        "prediction.md",
-    ] {
-        assert!(out.join(f).is_file(), "{f} written");
-    }
-    let doc: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("prediction.json")).unwrap())
-            .unwrap();
+    let doc = written(
+        &out,
+        &[
+            "prediction.json",
+            "law.png",
+            "law.svg",
+            "deviation.png",
+            "deviation.svg",
+            "play.png",
+            "play.svg",
+            "prediction.md",
+        ],
+    );
     assert_eq!(doc["format"], "mpcmech-prediction/1");
     let p = &doc["prediction"];
     let samples = p["samples"].as_array().unwrap();
@@ -138,6 +136,15 @@ fn parts_that_never_meet_lose_the_drive_everywhere() {
 /// A 1R1T mechanism: screw-bob synthesized at 90 samples per period (`mpc-rig synth
 /// data/motions/screw-bob.toml --samples 90`: K = 4, d_x = 6), small enough to keep here.
 const SCREW_MECHANISM: &str = "tests/data/mechanism/screw-bob";
+
+/// Asserts that `simulate` wrote each of `files` into `out`, and returns its
+/// `prediction.json`.
+fn written(out: &std::path::Path, files: &[&str]) -> serde_json::Value {
+    for f in files {
+        assert!(out.join(f).is_file(), "{f} written");
+    }
+    serde_json::from_str(&std::fs::read_to_string(out.join("prediction.json")).unwrap()).unwrap()
+}
 
 /// Two blocks as the parts of either test mechanism (a small one on each part's axis, 60 mm
 /// apart, which never meet), with the `build.json` fields `simulate` reads, in `parts`.
@@ -189,17 +196,15 @@ fn a_1r1t_follower_on_parts_that_never_meet_is_free_along_every_ray() {
         ),
         "stdout:\n{stdout}"
     );
-    for f in [
-        "height.png",
-        "height.svg",
-        "play-slide.png",
-        "play-slide.svg",
-    ] {
-        assert!(out.join(f).is_file(), "{f} written");
-    }
-    let doc: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("prediction.json")).unwrap())
-            .unwrap();
+    let doc = written(
+        &out,
+        &[
+            "height.png",
+            "height.svg",
+            "play-slide.png",
+            "play-slide.svg",
+        ],
+    );
     let p = &doc["prediction"];
     assert_eq!(p["class"], "1R1T");
     assert_eq!(p["slide"]["lever_mm"].as_f64().unwrap(), SCREW_LEVER_MM);

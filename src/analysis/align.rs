@@ -318,25 +318,12 @@ fn align_scalar(run: &MeasuredRun, dofs: &[ScalarDof<'_>], idx: &[usize], both: 
                             *v = 0.0;
                         }
                     }
-                    for a in 0..np {
-                        if row[a] == 0.0 {
-                            continue;
-                        }
-                        jtr[a] += row[a] * r;
-                        for b in a..np {
-                            jtj[(a, b)] += row[a] * row[b];
-                        }
-                    }
+                    add_row(&mut jtj, &mut jtr, &row, r);
                     ssr += r * r;
                 }
             }
-            for a in 0..np {
-                for b in 0..a {
-                    jtj[(a, b)] = jtj[(b, a)];
-                }
-            }
-            let step = solve_pinv(&jtj, &jtr);
-            let mut step = step;
+            fill_lower(&mut jtj);
+            let mut step = solve_pinv(&jtj, &jtr);
             let lim = |v: f64| v.clamp(-ALIGN_MAX_STEP_DEG, ALIGN_MAX_STEP_DEG);
             step[0] = lim(step[0]);
             if both {
@@ -408,6 +395,30 @@ fn align_scalar(run: &MeasuredRun, dofs: &[ScalarDof<'_>], idx: &[usize], both: 
         rotation: None,
         both_directions: both,
         samples: idx.len(),
+    }
+}
+
+/// Add one residual `r` whose Jacobian row is `row` to the normal equations: Jᵀr, and the
+/// upper triangle of JᵀJ (see [`fill_lower`]). Zero entries of the row add nothing and are
+/// skipped.
+fn add_row(jtj: &mut DMatrix<f64>, jtr: &mut DVector<f64>, row: &[f64], r: f64) {
+    for (a, &ra) in row.iter().enumerate() {
+        if ra == 0.0 {
+            continue;
+        }
+        jtr[a] += ra * r;
+        for (b, &rb) in row.iter().enumerate().skip(a) {
+            jtj[(a, b)] += ra * rb;
+        }
+    }
+}
+
+/// Copy JᵀJ's upper triangle, which [`add_row`] fills, into its lower one.
+fn fill_lower(jtj: &mut DMatrix<f64>) {
+    for a in 0..jtj.nrows() {
+        for b in 0..a {
+            jtj[(a, b)] = jtj[(b, a)];
+        }
     }
 }
 
@@ -562,20 +573,11 @@ fn gauss_newton_rotation(
                 if both {
                     row[7] = dir * w_omega[r];
                 }
-                for a in 0..np {
-                    jtr[a] += row[a] * e[r];
-                    for b in a..np {
-                        jtj[(a, b)] += row[a] * row[b];
-                    }
-                }
+                add_row(&mut jtj, &mut jtr, &row[..np], e[r]);
                 ssr += e[r] * e[r];
             }
         }
-        for a in 0..np {
-            for b in 0..a {
-                jtj[(a, b)] = jtj[(b, a)];
-            }
-        }
+        fill_lower(&mut jtj);
         let step = -solve_pinv(&jtj, &jtr);
         let lim = |v: f64| v.clamp(-ALIGN_MAX_STEP_DEG, ALIGN_MAX_STEP_DEG);
         world = UnitQuaternion::from_scaled_axis(nalgebra::Vector3::new(step[0], step[1], step[2]))

@@ -385,11 +385,10 @@ fn trim(f: &(dyn Fn(Vec3) -> f64 + Sync), g: &Grid, outs: &mut [BlockOut], slive
     let deep = -0.5 * sliver;
     let reach = trim_reach(sliver, g.h);
     let k = (reach / g.h).ceil() as i64;
-    let flat = |b: [usize; 3]| g.block_index(b);
     let slot: HashMap<usize, usize> = outs
         .iter()
         .enumerate()
-        .map(|(i, o)| (flat(o.block), i))
+        .map(|(i, o)| (g.block_index(o.block), i))
         .collect();
     // Blocks the meshing skipped lie wholly on one side: which, from their centre's value
     // (beyond half a block's diagonal from the surface, or they would have been meshed).
@@ -408,7 +407,7 @@ fn trim(f: &(dyn Fn(Vec3) -> f64 + Sync), g: &Grid, outs: &mut [BlockOut], slive
                 })
                 .collect();
             if let Some(nb) = nb {
-                let j = flat([nb[0], nb[1], nb[2]]);
+                let j = g.block_index([nb[0], nb[1], nb[2]]);
                 if !slot.contains_key(&j) {
                     skipped.push(j);
                 }
@@ -445,7 +444,7 @@ fn trim(f: &(dyn Fn(Vec3) -> f64 + Sync), g: &Grid, outs: &mut [BlockOut], slive
             if !ok {
                 continue;
             }
-            if let Some(&i) = slot.get(&flat(q)) {
+            if let Some(&i) = slot.get(&g.block_index(q)) {
                 let l = [
                     p[0] - q[0] * BLOCK,
                     p[1] - q[1] * BLOCK,
@@ -455,7 +454,7 @@ fn trim(f: &(dyn Fn(Vec3) -> f64 + Sync), g: &Grid, outs: &mut [BlockOut], slive
             }
             home.get_or_insert(q);
         }
-        home.is_some_and(|q| inside.get(&flat(q)).copied().unwrap_or(false))
+        home.is_some_and(|q| inside.get(&g.block_index(q)).copied().unwrap_or(false))
     };
     let mut offsets: Vec<[i64; 3]> = Vec::new();
     for dz in -k..=k {
