@@ -14,8 +14,10 @@
 //! were recorded, λ a direction-dependent driver-angle offset (half a dead band between
 //! driver and follower, plus any time lag times the driver speed) and β_j a dead band on the
 //! follower side (follower units), a width and so never negative: where the free fit puts
-//! one below zero it is held at zero and the rest fitted again. The fit is a weighted
-//! Gauss–Newton least-squares over all measured samples, started from a grid search over δ₀;
+//! one below zero it is held at zero and the rest fitted again, and a held one the
+//! residuals then pull upwards is let go (an active set, [`WIDTH_RELEASE_COSINE`]). The fit
+//! is a weighted Gauss–Newton least-squares over all measured samples, started from a grid
+//! search over δ₀;
 //! standard errors come from the normal matrix. Parameters that the data cannot separate
 //! (e.g. δ₀ and c for a uniform law) are flagged, not guessed.
 //!
@@ -125,10 +127,10 @@ pub struct DofOffsets {
     /// Whole turns removed from the sensor offset (degrees, a multiple of 360; 0 for tz).
     pub turn_shift: f64,
     /// Follower-side dead band β (DOF units), when both directions were recorded. Never
-    /// negative: where the free fit gave a negative width it is held at 0 (standard error 0)
-    /// and the other parameters fitted again.
+    /// negative: where the fit gives a negative width it is held at 0 (standard error 0)
+    /// and the other parameters fitted again (see `fit_widths_nonnegative`).
     pub backlash: Option<Estimate>,
-    /// The free fit's negative β when [`Self::backlash`] was held at 0 for it.
+    /// The negative β the fit gave before [`Self::backlash`] was held at 0 for it.
     pub backlash_free: Option<f64>,
 }
 
@@ -282,14 +284,26 @@ fn align_scalar(run: &MeasuredRun, dofs: &[ScalarDof<'_>], idx: &[usize], both: 
     }
     // Gauss–Newton with the parameters marked in `held` kept where they are (their column of
     // the Jacobian is zero, so the minimum-norm step leaves them alone).
-    let fit = |p: &mut DVector<f64>, held: &[bool]| -> (DMatrix<f64>, f64) {
-        let mut jtj = DMatrix::<f64>::zeros(np, np);
-        let mut ssr = 0.0;
+    let fit = |p: &mut DVector<f64>, held: &[bool]| -> HeldFit {
+        let mut out = HeldFit {
+            jtj: DMatrix::<f64>::zeros(np, np),
+            ssr: 0.0,
+            pull: DVector::<f64>::zeros(np),
+            column2: DVector::<f64>::zeros(np),
+        };
         let mut row = vec![0.0; np];
         for _ in 0..ALIGN_MAX_ITERATIONS {
+            let HeldFit {
+                jtj,
+                ssr,
+                pull,
+                column2,
+            } = &mut out;
             jtj.fill(0.0);
+            pull.fill(0.0);
+            column2.fill(0.0);
             let mut jtr = DVector::<f64>::zeros(np);
-            ssr = 0.0;
+            *ssr = 0.0;
             for &i in idx {
                 let dir = run.phase[i].direction();
                 let lag = if both { p[1] } else { 0.0 };
@@ -313,17 +327,19 @@ fn align_scalar(run: &MeasuredRun, dofs: &[ScalarDof<'_>], idx: &[usize], both: 
                         row[cj + 1] = -dir * s / 2.0 * w;
                     }
                     row[cj] = w;
-                    for (v, h) in row.iter_mut().zip(held) {
+                    for (k, (v, h)) in row.iter_mut().zip(held).enumerate() {
                         if *h {
+                            pull[k] += *v * r;
+                            column2[k] += *v * *v;
                             *v = 0.0;
                         }
                     }
-                    add_row(&mut jtj, &mut jtr, &row, r);
-                    ssr += r * r;
+                    add_row(jtj, &mut jtr, &row, r);
+                    *ssr += r * r;
                 }
             }
-            fill_lower(&mut jtj);
-            let mut step = solve_pinv(&jtj, &jtr);
+            fill_lower(jtj);
+            let mut step = solve_pinv(jtj, &jtr);
             let lim = |v: f64| v.clamp(-ALIGN_MAX_STEP_DEG, ALIGN_MAX_STEP_DEG);
             step[0] = lim(step[0]);
             if both {
@@ -336,27 +352,16 @@ fn align_scalar(run: &MeasuredRun, dofs: &[ScalarDof<'_>], idx: &[usize], both: 
                 break;
             }
         }
-        (jtj, ssr)
+        out
     };
-    // A dead band is a width: one the free fit puts below zero is held at zero and the rest
-    // fitted again (the two directions' gap is then the driver side's), until none is.
-    let mut held = vec![false; np];
-    let mut free_backlash = vec![None; nd];
-    let (jtj, ssr) = loop {
-        let (jtj, ssr) = fit(&mut p, &held);
-        let negative: Vec<usize> = (0..nd)
-            .filter(|&j| both && !held[c_at(j) + 1] && p[c_at(j) + 1] < 0.0)
-            .collect();
-        if negative.is_empty() {
-            break (jtj, ssr);
-        }
-        for j in negative {
-            let k = c_at(j) + 1;
-            free_backlash[j] = Some(p[k]);
-            held[k] = true;
-            p[k] = 0.0;
-        }
+    // A dead band is a width, never negative (the two directions' gap is then the driver
+    // side's).
+    let widths: Vec<usize> = if both {
+        (0..nd).map(|j| c_at(j) + 1).collect()
+    } else {
+        Vec::new()
     };
+    let (HeldFit { jtj, ssr, .. }, held, free) = fit_widths_nonnegative(&mut p, &widths, fit);
     let dof_count = (idx.len() * nd) as f64;
     let sigma2 = ssr / (dof_count - np as f64).max(1.0);
     let cov = covariance(&jtj, sigma2);
@@ -384,7 +389,7 @@ fn align_scalar(run: &MeasuredRun, dofs: &[ScalarDof<'_>], idx: &[usize], both: 
                         est(cj + 1)
                     }
                 }),
-                backlash_free: free_backlash[j],
+                backlash_free: both.then(|| free[cj + 1]).flatten(),
             }
         })
         .collect();
@@ -409,6 +414,81 @@ fn add_row(jtj: &mut DMatrix<f64>, jtr: &mut DVector<f64>, row: &[f64], r: f64) 
         jtr[a] += ra * r;
         for (b, &rb) in row.iter().enumerate().skip(a) {
             jtj[(a, b)] += ra * rb;
+        }
+    }
+}
+
+/// One Gauss–Newton fit with some parameters held where they are, as its last
+/// linearization saw it.
+struct HeldFit {
+    /// JᵀJ of the free parameters (a held one's row and column are zero).
+    jtj: DMatrix<f64>,
+    /// Sum of the squared weighted residuals.
+    ssr: f64,
+    /// Per held parameter, Σ jₖ·r over the rows (jₖ the row's entry for it before it was
+    /// zeroed): positive when moving it up would lower the residuals. Zero for free ones.
+    pull: DVector<f64>,
+    /// Per held parameter, Σ jₖ². Zero for free ones.
+    column2: DVector<f64>,
+}
+
+/// A held width is let go when the cosine between its column and the residual vector is
+/// above this. Default 10⁻⁶: the sums behind it carry round-off near 10⁻¹², so this is far
+/// above noise, and a width whose column is that nearly orthogonal to the residuals would
+/// move the fit by less than it can resolve.
+pub const WIDTH_RELEASE_COSINE: f64 = 1e-6;
+
+/// Fit with the parameters `widths` kept non-negative, by active set: a width the fit puts
+/// below zero is held at zero (with every other negative one) and the rest fitted again; a
+/// held width the residuals pull upwards (see [`HeldFit::pull`]) is let go again, each at
+/// most once, so the rounds end. Holding several at once can hold one that only the others'
+/// negative values made negative; letting it go finds the constrained optimum (a quadratic
+/// example in the tests). Returns the last fit, which parameters are held and, per held
+/// one, the value the fit before its hold gave it.
+fn fit_widths_nonnegative(
+    p: &mut DVector<f64>,
+    widths: &[usize],
+    mut fit: impl FnMut(&mut DVector<f64>, &[bool]) -> HeldFit,
+) -> (HeldFit, Vec<bool>, Vec<Option<f64>>) {
+    let np = p.len();
+    let mut held = vec![false; np];
+    let mut released = vec![false; np];
+    let mut free = vec![None; np];
+    loop {
+        let out = fit(p, &held);
+        let negative: Vec<usize> = widths
+            .iter()
+            .copied()
+            .filter(|&k| !held[k] && p[k] < 0.0)
+            .collect();
+        if !negative.is_empty() {
+            for k in negative {
+                free[k] = Some(p[k]);
+                held[k] = true;
+                p[k] = 0.0;
+            }
+            continue;
+        }
+        let cosine = |k: usize| {
+            let norm = (out.column2[k] * out.ssr).sqrt();
+            if norm > 0.0 {
+                out.pull[k] / norm
+            } else {
+                0.0
+            }
+        };
+        let release = widths
+            .iter()
+            .copied()
+            .filter(|&k| held[k] && !released[k] && cosine(k) > WIDTH_RELEASE_COSINE)
+            .max_by(|&a, &b| cosine(a).total_cmp(&cosine(b)));
+        match release {
+            Some(k) => {
+                held[k] = false;
+                released[k] = true;
+                free[k] = None;
+            }
+            None => return (out, held, free),
         }
     }
 }
@@ -719,6 +799,82 @@ mod tests {
         let free = dof(&al).backlash_free.expect("the free fit's value");
         assert!((free + 1.0).abs() < 0.02, "free fit {free}");
         assert!(al.driver_offset_deg.value.is_finite());
+    }
+
+    /// A linear least-squares fit in the shape `align_scalar`'s closure has: two DOFs share
+    /// the slope u (as they share the driver-side lag) and each has its own width bᵢ;
+    /// rows (a, y) of DOF i predict a·u + bᵢ.
+    fn shared_slope_fit(
+        rows: [&'static [(f64, f64)]; 2],
+    ) -> impl FnMut(&mut DVector<f64>, &[bool]) -> HeldFit {
+        move |p: &mut DVector<f64>, held: &[bool]| {
+            let mut out = HeldFit {
+                jtj: DMatrix::zeros(3, 3),
+                ssr: 0.0,
+                pull: DVector::zeros(3),
+                column2: DVector::zeros(3),
+            };
+            // Two rounds: the first lands on the optimum, the second's sums are taken there.
+            for _ in 0..2 {
+                out.jtj.fill(0.0);
+                out.pull.fill(0.0);
+                out.column2.fill(0.0);
+                out.ssr = 0.0;
+                let mut jtr = DVector::zeros(3);
+                for (i, dof) in rows.iter().enumerate() {
+                    for &(a, y) in dof.iter() {
+                        let mut row = [a, 0.0, 0.0];
+                        row[1 + i] = 1.0;
+                        let r = y - (a * p[0] + p[1 + i]);
+                        for k in 0..3 {
+                            if held[k] {
+                                out.pull[k] += row[k] * r;
+                                out.column2[k] += row[k] * row[k];
+                                row[k] = 0.0;
+                            }
+                        }
+                        add_row(&mut out.jtj, &mut jtr, &row, r);
+                        out.ssr += r * r;
+                    }
+                }
+                fill_lower(&mut out.jtj);
+                *p += solve_pinv(&out.jtj, &jtr);
+            }
+            out
+        }
+    }
+
+    /// Guards the active set of the widths: when the free fit puts two widths below zero,
+    /// holding both can hold one that only the other's negative value pulled down. Here DOF
+    /// 1 alone says b₁ = −0.1 and DOF 2 says b₂ = −1 with the same slope 2; with both held
+    /// the shared slope falls to 1.67 and DOF 1's residuals all point up, so b₁ is let go
+    /// and settles at 0.718 (u = 1.4545), while b₂ stays held. The result is also the best
+    /// of all four ways of holding the widths that leave none negative.
+    #[test]
+    fn a_held_width_the_residuals_pull_up_is_let_go() {
+        let rows: [&'static [(f64, f64)]; 2] =
+            [&[(1.0, 1.9), (2.0, 3.9)], &[(1.0, 1.0), (2.0, 3.0)]];
+        let mut p = DVector::zeros(3);
+        let (out, held, free) = fit_widths_nonnegative(&mut p, &[1, 2], shared_slope_fit(rows));
+        assert_eq!(held, [false, false, true]);
+        assert!((p[0] - 16.0 / 11.0).abs() < 1e-12, "u = {}", p[0]);
+        assert!(
+            (p[1] - 0.718_181_818_181_818_2).abs() < 1e-12,
+            "b1 = {}",
+            p[1]
+        );
+        assert_eq!(p[2], 0.0);
+        assert_eq!(free[1], None);
+        assert!((free[2].expect("b2 held") + 1.0).abs() < 1e-12, "{free:?}");
+        let best = (0..4)
+            .filter_map(|mask: usize| {
+                let hold = [false, mask & 1 != 0, mask & 2 != 0];
+                let mut q = DVector::zeros(3);
+                let fit = shared_slope_fit(rows)(&mut q, &hold);
+                (q[1] >= 0.0 && q[2] >= 0.0).then_some(fit.ssr)
+            })
+            .fold(f64::INFINITY, f64::min);
+        assert!((out.ssr - best).abs() < 1e-12, "{} against {best}", out.ssr);
     }
 
     /// Guards the input checks: a 3R target without an IMU column is a clear mismatch.
