@@ -29,7 +29,7 @@ impl<const D: usize> Dual<D> {
         Self { v, g }
     }
     /// Chain rule for a unary function with value `f` and derivative `df` at `self.v`.
-    #[inline]
+    #[inline(always)]
     fn chain(self, f: f64, df: f64) -> Self {
         let mut g = self.g;
         for x in g.iter_mut() {
@@ -39,9 +39,10 @@ impl<const D: usize> Dual<D> {
     }
 }
 
+// The operators are `#[inline(always)]` for the same reason as `V3`'s methods (see `math`).
 impl<const D: usize> Add for Dual<D> {
     type Output = Self;
-    #[inline]
+    #[inline(always)]
     fn add(mut self, o: Self) -> Self {
         self.v += o.v;
         for (a, b) in self.g.iter_mut().zip(o.g.iter()) {
@@ -51,14 +52,14 @@ impl<const D: usize> Add for Dual<D> {
     }
 }
 impl<const D: usize> AddAssign for Dual<D> {
-    #[inline]
+    #[inline(always)]
     fn add_assign(&mut self, o: Self) {
         *self = *self + o;
     }
 }
 impl<const D: usize> Sub for Dual<D> {
     type Output = Self;
-    #[inline]
+    #[inline(always)]
     fn sub(mut self, o: Self) -> Self {
         self.v -= o.v;
         for (a, b) in self.g.iter_mut().zip(o.g.iter()) {
@@ -69,7 +70,7 @@ impl<const D: usize> Sub for Dual<D> {
 }
 impl<const D: usize> Mul for Dual<D> {
     type Output = Self;
-    #[inline]
+    #[inline(always)]
     fn mul(self, o: Self) -> Self {
         let mut g = [0.0; D];
         for ((r, a), b) in g.iter_mut().zip(self.g.iter()).zip(o.g.iter()) {
@@ -80,7 +81,7 @@ impl<const D: usize> Mul for Dual<D> {
 }
 impl<const D: usize> Div for Dual<D> {
     type Output = Self;
-    #[inline]
+    #[inline(always)]
     fn div(self, o: Self) -> Self {
         let inv = 1.0 / o.v;
         let q = self.v * inv;
@@ -93,14 +94,14 @@ impl<const D: usize> Div for Dual<D> {
 }
 impl<const D: usize> Neg for Dual<D> {
     type Output = Self;
-    #[inline]
+    #[inline(always)]
     fn neg(self) -> Self {
         self.chain(-self.v, -1.0)
     }
 }
 impl<const D: usize> Add<f64> for Dual<D> {
     type Output = Self;
-    #[inline]
+    #[inline(always)]
     fn add(mut self, o: f64) -> Self {
         self.v += o;
         self
@@ -108,7 +109,7 @@ impl<const D: usize> Add<f64> for Dual<D> {
 }
 impl<const D: usize> Sub<f64> for Dual<D> {
     type Output = Self;
-    #[inline]
+    #[inline(always)]
     fn sub(mut self, o: f64) -> Self {
         self.v -= o;
         self
@@ -116,7 +117,7 @@ impl<const D: usize> Sub<f64> for Dual<D> {
 }
 impl<const D: usize> Mul<f64> for Dual<D> {
     type Output = Self;
-    #[inline]
+    #[inline(always)]
     fn mul(self, o: f64) -> Self {
         self.chain(self.v * o, o)
     }

@@ -107,34 +107,37 @@ pub struct V3<S> {
     pub z: S,
 }
 
+// Every method and operator of `V3` is `#[inline(always)]`: on a `Dual<10>` a call copies
+// its 264-byte operands, and LLVM left these as calls (a tenth of synthesis in `memmove`;
+// measured in docs/synthesis.md, "Measured after inlining the jets").
 impl<S: Scalar> V3<S> {
     /// From components.
-    #[inline]
+    #[inline(always)]
     pub fn new(x: S, y: S, z: S) -> Self {
         Self { x, y, z }
     }
     /// A constant vector.
-    #[inline]
+    #[inline(always)]
     pub fn cst(v: [f64; 3]) -> Self {
         Self::new(S::cst(v[0]), S::cst(v[1]), S::cst(v[2]))
     }
     /// The zero vector.
-    #[inline]
+    #[inline(always)]
     pub fn zero() -> Self {
         Self::cst([0.0; 3])
     }
     /// Dot product.
-    #[inline]
+    #[inline(always)]
     pub fn dot(self, o: Self) -> S {
         self.x * o.x + self.y * o.y + self.z * o.z
     }
     /// Dot product with a constant vector.
-    #[inline]
+    #[inline(always)]
     pub fn dotc(self, o: [f64; 3]) -> S {
         self.x * o[0] + self.y * o[1] + self.z * o[2]
     }
     /// Cross product.
-    #[inline]
+    #[inline(always)]
     pub fn cross(self, o: Self) -> Self {
         Self::new(
             self.y * o.z - self.z * o.y,
@@ -143,38 +146,38 @@ impl<S: Scalar> V3<S> {
         )
     }
     /// Squared norm.
-    #[inline]
+    #[inline(always)]
     pub fn norm2(self) -> S {
         self.dot(self)
     }
     /// Norm.
-    #[inline]
+    #[inline(always)]
     pub fn norm(self) -> S {
         self.norm2().sqrt()
     }
     /// Scaled by a scalar.
-    #[inline]
+    #[inline(always)]
     pub fn scale(self, s: S) -> Self {
         Self::new(self.x * s, self.y * s, self.z * s)
     }
     /// Scaled by a constant.
-    #[inline]
+    #[inline(always)]
     pub fn scalec(self, s: f64) -> Self {
         Self::new(self.x * s, self.y * s, self.z * s)
     }
     /// Unit vector (the caller guarantees a non-zero norm).
-    #[inline]
+    #[inline(always)]
     pub fn unit(self) -> Self {
         let inv = S::cst(1.0) / self.norm();
         self.scale(inv)
     }
     /// Apply a constant rotation (or any 3×3 matrix).
-    #[inline]
+    #[inline(always)]
     pub fn rot(self, m: &Mat3) -> Self {
         Self::new(self.dotc(m[0]), self.dotc(m[1]), self.dotc(m[2]))
     }
     /// Apply the transpose of a constant 3×3 matrix (the inverse of a rotation).
-    #[inline]
+    #[inline(always)]
     pub fn rot_t(self, m: &Mat3) -> Self {
         Self::new(
             self.x * m[0][0] + self.y * m[1][0] + self.z * m[2][0],
@@ -183,7 +186,7 @@ impl<S: Scalar> V3<S> {
         )
     }
     /// Values only.
-    #[inline]
+    #[inline(always)]
     pub fn vals(self) -> [f64; 3] {
         [self.x.val(), self.y.val(), self.z.val()]
     }
@@ -191,21 +194,21 @@ impl<S: Scalar> V3<S> {
 
 impl<S: Scalar> Add for V3<S> {
     type Output = Self;
-    #[inline]
+    #[inline(always)]
     fn add(self, o: Self) -> Self {
         Self::new(self.x + o.x, self.y + o.y, self.z + o.z)
     }
 }
 impl<S: Scalar> Sub for V3<S> {
     type Output = Self;
-    #[inline]
+    #[inline(always)]
     fn sub(self, o: Self) -> Self {
         Self::new(self.x - o.x, self.y - o.y, self.z - o.z)
     }
 }
 impl<S: Scalar> Neg for V3<S> {
     type Output = Self;
-    #[inline]
+    #[inline(always)]
     fn neg(self) -> Self {
         Self::new(-self.x, -self.y, -self.z)
     }

@@ -19,7 +19,7 @@
 //! It does not sum energies or know about constraints (see `energy`).
 
 use super::bspline::Basis;
-use super::math::{rz, Scalar, V3};
+use super::math::{Scalar, V3};
 use super::pose::Pose;
 
 /// Control points of each follower curve c²ₖ: 8 (paper §5.1).
@@ -83,7 +83,9 @@ pub fn angle_at<S: Scalar>(b: &Basis, th: &dyn Fn(usize) -> S) -> S {
 pub type Tangents<S> = (V3<S>, V3<S>, V3<S>, V3<S>, V3<S>);
 
 /// Tangent-only part of the model (no normal): p, c¹, ċ¹, T¹, T² — used for the
-/// smoothness term at the next sample.
+/// smoothness term at the next sample. Inlined always: on dual numbers, a call copies the
+/// jets in and the five vectors out (see `math`).
+#[inline(always)]
 pub fn tangents<S: Scalar>(pose: &Pose, dx: f64, c2: [V3<S>; 3]) -> Tangents<S> {
     let q = c2[0].rot(&pose.rot);
     let p = q + V3::cst(pose.trans);
@@ -94,13 +96,13 @@ pub fn tangents<S: Scalar>(pose: &Pose, dx: f64, c2: [V3<S>; 3]) -> Tangents<S> 
     // ṗ − ω_driver × (p − D) with ṗ = ω × q + T² + v.
     let zx_rel = V3::new(-rel.y, rel.x, S::cst(0.0)).scalec(phi_rate);
     let t1 = t2 + omega.cross(q) + V3::cst(pose.vel) - zx_rel;
-    let rz_phi = rz(phi_rate * pose.t);
-    let c1 = rel.rot_t(&rz_phi);
-    let c1d = t1.rot_t(&rz_phi);
+    let c1 = rel.rot_t(&pose.driver);
+    let c1d = t1.rot_t(&pose.driver);
     (p, c1, c1d, t1, t2)
 }
 
-/// The full contact model at one instant.
+/// The full contact model at one instant. Inlined always, as [`tangents`].
+#[inline(always)]
 pub fn contact<S: Scalar>(pose: &Pose, dx: f64, c2: [V3<S>; 3], theta: S) -> Contact<S> {
     let (p, c1, c1d, t1, t2) = tangents(pose, dx, c2);
     let that = c2[1].unit();
@@ -202,7 +204,7 @@ mod tests {
         for k in 0..20 {
             let t = k as f64 / 20.0 + 0.01;
             let c = contact_f64(&x, &pose(t), dx);
-            let r = rz(std::f64::consts::TAU * t);
+            let r = crate::synth::math::rz(std::f64::consts::TAU * t);
             let back = V3::<f64>::new(c.c1.x, c.c1.y, c.c1.z).rot(&r);
             assert!((back.x + dx - c.p.x).abs() < 1e-12);
             assert!((back.y - c.p.y).abs() < 1e-12);

@@ -6,9 +6,10 @@
 //! built from a [`crate::motion::Motion`] or, in tests, from any function of t. It does not
 //! interpolate keyframes (the motion module does).
 
+use std::f64::consts::TAU;
 use std::sync::Arc;
 
-use super::math::{mat3_of, quaternion_of, Mat3, UnitQuaternion, Vector3, V3};
+use super::math::{mat3_of, quaternion_of, rz, Mat3, UnitQuaternion, Vector3, V3};
 
 /// One follower pose with first derivatives, in frame R.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -23,6 +24,9 @@ pub struct Pose {
     pub omega: [f64; 3],
     /// dT₂/dt.
     pub vel: [f64; 3],
+    /// The driver's rotation Rz(φ) at t, φ = 2πt: kept with the pose because the candidate
+    /// problem maps every sample into the driver frame at every evaluation.
+    pub driver: Mat3,
 }
 
 impl Pose {
@@ -40,6 +44,7 @@ impl Pose {
             trans: trans.into(),
             omega: omega.into(),
             vel: vel.into(),
+            driver: rz(TAU * t),
         }
     }
 
@@ -132,5 +137,6 @@ pub fn pose_1r(t: f64, angle: f64, rate: f64) -> Pose {
         trans: [0.0; 3],
         omega: [0.0, 0.0, rate],
         vel: [0.0; 3],
+        driver: rz(TAU * t),
     }
 }
