@@ -400,7 +400,21 @@ pub fn dist_at(class: Class, contacts: &[([f64; 3], [f64; 3])]) -> (f64, f64) {
             }
         }
     }
-    (signed_dist(class, &all), signed_dist(class, &rob))
+    signed_dists(class, &all, &rob)
+}
+
+/// The signed distances of all projected normals and of their robust subsequence `rob`.
+/// A subsequence as long as `all` is `all`, and its distance is not computed twice: under
+/// the 3R tangent cone every contact counts robustly, and the second hull was half of the
+/// 3R combination search's hull work (measured in `docs/synthesis.md`).
+pub fn signed_dists(class: Class, all: &[[f64; 3]], rob: &[[f64; 3]]) -> (f64, f64) {
+    let d = signed_dist(class, all);
+    let r = if rob.len() == all.len() {
+        d
+    } else {
+        signed_dist(class, rob)
+    };
+    (d, r)
 }
 
 /// Closure figures over a sampled period.

@@ -171,10 +171,7 @@ impl Pool<'_> {
                 }
             }
         }
-        (
-            closure::signed_dist(self.class, all),
-            closure::signed_dist(self.class, rob),
-        )
+        closure::signed_dists(self.class, all, rob)
     }
 
     /// Closure summary of a genome at the given density.
