@@ -37,7 +37,7 @@ use crate::synth::mechanism::Mechanism;
 
 use super::kinematics::{Frame, Kinematics};
 use super::parts::Design;
-use super::swept::{transform, ExactSweep};
+use super::swept::ExactSweep;
 
 /// Times per period of the interference check. 720: twice the 360, so a part moves
 /// by less than 1.3 mm between checks at the examples' fastest points.
@@ -445,7 +445,7 @@ fn deepest(
     let times = if from == into { 1 } else { CHECK_TIMES };
     let at = |j: usize| j as f64 / times as f64;
     let poses: Vec<Isometry3<f64>> = (0..times)
-        .map(|j| transform(kin, from, into, at(j)))
+        .map(|j| kin.transform(from, into, at(j)))
         .collect();
     // How far a point may move from each instant to the next: per mm of its distance from
     // its frame's origin, and in all.
@@ -769,12 +769,12 @@ mod tests {
         let kin = Kinematics::new(&mech, mech.scale_mm).expect("kinematics");
         let centre = nalgebra::Point3::new(30.0, 4.0, 5.0);
         let fixed = Queryable::new(&uv_sphere([centre.x, centre.y, centre.z], 3.0, 32, 16));
-        let met = transform(&kin, Frame::Driver, Frame::Follower, 0.3) * centre;
+        let met = kin.transform(Frame::Driver, Frame::Follower, 0.3) * centre;
         let moving = uv_sphere([met.x + 0.2, met.y, met.z], 2.0, 16, 8);
         let mut want = (0.0, 0.0);
         for j in 0..CHECK_TIMES {
             let t = j as f64 / CHECK_TIMES as f64;
-            let m = transform(&kin, Frame::Follower, Frame::Driver, t);
+            let m = kin.transform(Frame::Follower, Frame::Driver, t);
             for v in &moving.vertices {
                 let x = m * nalgebra::Point3::new(v[0], v[1], v[2]);
                 let depth = (-fixed.signed(x.coords)).max(0.0);

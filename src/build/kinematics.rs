@@ -8,6 +8,8 @@
 //! to sample time finely enough and to bound distances between samples. It does not know
 //! the parts' shapes.
 
+use std::sync::OnceLock;
+
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 use crate::motion::{DenseRow, Motion, MotionClass};
@@ -45,6 +47,25 @@ impl Frame {
     }
 }
 
+/// Steps per period of the tables of frame-to-frame maps ([`Kinematics::transform`]): 2¹⁴.
+/// The exact sweep's branch and bound halves intervals from 32 starting ones, so its
+/// instants are multiples of 2⁻ᵏ; down to intervals of 2⁻¹⁴ of a period they are read from
+/// the table instead of evaluating the law's spline and composing two poses again.
+const TRANSFORM_TABLE: usize = 1 << 14;
+
+/// Per ordered pair of frames, the map `from` → `to` at the instants j / [`TRANSFORM_TABLE`],
+/// each table built when first asked for (the same function at the same instant, so a
+/// value read from it is bit for bit the one computed).
+#[derive(Clone, Default)]
+struct TransformTables([OnceLock<Vec<Isometry3<f64>>>; 9]);
+
+impl std::fmt::Debug for TransformTables {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let built = self.0.iter().filter(|t| t.get().is_some()).count();
+        write!(f, "TransformTables {{ built: {built} of 9 }}")
+    }
+}
+
 /// Frames: D (driver), F (follower), R (reference = support). Poses map a frame into R.
 #[derive(Clone, Debug)]
 pub struct Kinematics {
@@ -60,6 +81,8 @@ pub struct Kinematics {
     trans_max: f64,
     /// Per ordered pair of frames (`from.index() * 3 + to.index()`; empty when equal).
     within: Vec<IntervalSpeed>,
+    /// The maps between frames at the table's instants.
+    tables: TransformTables,
 }
 
 /// How fast the points of one frame move in another over any interval of time: a point p
@@ -153,6 +176,7 @@ impl Kinematics {
             vel_max: 0.0,
             trans_max: 0.0,
             within: Vec::new(),
+            tables: TransformTables::default(),
         };
         k.within = k.interval_speeds();
         for i in 0..SPEED_SAMPLES {
@@ -282,14 +306,41 @@ impl Kinematics {
         (s.spin.over(t0, t1), s.drift.over(t0, t1))
     }
 
+    /// The map from frame `from` to frame `to` at time `t`. At the instants of the table
+    /// (the multiples of 2⁻¹⁴ of a period) it is read from there.
+    pub fn transform(&self, from: Frame, to: Frame, t: f64) -> Isometry3<f64> {
+        let n = TRANSFORM_TABLE as f64;
+        // t·2¹⁴ is exact, so an integer j means t = j / 2¹⁴ exactly.
+        let j = t * n;
+        if (0.0..n).contains(&j) && j.fract() == 0.0 {
+            let table = self.tables.0[from.index() * 3 + to.index()].get_or_init(|| {
+                (0..TRANSFORM_TABLE)
+                    .map(|j| self.transform_at(from, to, j as f64 / n))
+                    .collect()
+            });
+            return table[j as usize];
+        }
+        self.transform_at(from, to, t)
+    }
+
+    /// [`Self::transform`] evaluated.
+    fn transform_at(&self, from: Frame, to: Frame, t: f64) -> Isometry3<f64> {
+        let pose = |f: Frame| match f {
+            Frame::Driver => self.driver(t),
+            Frame::Follower => self.follower(t),
+            Frame::Reference => Isometry3::identity(),
+        };
+        pose(to).inverse() * pose(from)
+    }
+
     /// D → F at time `t`.
     pub fn driver_to_follower(&self, t: f64) -> Isometry3<f64> {
-        self.follower(t).inverse() * self.driver(t)
+        self.transform(Frame::Driver, Frame::Follower, t)
     }
 
     /// F → D at time `t`.
     pub fn follower_to_driver(&self, t: f64) -> Isometry3<f64> {
-        self.driver(t).inverse() * self.follower(t)
+        self.transform(Frame::Follower, Frame::Driver, t)
     }
 
     /// Bound on the speed (mm per period) of the driver point `p` (D frame) seen from the
@@ -410,6 +461,32 @@ mod tests {
             period += kin.speed_driver_point_in_follower(p);
         }
         assert!(within < 0.5 * period, "{within} against {period}");
+    }
+
+    /// Guards the tables of frame-to-frame maps: at instants on the table (its first and
+    /// last, the sweep's start centres, seeded random ones) and off it (between two of its
+    /// instants, before 0 and at 1), every ordered pair of frames gets bit for bit the map
+    /// computed at that instant, so the carve's values do not depend on the table.
+    #[test]
+    fn tabled_maps_are_the_computed_ones() {
+        let (_, kin) = half_turn();
+        let n = TRANSFORM_TABLE as f64;
+        let mut rng = ChaCha8Rng::seed_from_u64(33);
+        let mut instants: Vec<f64> = vec![0.0, (n - 1.0) / n, 1.0 / 64.0, 63.0 / 64.0];
+        instants.extend((0..40).map(|_| rng.random_range(0..TRANSFORM_TABLE) as f64 / n));
+        instants.extend([0.5 / n, 1.0, -1.0 / n, rng.random_range(0.0..1.0)]);
+        for from in Frame::ALL {
+            for to in Frame::ALL {
+                for &t in &instants {
+                    assert_eq!(
+                        kin.transform(from, to, t),
+                        kin.transform_at(from, to, t),
+                        "{from:?} → {to:?} at {t}"
+                    );
+                }
+            }
+        }
+        assert!(kin.tables.0.iter().all(|t| t.get().is_some()));
     }
 
     /// Guards the frames every part is posed in: at each sample of each curve pair, the

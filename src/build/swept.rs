@@ -43,16 +43,6 @@ pub struct Balls {
     pub radius: f64,
 }
 
-/// Map from frame `from` to frame `to` at time `t`.
-pub fn transform(kin: &Kinematics, from: Frame, to: Frame, t: f64) -> Isometry3<f64> {
-    let pose = |f: Frame| match f {
-        Frame::Driver => kin.driver(t),
-        Frame::Follower => kin.follower(t),
-        Frame::Reference => Isometry3::identity(),
-    };
-    pose(to).inverse() * pose(from)
-}
-
 /// Bound on the speed (mm per period) of the point `p` of frame `from` seen from `to`.
 pub fn speed(kin: &Kinematics, from: Frame, to: Frame, p: Vec3) -> f64 {
     match (from, to) {
@@ -97,7 +87,7 @@ pub fn swept_field(
             } else {
                 (0..TIME_TABLE)
                     .into_par_iter()
-                    .map(|j| transform(kin, b.frame, target, j as f64 / TIME_TABLE as f64))
+                    .map(|j| kin.transform(b.frame, target, j as f64 / TIME_TABLE as f64))
                     .collect()
             };
             let hits: Vec<(Vec<usize>, f64)> = b
@@ -388,7 +378,7 @@ impl<S: Sdf> ExactSweep<'_, S> {
     /// `limit` and the exact one otherwise (continuous: the search bounds the change
     /// between instants by how far the point moved).
     fn at(&self, p: Vec3, t: f64, limit: f64) -> f64 {
-        let x = transform(self.kin, self.target, self.frame, t) * nalgebra::Point3::from(p);
+        let x = self.kin.transform(self.target, self.frame, t) * nalgebra::Point3::from(p);
         self.solid.dist_continuous(x.coords, limit)
     }
 
@@ -693,7 +683,7 @@ pub fn swept_bounds(kin: &Kinematics, body: &Balls, target: Frame, samples: usiz
     let n = if body.frame == target { 1 } else { samples };
     let mut b = Aabb::EMPTY;
     for j in 0..n {
-        let m = transform(kin, body.frame, target, j as f64 / n as f64);
+        let m = kin.transform(body.frame, target, j as f64 / n as f64);
         for &c in &body.centers {
             let x = m * nalgebra::Point3::from(c);
             b = b.union(&Aabb::new([x.x, x.y, x.z], [x.x, x.y, x.z]));
@@ -746,7 +736,7 @@ mod tests {
         let mut checked = 0;
         for k in 0..24 {
             let t0 = (k as f64 + 0.37) / 24.0;
-            let centre = transform(&kin, Frame::Follower, Frame::Driver, t0)
+            let centre = kin.transform(Frame::Follower, Frame::Driver, t0)
                 * nalgebra::Point3::from(ball.center);
             let off = Vec3::new(
                 (k as f64 * 1.3).sin(),
