@@ -414,14 +414,8 @@ mod tests {
     #[test]
     fn interval_speeds_bound_the_motion_and_are_tighter_than_the_period_s() {
         let (_, kin) = half_turn();
-        let pose = |f: Frame, t: f64| match f {
-            Frame::Driver => kin.driver(t),
-            Frame::Follower => kin.follower(t),
-            Frame::Reference => Isometry3::identity(),
-        };
-        let place = |from: Frame, to: Frame, p: &Point3<f64>, t: f64| {
-            (pose(to, t).inverse() * pose(from, t)) * p
-        };
+        let place =
+            |from: Frame, to: Frame, p: &Point3<f64>, t: f64| kin.transform(from, to, t) * p;
         let mut rng = ChaCha8Rng::seed_from_u64(32);
         let e = 1e-7;
         for from in Frame::ALL {
