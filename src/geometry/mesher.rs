@@ -13,7 +13,10 @@
 //! Only blocks of [`BLOCK`]³ cells near the surface are evaluated: a block is skipped when
 //! the value at its centre says the surface is farther than the block is wide (the
 //! function is a distance bound, `geometry::sdf`), and a block whose face has a sign change
-//! activates its neighbour, so skipping never opens a hole. It does not decide the
+//! activates its neighbour, so skipping never opens a hole. Within a block, points are
+//! evaluated coarse to fine, and a point whose coarser neighbours prove its sign far from
+//! the surface takes their bound instead of a value (the mesh is the same to the bit: only
+//! the signs of such points are ever read). It does not decide the
 //! resolution (callers pass the cell size) nor simplify the result.
 
 use std::collections::HashMap;
@@ -177,6 +180,10 @@ struct Grid {
     n: [usize; 3],
     /// Blocks per axis.
     nb: [usize; 3],
+    /// Grid values farther than this from zero are read for their sign alone, mm: no edge
+    /// of a tetrahedron (at most √3 cells long) joins such a point to one of the other
+    /// sign, and trimming (by `sliver`) moves only points shallower than half the sliver.
+    exact_within: f64,
 }
 
 impl Grid {
@@ -260,22 +267,89 @@ fn process_block(
     out
 }
 
+/// Strides of the passes over a block's grid points, coarse to fine: every point of a
+/// pass lies between points of the one before (twice its stride), which may tell its sign
+/// without evaluating it ([`infer`]).
+const STRIDES: [usize; 3] = [4, 2, 1];
+
+/// The value a point's coarser neighbours `parents` (local indices, known) prove for it,
+/// if it lies beyond `g.exact_within` of the surface: then only its sign is read, and the
+/// bound stands in for the value. The function is a distance bound up to [`SKIP_SAFETY`],
+/// so a parent q with value v holds the sign of v at every point within
+/// (|v| − exact_within)/`SKIP_SAFETY` of it, at a depth of at least |v| − `SKIP_SAFETY`·|p − q|.
+fn infer(vals: &[f64], g: &Grid, p: [usize; 3], parents: &[[usize; 3]]) -> Option<f64> {
+    let mut best: Option<f64> = None;
+    for q in parents {
+        let d2: usize = (0..3).map(|a| p[a].abs_diff(q[a]).pow(2)).sum();
+        let v = vals[at(q[0], q[1], q[2])];
+        let depth = v.abs() - SKIP_SAFETY * g.h * (d2 as f64).sqrt();
+        if depth > g.exact_within && best.is_none_or(|b: f64| depth > b.abs()) {
+            best = Some(depth.copysign(v));
+        }
+    }
+    best
+}
+
 /// A block's grid values, the sign changes on its faces and any inside point on the grid's
-/// outer boundary.
+/// outer boundary. Points whose sign their coarser neighbours prove, far enough from the
+/// surface that their magnitude is never read ([`infer`]), are not evaluated. Which points
+/// those are depends only on their place in the grid (the strides are global, since blocks
+/// start at multiples of [`BLOCK`], and a point on a block's face has its parents on that
+/// face), so the blocks that share a point agree on its value, and the mesh stays closed
+/// whatever the function.
 fn evaluate_block(f: &(dyn Fn(Vec3) -> f64 + Sync), g: &Grid, b: [usize; 3]) -> BlockOut {
     let m = M;
     let (base, ext) = extent(g, b);
     let delta = ZERO_OFFSET * g.h;
     let mut vals = vec![0.0f64; m * m * m];
-    for k in 0..=ext[2] {
-        for j in 0..=ext[1] {
-            for i in 0..=ext[0] {
-                let v = f(g.point([base[0] + i, base[1] + j, base[2] + k]));
-                vals[at(i, j, k)] = if v.abs() < delta || v.is_nan() {
-                    delta
-                } else {
-                    v
-                };
+    let mut have = [false; M * M * M];
+    let mut parents: Vec<[usize; 3]> = Vec::with_capacity(8);
+    for (level, &s) in STRIDES.iter().enumerate() {
+        for k in (0..=ext[2]).step_by(s) {
+            for j in (0..=ext[1]).step_by(s) {
+                for i in (0..=ext[0]).step_by(s) {
+                    let l = at(i, j, k);
+                    if have[l] {
+                        continue;
+                    }
+                    let p = [i, j, k];
+                    let inferred = if level == 0 {
+                        None
+                    } else {
+                        // Per axis, the point itself where it is on the coarser lattice,
+                        // else its two neighbours on it (one at the grid's far end).
+                        parents.clear();
+                        parents.push([0; 3]);
+                        for a in 0..3 {
+                            if p[a] % (2 * s) == 0 {
+                                for q in parents.iter_mut() {
+                                    q[a] = p[a];
+                                }
+                            } else {
+                                let n = parents.len();
+                                for c in 0..n {
+                                    let mut q = parents[c];
+                                    q[a] = p[a] - s;
+                                    parents[c] = q;
+                                    if p[a] + s <= ext[a] {
+                                        q[a] = p[a] + s;
+                                        parents.push(q);
+                                    }
+                                }
+                            }
+                        }
+                        infer(&vals, g, p, &parents)
+                    };
+                    vals[l] = inferred.unwrap_or_else(|| {
+                        let v = f(g.point([base[0] + i, base[1] + j, base[2] + k]));
+                        if v.abs() < delta || v.is_nan() {
+                            delta
+                        } else {
+                            v
+                        }
+                    });
+                    have[l] = true;
+                }
             }
         }
     }
@@ -547,6 +621,19 @@ pub fn mesh_solid_trimmed(
     sliver_mm: Option<f64>,
     report: &mut dyn FnMut(MeshProgress),
 ) -> Result<Mesh, MesherError> {
+    mesh_inferring(f, bounds, h, sliver_mm, report, true)
+}
+
+/// [`mesh_solid_trimmed`], evaluating every grid point of the blocks near the surface when
+/// `infer` is false (what the tests compare the inference with).
+fn mesh_inferring(
+    f: &(dyn Fn(Vec3) -> f64 + Sync),
+    bounds: Aabb,
+    h: f64,
+    sliver_mm: Option<f64>,
+    report: &mut dyn FnMut(MeshProgress),
+    infer: bool,
+) -> Result<Mesh, MesherError> {
     let keep = sliver_mm.is_some();
     // Two cells of margin so the outermost grid points are outside the solid.
     let b = bounds.inflate(2.0 * h);
@@ -574,6 +661,11 @@ pub fn mesh_solid_trimmed(
             cells[1].div_ceil(BLOCK),
             cells[2].div_ceil(BLOCK),
         ],
+        exact_within: if infer {
+            SKIP_SAFETY * 3f64.sqrt() * h + 0.5 * sliver_mm.unwrap_or(0.0)
+        } else {
+            f64::INFINITY
+        },
     };
     let nblocks = g.nb[0] * g.nb[1] * g.nb[2];
     let unflat = |i: usize| g.block(i);
@@ -673,7 +765,7 @@ pub fn mesh_solid_trimmed(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::sdf::{Cuboid, Cylinder, Difference, Sdf, Sphere};
+    use crate::geometry::sdf::{Cuboid, Cylinder, Difference, Sdf, Sphere, Union};
     use crate::geometry::sweep::{Frame, Section, Sweep};
     use nalgebra::Rotation3;
 
@@ -832,6 +924,75 @@ mod tests {
             "{} vs {want}",
             c.volume_mm3
         );
+    }
+
+    /// Guards the coarse-to-fine evaluation of a block ([`infer`]): the mesh is the one an
+    /// evaluation of every grid point gives, to the bit, with and without trimming, while
+    /// far fewer points are evaluated.
+    #[test]
+    fn points_whose_sign_is_proven_are_not_evaluated_and_the_mesh_is_the_same() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        // A block with a hole and a thin fin (which the trimming removes).
+        let d = Union::new(vec![
+            Box::new(Difference::new(
+                Box::new(Cuboid::aligned(
+                    Vec3::new(-10.0, -10.0, -8.0),
+                    Vec3::new(10.0, 10.0, 8.0),
+                )),
+                vec![Box::new(Cylinder::z(0.0, 0.0, -9.0, 9.0, 4.0))],
+            )),
+            Box::new(Cuboid::aligned(
+                Vec3::new(10.0, -5.0, -0.2),
+                Vec3::new(16.0, 5.0, 0.2),
+            )),
+        ]);
+        for sliver in [None, Some(1.0)] {
+            let calls = [AtomicUsize::new(0), AtomicUsize::new(0)];
+            let meshes: Vec<Mesh> = [false, true]
+                .iter()
+                .zip(&calls)
+                .map(|(&infer, n)| {
+                    let f = |p: Vec3| {
+                        n.fetch_add(1, Ordering::Relaxed);
+                        d.dist(p)
+                    };
+                    mesh_inferring(&f, d.bounds(), 0.5, sliver, &mut |_| {}, infer).unwrap()
+                })
+                .collect();
+            assert_eq!(meshes[0].vertices, meshes[1].vertices, "sliver {sliver:?}");
+            assert_eq!(
+                meshes[0].triangles, meshes[1].triangles,
+                "sliver {sliver:?}"
+            );
+            let (all, inferring) = (
+                calls[0].load(Ordering::Relaxed),
+                calls[1].load(Ordering::Relaxed),
+            );
+            assert!(
+                (inferring as f64) < 0.8 * all as f64,
+                "sliver {sliver:?}: {inferring} of {all} evaluated"
+            );
+        }
+    }
+
+    /// Guards the closure of the mesh whatever the function: one that is no distance bound
+    /// (three times steeper than the distance, so inferred signs may be wrong) still
+    /// meshes to a closed, consistently oriented 2-manifold, since the blocks that share a
+    /// grid point give it the same value.
+    #[test]
+    fn a_function_steeper_than_a_distance_still_meshes_closed() {
+        let s = Sphere {
+            center: Vec3::new(0.3, -0.2, 0.1),
+            radius: 5.0,
+        };
+        let f = |p: Vec3| {
+            let q = p - s.center;
+            // Wavy: the zero set has bumps the inference may miss.
+            3.0 * s.dist(p) + 2.5 * (3.0 * q.x).sin() * (2.0 * q.y).cos()
+        };
+        let m = mesh_solid(&f, s.bounds().inflate(4.0), 0.4).unwrap();
+        let c = m.check();
+        assert!(c.is_closed_manifold(), "{}", c.summary());
     }
 
     /// The sweep of a simple closed curve (a circle carrying a half-ellipse section) is
