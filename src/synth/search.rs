@@ -725,7 +725,13 @@ impl Search<'_> {
                 })
                 .collect();
             // The GA's combination or the closed one's, improved; the better of the two.
-            let from_start = combine::improve(&self.pool_of(&valid), start);
+            // Only a combination that closes, and beats the best found leaving out an
+            // earlier band, is of use.
+            let need = match &best {
+                Some(b) => b.0.oversampled.clone(),
+                None => Fitness::closing(self.opts.min_margin),
+            };
+            let from_start = combine::improve(&self.pool_of(&valid), start, Some(&need));
             let (fresh, _) = self.combine_over(&valid, dx);
             let c = if fresh.oversampled.cmp_better(&from_start.oversampled) == CmpOrdering::Greater
             {
