@@ -315,9 +315,9 @@ pub fn combine(
 /// search when the pool holds at most [`exact_limit`] combinations (or
 /// [`EXACT_LIMIT_CLOSED`], when the combination to beat closes), else a local search from
 /// `start` (no GA: for a start that is already good, such as a combination that closed
-/// with one band more). With `need`, only combinations at least that good are looked for
-/// (an exact search drops every other as soon as it falls below), and `start` comes back
-/// when none is found.
+/// with one band more). With `need`, the exact search looks only for combinations that
+/// beat it (dropping every other at the first instant that shows it below) and returns
+/// `start` when none does; the local search climbs from `start` as without it.
 pub fn improve(pool: &Pool, start: Vec<usize>, need: Option<&Fitness>) -> Combination {
     let start_fit = pool.fitness(&start, Density::Oversampled);
     let bound = match need {
