@@ -47,11 +47,12 @@ impl Frame {
     }
 }
 
-/// Steps per period of the tables of frame-to-frame maps ([`Kinematics::transform`]): 2¹⁴.
-/// The exact sweep's branch and bound halves intervals from 32 starting ones, so its
-/// instants are multiples of 2⁻ᵏ; down to intervals of 2⁻¹⁴ of a period they are read from
-/// the table instead of evaluating the law's spline and composing two poses again.
-const TRANSFORM_TABLE: usize = 1 << 14;
+/// Steps per period of the tables of frame-to-frame maps ([`Kinematics::transform`],
+/// [`Kinematics::table`]): 2¹⁴. The exact sweep's branch and bound halves intervals from 32
+/// starting ones, so its instants are multiples of 2⁻ᵏ; down to intervals of 2⁻¹⁴ of a
+/// period they are read from the table instead of evaluating the law's spline and
+/// composing two poses again. The coarse swept field steps through the same table.
+pub const TRANSFORM_TABLE: usize = 1 << 14;
 
 /// Per ordered pair of frames, the map `from` → `to` at the instants j / [`TRANSFORM_TABLE`],
 /// each table built when first asked for (the same function at the same instant, so a
@@ -313,14 +314,20 @@ impl Kinematics {
         // t·2¹⁴ is exact, so an integer j means t = j / 2¹⁴ exactly.
         let j = t * n;
         if (0.0..n).contains(&j) && j.fract() == 0.0 {
-            let table = self.tables.0[from.index() * 3 + to.index()].get_or_init(|| {
-                (0..TRANSFORM_TABLE)
-                    .map(|j| self.transform_at(from, to, j as f64 / n))
-                    .collect()
-            });
-            return table[j as usize];
+            return self.table(from, to)[j as usize];
         }
         self.transform_at(from, to, t)
+    }
+
+    /// The maps from frame `from` to frame `to` at the instants j / [`TRANSFORM_TABLE`] of
+    /// a period, j = 0 … [`TRANSFORM_TABLE`] − 1, built when first asked for.
+    pub fn table(&self, from: Frame, to: Frame) -> &[Isometry3<f64>] {
+        self.tables.0[from.index() * 3 + to.index()].get_or_init(|| {
+            let n = TRANSFORM_TABLE as f64;
+            (0..TRANSFORM_TABLE)
+                .map(|j| self.transform_at(from, to, j as f64 / n))
+                .collect()
+        })
     }
 
     /// [`Self::transform`] evaluated.

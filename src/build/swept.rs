@@ -30,7 +30,7 @@ use crate::geometry::mesh::Aabb;
 use crate::geometry::sdf::{Sdf, Vec3};
 use crate::geometry::voxel::{distance_transform, DistanceField, VoxelGrid};
 
-use super::kinematics::{Frame, Kinematics};
+use super::kinematics::{Frame, Kinematics, TRANSFORM_TABLE};
 
 /// A body given as balls of one radius in its frame (a conservative cover of a part).
 #[derive(Clone, Debug)]
@@ -59,9 +59,6 @@ pub fn speed(kin: &Kinematics, from: Frame, to: Frame, p: Vec3) -> f64 {
     }
 }
 
-/// Steps per period of the finest time table the sweeps use; a point uses every 2ᵏ-th entry.
-const TIME_TABLE: usize = 1 << 14;
-
 /// A lower bound of the distance from each voxel centre of `grid` (in frame `target`) to
 /// the union over one period of `bodies`. Voxels beyond every body's reach get large values.
 pub fn swept_field(
@@ -82,13 +79,12 @@ pub fn swept_field(
         let mut marks = vec![false; grid.len()];
         let mut max_step: f64 = 0.0;
         for b in group {
-            let table: Vec<Isometry3<f64>> = if b.frame == target {
-                vec![Isometry3::identity()]
+            // The kinematics' table of maps; a point uses every 2ᵏ-th entry.
+            let identity = [Isometry3::identity()];
+            let table: &[Isometry3<f64>] = if b.frame == target {
+                &identity
             } else {
-                (0..TIME_TABLE)
-                    .into_par_iter()
-                    .map(|j| kin.transform(b.frame, target, j as f64 / TIME_TABLE as f64))
-                    .collect()
+                kin.table(b.frame, target)
             };
             let hits: Vec<(Vec<usize>, f64)> = b
                 .centers
@@ -103,9 +99,9 @@ pub fn swept_field(
                             // Steps of at most half a voxel.
                             let v = speed(kin, b.frame, target, c);
                             let want = (v / (0.5 * h)).ceil().max(16.0) as usize;
-                            let steps = want.next_power_of_two().min(TIME_TABLE);
+                            let steps = want.next_power_of_two().min(TRANSFORM_TABLE);
                             worst = worst.max(v / steps as f64);
-                            (steps, TIME_TABLE / steps)
+                            (steps, TRANSFORM_TABLE / steps)
                         };
                         for j in 0..steps {
                             let x = table[j * stride] * nalgebra::Point3::from(c);
