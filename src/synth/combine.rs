@@ -419,10 +419,11 @@ const MOVE_BANDS: usize = 2;
 
 /// Steepest ascent over the oversampled instants: replace one band's candidate by the one
 /// that improves the fitness most; when no single replacement improves, two bands'
-/// candidates at once, then three ([`MOVE_BANDS`]), going back to single replacements
-/// after every move, until no move improves. A closed combination is judged by its
-/// margin, the closure distance at its tightest instant, and one band alone often cannot
-/// lower that instant without raising another, where two or three can.
+/// candidates at once ([`MOVE_BANDS`]), going back to single replacements after every
+/// move, until no move improves. A closed combination is judged by its margin, the
+/// closure distance at its tightest instant, and one band alone often cannot lower that
+/// instant without raising another, where two can. (Three at once was measured and not
+/// kept: docs/synthesis.md, "Measured after the margin search".)
 fn local_search(pool: &Pool, mut g: Vec<usize>, mut fit: Fitness) -> (Vec<usize>, Fitness) {
     let step = 1;
     'improve: loop {
