@@ -3,7 +3,8 @@
 //!
 //! Owns ñ (the projection of [n; p × n] onto the follower's motion space, per class, as fixed
 //! in `docs/conventions.md`), the exact small-hull routines, the robust-closure filter (only
-//! contacts whose torque arm is useful count) and the per-sample summary
+//! contacts whose torque arm is useful count), the 3-D hull's facet nearest the origin
+//! (what the 3R margin push widens) and the per-sample summary
 //! (E_valiTime, E_maxDist). It does not know about curves or optimization.
 //!
 //! Hull routines are exact for the small point counts of a mechanism (K ≤ ~10): the 2-D
@@ -308,20 +309,31 @@ fn dist_to_triangle(a: V3<f64>, b: V3<f64>, c: V3<f64>) -> f64 {
     (a + ab.scalec(v) + ac.scalec(w)).norm()
 }
 
-/// Signed distance from the origin to the boundary of the hull of 3-D points.
+/// A supporting plane of the hull of 3-D points, found through the points `tri`: its unit
+/// normal `u` points away from the hull, and `depth` is how far the origin lies below the
+/// plane (positive on the hull's side).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Facet {
+    /// The three points the plane was found through (indices into the point list).
+    pub tri: [usize; 3],
+    /// Outward unit normal.
+    pub u: [f64; 3],
+    /// The origin's distance below the plane, positive on the hull's side.
+    pub depth: f64,
+}
+
+/// Whether the points have no interior, or else every supporting plane through a triple of
+/// them, given to `visit` (a facet with more than three points on its plane comes once per
+/// triple). `false`: fewer than 4 points, or all coplanar.
 ///
 /// Facets are found by brute force: a triple (i, j, k) spans a supporting plane when every
-/// other point lies on one side of it. Inside: minus the distance to the nearest facet
-/// plane. Outside: the distance to the nearest facet triangle.
-pub fn signed_dist_3d(pts: &[[f64; 3]]) -> f64 {
+/// other point lies on one side of it.
+fn hull_facets_3d(pts: &[[f64; 3]], mut visit: impl FnMut(&Facet)) -> bool {
     let m = pts.len();
     if m < 4 {
-        return NO_INTERIOR_DIST;
+        return false;
     }
     let mut any_facet = false;
-    let mut inside = true;
-    let mut min_plane = f64::INFINITY;
-    let mut min_tri = f64::INFINITY;
     for i in 0..m {
         for j in i + 1..m {
             for k in j + 1..m {
@@ -354,21 +366,47 @@ pub fn signed_dist_3d(pts: &[[f64; 3]]) -> f64 {
                 }
                 if !pos && !neg {
                     // All points coplanar: no interior.
-                    return NO_INTERIOR_DIST;
+                    return false;
                 }
                 any_facet = true;
-                // The origin's signed distance below the facet plane (u oriented away from
-                // the other points), positive when inside.
-                let s0 = if pos { -off } else { off };
-                if s0 <= 0.0 {
-                    inside = false;
-                }
-                min_plane = min_plane.min(s0);
-                min_tri = min_tri.min(dist_to_triangle(a, b, c));
+                // Orient u away from the other points.
+                let (u, depth) = if pos {
+                    (u.scalec(-1.0), -off)
+                } else {
+                    (u, off)
+                };
+                visit(&Facet {
+                    tri: [i, j, k],
+                    u: u.vals(),
+                    depth,
+                });
             }
         }
     }
-    if !any_facet {
+    any_facet
+}
+
+/// Signed distance from the origin to the boundary of the hull of 3-D points.
+///
+/// Inside: minus the distance to the nearest facet plane. Outside: the distance to the
+/// nearest facet triangle.
+pub fn signed_dist_3d(pts: &[[f64; 3]]) -> f64 {
+    let mut inside = true;
+    let mut min_plane = f64::INFINITY;
+    let mut min_tri = f64::INFINITY;
+    let any = hull_facets_3d(pts, |f| {
+        if f.depth <= 0.0 {
+            inside = false;
+        }
+        min_plane = min_plane.min(f.depth);
+        let [i, j, k] = f.tri;
+        min_tri = min_tri.min(dist_to_triangle(
+            V3::from(pts[i]),
+            V3::from(pts[j]),
+            V3::from(pts[k]),
+        ));
+    });
+    if !any {
         return NO_INTERIOR_DIST;
     }
     if inside {
@@ -376,6 +414,24 @@ pub fn signed_dist_3d(pts: &[[f64; 3]]) -> f64 {
     } else {
         min_tri
     }
+}
+
+/// The facet of the hull of 3-D points nearest the origin, when the origin lies inside:
+/// the plane that sets [`signed_dist_3d`] (its `depth` is minus that distance). `None` when
+/// the points have no interior or the origin is not inside. Ties go to the first triple in
+/// index order.
+pub fn nearest_facet_3d(pts: &[[f64; 3]]) -> Option<Facet> {
+    let mut inside = true;
+    let mut nearest: Option<Facet> = None;
+    let any = hull_facets_3d(pts, |f| {
+        if f.depth <= 0.0 {
+            inside = false;
+        }
+        if nearest.is_none_or(|n| f.depth < n.depth) {
+            nearest = Some(*f);
+        }
+    });
+    (any && inside).then_some(nearest).flatten()
 }
 
 /// Signed distance for a set of projected normals of a class (1-D uses the first component,
@@ -594,6 +650,66 @@ mod tests {
             [0.0, 1.0, 0.0],
         ];
         assert_eq!(signed_dist_3d(&col), NO_INTERIOR_DIST);
+    }
+
+    /// Guards `nearest_facet_3d`: on a tetrahedron with one face nearer the origin it gives
+    /// that face (its points, its outward normal, its depth); on random sets with the
+    /// origin inside its depth is minus `signed_dist_3d`, its normal is a unit vector with
+    /// every point at or below the plane and its three points on it; outside the hull, and
+    /// for sets without interior, it gives nothing.
+    #[test]
+    fn nearest_facet_is_the_plane_that_sets_the_distance() {
+        // Face z = -0.1 (points 0, 1, 2) is the nearest; the apex is far above.
+        let tet = [
+            [1.0, 0.0, -0.1],
+            [-0.5, 0.8, -0.1],
+            [-0.5, -0.8, -0.1],
+            [0.0, 0.0, 1.0],
+        ];
+        let f = nearest_facet_3d(&tet).expect("the origin is inside");
+        assert_eq!(f.tri, [0, 1, 2]);
+        assert!((f.depth - 0.1).abs() < 1e-12, "{f:?}");
+        assert!((f.u[2] + 1.0).abs() < 1e-12, "{f:?}");
+        let shifted: Vec<[f64; 3]> = tet.iter().map(|p| [p[0], p[1], p[2] + 0.2]).collect();
+        assert_eq!(
+            nearest_facet_3d(&shifted),
+            None,
+            "the origin is below the hull"
+        );
+        assert_eq!(nearest_facet_3d(&tet[..3]), None);
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let mut inside = 0;
+        for _ in 0..60 {
+            let pts: Vec<[f64; 3]> = (0..6)
+                .map(|_| {
+                    V3::new(
+                        rng.random_range(-1.0..1.0) + 0.3,
+                        rng.random_range(-1.0..1.0),
+                        rng.random_range(-1.0..1.0),
+                    )
+                    .unit()
+                    .vals()
+                })
+                .collect();
+            let d = signed_dist_3d(&pts);
+            let Some(f) = nearest_facet_3d(&pts) else {
+                assert!(d >= 0.0, "inside ({d}) but no facet");
+                continue;
+            };
+            inside += 1;
+            assert!((f.depth + d).abs() < 1e-12, "{f:?} vs {d}");
+            let dot = |p: &[f64; 3]| p[0] * f.u[0] + p[1] * f.u[1] + p[2] * f.u[2];
+            assert!((dot(&f.u) - 1.0).abs() < 1e-12);
+            assert!(pts.iter().all(|p| dot(p) <= f.depth + 1e-12), "{f:?}");
+            assert!(f
+                .tri
+                .iter()
+                .all(|&i| (dot(&pts[i]) - f.depth).abs() < 1e-12));
+        }
+        assert!(
+            (10..=50).contains(&inside),
+            "{inside} of 60 inside: both cases must occur"
+        );
     }
 
     /// Cross-checks the exact 2-D and 3-D routines against the independent support-function
