@@ -3,7 +3,8 @@
 //! robust E_maxDist at 4× the samples (the accepted margin), the worst conjugation
 //! residual, the wall-clock seconds, and the best robust E_valiTime at 4× that every (K,
 //! d_x) tried reached (`K@d_x:figure`, `K-@…` for a combination that leaves bands out of
-//! one that closed).
+//! one that closed; `Kp3@d_x:margin`, for round 3 of the 3R margin push, gives the robust
+//! E_maxDist at 4× that round reached instead, since every round closes).
 //!
 //! Run with `cargo bench --bench synth`. Set `SYNTH_BENCH_FILTER=<substring>` to run only
 //! matching motion files, `SYNTH_BENCH_THREADS=<n>` to fix the thread count and
@@ -96,9 +97,15 @@ fn main() {
                     .attempts
                     .iter()
                     .map(|a| {
-                        let r = a.oversampled.as_ref().map_or(0.0, |o| o.robust_vali_time);
+                        let o = a.oversampled.as_ref();
                         let out = if a.left_out.is_empty() { "" } else { "-" };
-                        format!("{}{out}@{}:{r:.3}", a.k, a.dx)
+                        if a.pushed > 0 {
+                            let r = o.map_or(0.0, |o| o.robust_max_dist);
+                            format!("{}{out}p{}@{}:{r:.3}", a.k, a.pushed, a.dx)
+                        } else {
+                            let r = o.map_or(0.0, |o| o.robust_vali_time);
+                            format!("{}{out}@{}:{r:.3}", a.k, a.dx)
+                        }
                     })
                     .collect();
                 println!(

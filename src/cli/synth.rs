@@ -196,11 +196,14 @@ fn attempt_figures(a: &Attempt) -> String {
         ),
         None => "; too few bands with usable candidates".into(),
     };
-    let left_out = if a.left_out.is_empty() {
+    let mut left_out = if a.left_out.is_empty() {
         String::new()
     } else {
         format!(" (bands {:?} left out)", a.left_out)
     };
+    if a.pushed > 0 {
+        left_out += &format!(" (margin push, round {})", a.pushed);
+    }
     format!(
         "K = {}{left_out}, d_x = {}: E_valiTime {:.3}, robust {:.3}, E_maxDist {}, robust {}{at4}",
         a.k,
@@ -432,6 +435,7 @@ mod tests {
             }),
             exhaustive: false,
             left_out: vec![],
+            pushed: 0,
             closes: false,
             accepted: false,
         };
@@ -439,6 +443,39 @@ mod tests {
             attempt_figures(&a),
             "K = 2, d_x = 6: E_valiTime 0.500, robust 0.250, E_maxDist no interior, robust \
              no interior; at 4×: 0.500, robust 0.250, E_maxDist no interior, robust -0.031"
+        );
+    }
+
+    /// Guards the attempt line of a combination derived from a closed one: the bands left
+    /// out and the round of the margin push that found it are both named.
+    #[test]
+    fn a_pushed_attempt_says_so() {
+        let a = Attempt {
+            k: 5,
+            dx: 6.0,
+            valid_candidates: vec![3, 4, 2, 5, 1, 2],
+            vali_time: 1.0,
+            robust_vali_time: 1.0,
+            max_dist: -0.0713,
+            robust_max_dist: -0.0713,
+            oversampled: Some(OversampledClosure {
+                factor: 4,
+                vali_time: 1.0,
+                max_dist: -0.0709,
+                robust_vali_time: 1.0,
+                robust_max_dist: -0.0709,
+            }),
+            exhaustive: true,
+            left_out: vec![2],
+            pushed: 3,
+            closes: true,
+            accepted: true,
+        };
+        assert_eq!(
+            attempt_figures(&a),
+            "K = 5 (bands [2] left out) (margin push, round 3), d_x = 6: E_valiTime 1.000, \
+             robust 1.000, E_maxDist -0.071, robust -0.071; at 4×: 1.000, robust 1.000, \
+             E_maxDist -0.071, robust -0.071"
         );
     }
 }

@@ -1,17 +1,19 @@
 //! The height bands: their layout, the candidate problem of each, which bands a
-//! combination uses when some are left empty, and what a 1R gap-filling band is asked for.
+//! combination uses when some are left empty, what a 1R gap-filling band is asked for, and
+//! what the 3R margin push asks of a chosen contact.
 //!
 //! Owns the band layout (band k is centred at s(k)·([`BAND_HEIGHT`] + [`BAND_GAP`]) with
 //! s = 0, +1, −1, +2, −2, …, so that K bands are a prefix of K + 1 bands and growing K only
-//! solves the new band), the skipping of empty bands (K counts curve pairs), and the focus of
-//! a gap-filling band (see `focus_of`). It does not solve candidates (see `candidate`) or
+//! solves the new band), the skipping of empty bands (K counts curve pairs), the focus of
+//! a gap-filling band (see `focus_of`) and a refinement (`refine_focus`), and the push's
+//! asks (`push_asks`). It does not solve candidates (see `candidate`) or
 //! run the search (see `search`).
 
 use std::sync::Arc;
 
 use super::candidate::{Candidate, OVERSAMPLE};
-use super::closure::{Class, NormalCone};
-use super::energy::{PairProblem, Stage, W_CLOSURE, W_ROBUST};
+use super::closure::{nearest_facet_3d, Class, Facet, NormalCone};
+use super::energy::{PairProblem, Push, Stage, W_CLOSURE, W_ROBUST};
 use super::pose::PoseTrack;
 
 /// Height of each band, model units. Default 1.0 (10 mm at the default scale): room for a
@@ -37,6 +39,10 @@ pub const FOCUS_WIDEN: f64 = 0.01;
 /// d_x = 6 stayed at robust 0.948 (seed 2) and 0.998 (seed 4) at 4×; with 0.03 seed 4
 /// closed and seed 2 reached 0.974.
 pub const REFINE_WIDEN: f64 = 0.03;
+/// How near a facet's plane a contact's ñ must lie to count as on the facet, for the 3R
+/// margin push (see `push_asks`). 1e-9: the plane passes through three of the points
+/// exactly, up to rounding; a point off it by more is inside the hull.
+pub const ON_FACET: f64 = 1e-9;
 /// Robust closure (share of samples) the previous combination must reach before the next 1R
 /// band becomes a gap-filling band. Default 0.5: below it the gaps are too wide for the one
 /// candidate a band contributes; aiming every band at the gaps (threshold 0) left 0–1 of 30
@@ -119,6 +125,7 @@ pub fn band_problem(
         w_robust: W_ROBUST,
         cone,
         focus: None,
+        push: None,
         stage: Stage::Full,
         axis_room: None,
         rim: None,
@@ -205,6 +212,57 @@ pub(super) fn refine_focus(chosen: &[Candidate], n: usize) -> Vec<Option<Arc<Vec
         .collect()
 }
 
+/// Per chosen 3R contact, what the margin push asks of it (see
+/// [`Push`](super::energy::Push)): at every instant of the 4× check where the hull of the
+/// chosen contacts' ñ holds the origin less than `goal` deep, the contacts on the facet
+/// nearest the origin (within [`ON_FACET`] of its plane) are asked to move out along its
+/// normal, at the sample nearest that instant (the thinnest instant's facet when several
+/// map to one sample). `None` for a contact asked for nothing. Instants where the origin
+/// is not inside (not closed) ask nothing: the push widens a margin, it does not close.
+pub(super) fn push_asks(
+    chosen: &[Candidate],
+    n: usize,
+    goal: f64,
+    weight: f64,
+) -> Vec<Option<Arc<Push>>> {
+    let mut asked: Vec<Vec<Option<Facet>>> = vec![vec![None; n]; chosen.len()];
+    let entries = chosen.first().map_or(0, |c| c.ntilde.len());
+    let (mut pts, mut who) = (Vec::new(), Vec::new());
+    for e in 0..entries {
+        pts.clear();
+        who.clear();
+        for (j, c) in chosen.iter().enumerate() {
+            if let (Some(v), true) = (c.ntilde[e], c.robust[e]) {
+                pts.push(v);
+                who.push(j);
+            }
+        }
+        let Some(f) = nearest_facet_3d(&pts).filter(|f| f.depth < goal) else {
+            continue;
+        };
+        let i = (e + OVERSAMPLE / 2) / OVERSAMPLE % n;
+        for (v, &j) in pts.iter().zip(&who) {
+            let out = v[0] * f.u[0] + v[1] * f.u[1] + v[2] * f.u[2];
+            let on = out >= f.depth - ON_FACET;
+            if on && asked[j][i].is_none_or(|a| f.depth < a.depth) {
+                asked[j][i] = Some(f);
+            }
+        }
+    }
+    asked
+        .into_iter()
+        .map(|a| {
+            a.iter().any(Option::is_some).then(|| {
+                Arc::new(Push {
+                    goal,
+                    weight,
+                    dirs: a.iter().map(|f| f.map(|f| f.u)).collect(),
+                })
+            })
+        })
+        .collect()
+}
+
 /// A gap-filling band's per-sample torque signs for its even- and odd-indexed candidates.
 pub(super) type Focus = (Arc<Vec<f64>>, Arc<Vec<f64>>);
 
@@ -259,11 +317,56 @@ mod tests {
                 .collect(),
             robust: signs.iter().flat_map(|&(_, r)| [r; OVERSAMPLE]).collect(),
             evals: 0,
+            vary: None,
         }
     }
 
     /// Guards the skipping of empty bands: K counts bands with usable candidates, an empty
     /// band is passed over (and shown as 0), and too few usable bands are reported as such.
+    /// A 3R candidate for `push_asks` tests: the same ñ at every instant of `n` samples,
+    /// except that it vanishes at the instants nearest the samples in `lost`.
+    fn contact_3r(v: [f64; 3], n: usize, lost: std::ops::Range<usize>) -> Candidate {
+        let mut c = contact_1r(&vec![(1.0, true); n]);
+        c.ntilde = (0..n * OVERSAMPLE)
+            .map(|e| (!lost.contains(&((e + OVERSAMPLE / 2) / OVERSAMPLE % n))).then_some(v))
+            .collect();
+        c
+    }
+
+    /// Guards what the 3R margin push asks: where the hull's nearest facet is shallower
+    /// than the goal, its contacts (and only they) are asked to move out along its normal
+    /// at every sample; a goal the hull already reaches asks nothing; where a contact is
+    /// lost the hull has no interior and nothing is asked there.
+    #[test]
+    fn push_asks_the_contacts_of_the_nearest_facet_where_it_is_shallow() {
+        let n = 8;
+        let chosen = [
+            contact_3r([1.0, 0.0, -0.1], n, 0..0),
+            contact_3r([-0.5, 0.8, -0.1], n, 0..0),
+            contact_3r([-0.5, -0.8, -0.1], n, 0..0),
+            contact_3r([0.0, 0.0, 1.0], n, 3..5),
+        ];
+        let asks = push_asks(&chosen, n, 0.2, 50.0);
+        for (j, a) in asks.iter().enumerate().take(3) {
+            let a = a
+                .as_ref()
+                .unwrap_or_else(|| panic!("contact {j} is on the facet"));
+            assert_eq!((a.goal, a.weight), (0.2, 50.0));
+            for (i, d) in a.dirs.iter().enumerate() {
+                if (3..5).contains(&i) {
+                    assert_eq!(*d, None, "sample {i}: no interior, nothing to widen");
+                } else {
+                    let u = d.unwrap_or_else(|| panic!("contact {j}, sample {i}"));
+                    assert!((u[2] + 1.0).abs() < 1e-12, "{u:?}");
+                }
+            }
+        }
+        assert!(asks[3].is_none(), "the apex is not on the nearest facet");
+        assert!(push_asks(&chosen, n, 0.05, 50.0)
+            .iter()
+            .all(Option::is_none));
+    }
+
     #[test]
     fn empty_bands_are_skipped_and_k_counts_curve_pairs() {
         let band = |usable: usize| -> Vec<Candidate> {

@@ -78,6 +78,9 @@ pub struct Candidate {
     pub robust: Vec<bool>,
     /// Objective evaluations used.
     pub evals: usize,
+    /// The sample index of its E_vary (3R, 1R1T), kept so that a candidate solved again
+    /// from this one (the 3R margin push) has the same objective.
+    pub vary: Option<usize>,
 }
 
 /// Signed normalized ẑ×p̂ circumferential direction made perpendicular to t (t × p where
@@ -670,6 +673,7 @@ pub fn solve_from(
         ntilde,
         robust,
         evals: evals + res.evals,
+        vary: pb.vary,
     }
 }
 
@@ -702,6 +706,7 @@ pub(crate) mod tests {
             w_robust: W_ROBUST,
             cone: closure::NormalCone::Tangent,
             focus: None,
+            push: None,
             stage: Stage::Full,
             axis_room: None,
             rim: None,

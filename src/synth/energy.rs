@@ -1,6 +1,7 @@
 //! The candidate problem of one curve pair: objective (paper Eqs. 19–23 plus the class's
-//! closure energy and E_vary; for 1R/1R1T our E_robust, and E_focus for a 1R candidate of a
-//! gap-filling band) and constraints, with exact gradients by forward-mode AD.
+//! closure energy and E_vary; for 1R/1R1T our E_robust, E_focus for a 1R candidate of a
+//! gap-filling band, and E_push for a chosen 3R contact the margin push solves again) and
+//! constraints, with exact gradients by forward-mode AD.
 //!
 //! Owns the weights, the constraint set and its aggregation, and the evaluation of a design
 //! vector (layout in `model::NV`). It does not run the optimizer (see `optimizer`) or pick
@@ -129,6 +130,9 @@ pub struct PairProblem {
     /// 1R only: per sample, the torque sign this candidate is asked to supply robustly
     /// (+1, −1, 0 for none); see [`W_FOCUS`]. `None` for an ordinary candidate.
     pub focus: Option<Arc<Vec<f64>>>,
+    /// 3R only: where this chosen contact is asked to widen a combination's margin (see
+    /// [`Push`]). `None` for an ordinary candidate.
+    pub push: Option<Arc<Push>>,
     /// Which objective: the candidate's, or the 3R curve-alignment pre-solve.
     pub stage: Stage,
     /// Room A kept free around the other part's axis, model units (`None`: no bound). With
@@ -144,6 +148,22 @@ pub struct PairProblem {
     /// are dropped from the candidate's closure data, so the combination closes with the
     /// contacts the printed parts keep. Not part of the objective.
     pub rim: Option<super::undercut::RimSection>,
+}
+
+/// What a chosen 3R contact is asked for where its combination's margin is thin (the
+/// search's margin push, ours): at each sample where the contact lies on the facet of the
+/// hull of ñ nearest the origin, that facet's outward unit normal u, and the depth `goal`
+/// its ñ·u should reach. Moving the facet's contacts out along u moves the facet away from
+/// the origin, which is the margin at that sample. The objective gains E_push =
+/// `weight`·Σᵢ max(0, g − ñᵢ·uᵢ)² over the samples asked (divided by N like every term).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Push {
+    /// The ñ·u asked for, where asked.
+    pub goal: f64,
+    /// Weight of E_push.
+    pub weight: f64,
+    /// Per sample: the facet normal u where the contact is asked, else `None`.
+    pub dirs: Vec<Option<[f64; 3]>>,
 }
 
 /// The objective a [`PairProblem`] evaluates.
@@ -604,6 +624,17 @@ impl PairProblem {
                 }
             }
         }
+        if let Some((goal, weight, u)) = self
+            .push
+            .as_ref()
+            .and_then(|p| p.dirs[i].map(|u| (p.goal, p.weight, u)))
+        {
+            let nt = self.ntilde(c);
+            let d = -(nt.x * u[0] + nt.y * u[1] + nt.z * u[2]) + goal;
+            if d.v > 0.0 {
+                e += d * d * weight;
+            }
+        }
         e
     }
 
@@ -687,6 +718,7 @@ mod tests {
                 w_robust: W_ROBUST,
                 cone: NormalCone::Tangent,
                 focus: None,
+                push: None,
                 stage: Stage::Full,
                 axis_room: None,
                 rim: None,
@@ -798,8 +830,8 @@ mod tests {
     }
 
     /// Guards the analytic (forward-mode) gradients of the objective and of every constraint
-    /// against central finite differences, for all three classes and for a 1R gap-filling
-    /// candidate (E_focus).
+    /// against central finite differences, for all three classes, for a 1R gap-filling
+    /// candidate (E_focus) and for a pushed 3R candidate (E_push).
     #[test]
     fn energy_gradients_match_finite_differences() {
         let focused = || {
@@ -814,10 +846,28 @@ mod tests {
             pb.stage = Stage::Align;
             (pb, x)
         };
+        let pushed = || {
+            let (mut pb, x) = problem(Class::R3);
+            let n = pb.poses.len();
+            // Directions that turn with the samples, asked at two samples of three, with a
+            // goal ñ·u cannot reach everywhere, so that the term is active somewhere.
+            let dirs = (0..n)
+                .map(|i| {
+                    let a = i as f64 * 0.7;
+                    (i % 3 != 0).then(|| [a.cos() * 0.6, a.sin() * 0.6, 0.8])
+                })
+                .collect();
+            pb.push = Some(Arc::new(Push {
+                goal: 0.5,
+                weight: 50.0,
+                dirs,
+            }));
+            (pb, x)
+        };
         let problems = [Class::R1, Class::R1T1, Class::R3]
             .map(problem)
             .into_iter()
-            .chain([focused(), aligning()])
+            .chain([focused(), aligning(), pushed()])
             .chain([Class::R1, Class::R3].map(reaching));
         for (pb, x) in problems {
             let class = (pb.class, pb.stage);
@@ -881,6 +931,51 @@ mod tests {
             assert!(want > 0.0, "the test design must miss the arm somewhere");
             assert!((got - want).abs() < 1e-9 * (1.0 + want), "{got} vs {want}");
         }
+    }
+
+    /// Guards E_push's value: asking a 3R contact to reach ñ·uᵢ ≥ g at a set of samples adds
+    /// exactly w·Σ max(0, g − ñᵢ·uᵢ)² / N over those samples, and nothing elsewhere
+    /// or where ñ·u already reaches g.
+    #[test]
+    fn push_energy_penalizes_only_a_short_reach_where_asked() {
+        let (pb, x) = problem(Class::R3);
+        let n = pb.poses.len();
+        let f0 = pb.evaluate(&x).f;
+        let nt: Vec<[f64; 3]> = pb
+            .poses
+            .samples
+            .iter()
+            .map(|pose| {
+                let c = model::contact_f64(&x, pose, pb.dx);
+                crate::synth::closure::project(Class::R3, c.p.vals(), c.n.vals()).unwrap()
+            })
+            .collect();
+        let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        // At every other sample: u = ñ itself (reached: ñ·u = 1 ≥ g) at even ones of those,
+        // and a direction across ñ at the others.
+        let dirs: Vec<Option<[f64; 3]>> = (0..n)
+            .map(|i| match i % 4 {
+                0 => Some(nt[i]),
+                2 => {
+                    let v = nt[i];
+                    let l = (v[0] * v[0] + v[1] * v[1]).sqrt().max(1e-9);
+                    Some([-v[1] / l, v[0] / l, 0.0])
+                }
+                _ => None,
+            })
+            .collect();
+        let (goal, weight) = (0.3, 700.0);
+        let want: f64 = dirs
+            .iter()
+            .zip(&nt)
+            .filter_map(|(u, v)| u.map(|u| (goal - dot(*v, u)).max(0.0).powi(2) * weight))
+            .sum::<f64>()
+            / n as f64;
+        let mut pp = pb.clone();
+        pp.push = Some(Arc::new(Push { goal, weight, dirs }));
+        let got = pp.evaluate(&x).f - f0;
+        assert!(want > 0.0, "the test design must fall short somewhere");
+        assert!((got - want).abs() < 1e-9 * (1.0 + want), "{got} vs {want}");
     }
 
     /// Guards the KS aggregation: it never under-estimates the exact per-sample maximum.

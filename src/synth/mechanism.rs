@@ -181,12 +181,20 @@ pub struct Attempt {
     /// combination found by leaving bands out of a K one that closed); a gap in the stack.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub left_out: Vec<usize>,
+    /// The round of the 3R margin push that found this combination, from the accepted
+    /// combination of the same K (0: not pushed; absent then, and in older files).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub pushed: usize,
     /// Meets the acceptance criteria: paper and robust closure at every instant of the 4×
     /// check with E_maxDist ≤ −`solve.min_margin`, every candidate's residual ≤ 1°.
     #[serde(default)]
     pub closes: bool,
     /// The attempt the mechanism was taken from.
     pub accepted: bool,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 fn no_interior() -> f64 {

@@ -25,6 +25,12 @@
 //! robust arm where the combination lacks one (`Search::refine`), up to [`REFINE_ROUNDS`]
 //! rounds while each improves it.
 //!
+//! **Margin push (3R).** An accepted 3R combination has the contacts that hold the hull's
+//! nearest facet at its thin instants solved again, asked (by E_push, see
+//! [`Push`]) to move out along the facet's normal, and its bands
+//! searched again with them (`Search::push_margin`), up to [`PUSH_ROUNDS`] rounds while
+//! each widens the margin. K is not changed: the push only widens what closed.
+//!
 //! **Gap-filling bands (1R).** Once the combination at some K holds robust closure at
 //! [`FOCUS_MIN_ROBUST`] of the samples or more, the next band's candidates are asked (by
 //! E_focus, see [`W_FOCUS`](super::energy::W_FOCUS)) for a robust torque of the sign the
@@ -44,13 +50,13 @@ use rayon::prelude::*;
 
 use super::assemble::assemble;
 use super::bands::{
-    band_problem, dwell_1r, focus_of, refine_focus, usable_bands, used_bands, BandLayout, Focus,
-    BAND_GAP, FOCUS_MIN_ROBUST, MAX_EMPTY_BANDS,
+    band_problem, dwell_1r, focus_of, push_asks, refine_focus, usable_bands, used_bands,
+    BandLayout, Focus, BAND_GAP, FOCUS_MIN_ROBUST, MAX_EMPTY_BANDS,
 };
 use super::candidate::{self, Candidate, NAN_REASON, OVERSAMPLE};
 use super::closure::{self, Class, NormalCone, EPSILON};
 use super::combine::{self, Combination, Fitness, Pool};
-use super::energy::{PairProblem, MIN_DRIVER_RADIUS, MIN_FOLLOWER_RADIUS};
+use super::energy::{PairProblem, Push, MIN_DRIVER_RADIUS, MIN_FOLLOWER_RADIUS};
 use super::error::SynthError;
 use super::ga::{self, GaSettings};
 use super::mechanism::{
@@ -146,6 +152,25 @@ pub const CANDIDATES_PRINTED_RIM: usize = 60;
 /// themselves within five (quarter-turn-dwell's K = 5 attempt at d_x = 6 improved in four,
 /// robust 0.914 → 0.9986 at 4×).
 pub const REFINE_ROUNDS: usize = 8;
+/// Rounds of the 3R margin push that widen the margin, at most (see `Search::push_margin`;
+/// it stops earlier when no weight widens it). A round costs up to K candidate solves per
+/// weight tried. Default 8, a bound on the cost rather than a tuning: on the six 3R
+/// examples (seed 1) the push stopped by itself after 2–6 rounds on five; helicopter used
+/// all 8 (−0.040 → −0.050 in the first, then 0.001–0.004 a round).
+pub const PUSH_ROUNDS: usize = 8;
+/// The depth of the origin in the hull of ñ that the 3R margin push asks for at every
+/// instant (see `bands::push_asks`). Default 0.1, measured on the six 3R examples (seed 1,
+/// `docs/synthesis.md`, "The margin push"): 0.06 widened pick-and-place to −0.043 and
+/// 0.08 gave lower margins than 0.1 on five of six; 0.2 widened only figure-eight, the
+/// contacts asked for that much failing the 1° conjugation check.
+pub const PUSH_GOAL: f64 = 0.1;
+/// Weights of E_push (see [`Push`]) the margin push tries in turn
+/// each round. 5 000 first: E_push acts at the few samples of the thin instants and is
+/// divided by N with the rest, so 50 (E_focus's weight) barely moved the contacts
+/// (pick-and-place −0.025 → −0.029 in four rounds), 500 reached −0.044, 5 000 −0.063
+/// (goal 0.1). Then 2 000: helicopter's contacts pushed at 5 000 failed the 1° check or
+/// did not widen its margin, and at 2 000 they did (−0.040 → −0.066).
+pub const PUSH_WEIGHTS: [f64; 2] = [5000.0, 2000.0];
 
 /// Options of [`synthesize`](super::synthesize).
 #[derive(Clone, Debug)]
@@ -393,6 +418,14 @@ struct Best {
     chosen: Vec<Candidate>,
 }
 
+/// How an attempt's combination came from one that closed: the bands left out of it and
+/// the round of the 3R margin push (both empty for a combination of the bands as laid out).
+#[derive(Clone, Debug, Default)]
+struct Derived {
+    left_out: Vec<usize>,
+    pushed: usize,
+}
+
 /// The bands solved at one d_x, and what the next 1R band is asked for.
 struct Stack {
     dx: f64,
@@ -514,6 +547,7 @@ impl Search<'_> {
                         ntilde: Vec::new(),
                         robust: Vec::new(),
                         evals: 0,
+                        vary: pb.vary,
                     }
                 } else {
                     candidate::solve(&pb, self.minimizer, opts.seed, b, i, opts.max_eval)
@@ -573,7 +607,15 @@ impl Search<'_> {
             .flatten();
         let accepted = c.oversampled.closes(opts.min_margin) && !cancelled(opts);
         let counts = used_bands(&stack.bands, k).1;
-        self.record(k, dx, counts.clone(), &c, &chosen, accepted, Vec::new());
+        self.record(
+            k,
+            dx,
+            counts.clone(),
+            &c,
+            &chosen,
+            accepted,
+            Derived::default(),
+        );
         if !accepted {
             return None;
         }
@@ -595,11 +637,109 @@ impl Search<'_> {
                 &c2,
                 &ch2,
                 true,
-                left_out.clone(),
+                Derived {
+                    left_out: left_out.clone(),
+                    pushed: 0,
+                },
             );
             chosen = ch2;
         }
+        if class == Class::R3 {
+            chosen = self.push_margin(&mut stack.bands, chosen, dx, counts, left_out);
+        }
         Some(chosen)
+    }
+
+    /// 3R: widen an accepted combination's margin. A round solves again, from where they
+    /// are, the chosen contacts that lie on the facet of the hull nearest the origin at some
+    /// instant thinner than [`PUSH_GOAL`], asked to move out along its normal
+    /// (`bands::push_asks`); the usable results join their bands, and the bands used are
+    /// searched again from the chosen combination (`combine::improve`, which only takes a
+    /// combination that beats it). A round that does not widen the margin is tried again
+    /// with the next, gentler weight of [`PUSH_WEIGHTS`]; the push stops when none widens
+    /// it, or after [`PUSH_ROUNDS`] rounds that did. Each round that does is recorded as an
+    /// attempt of the same K.
+    fn push_margin(
+        &mut self,
+        bands: &mut [Vec<Candidate>],
+        mut chosen: Vec<Candidate>,
+        dx: f64,
+        counts: Vec<usize>,
+        left_out: Vec<usize>,
+    ) -> Vec<Candidate> {
+        let mut solves = 0;
+        'rounds: for round in 1..=PUSH_ROUNDS {
+            for weight in PUSH_WEIGHTS {
+                if cancelled(self.opts) {
+                    break 'rounds;
+                }
+                let pushed = self.push(&chosen, dx, weight, &mut solves);
+                if pushed.is_empty() {
+                    continue;
+                }
+                for r in pushed {
+                    bands[r.band].push(r);
+                }
+                let valid: Vec<Vec<&Candidate>> = chosen
+                    .iter()
+                    .map(|c| bands[c.band].iter().filter(|u| u.valid).collect())
+                    .collect();
+                let start = positions_of(&chosen, &valid);
+                let pool = self.pool_of(&valid);
+                let before = pool.fitness(&start, combine::Density::Oversampled);
+                let c = combine::improve(&pool, start, Some(&before));
+                if c.oversampled.cmp_better(&before) != CmpOrdering::Greater {
+                    continue;
+                }
+                if let Some(prev) = self.attempts.last_mut() {
+                    prev.accepted = false;
+                }
+                chosen = chosen_of(&c, &valid);
+                let how = Derived {
+                    left_out: left_out.clone(),
+                    pushed: round,
+                };
+                self.record(chosen.len(), dx, counts.clone(), &c, &chosen, true, how);
+                continue 'rounds;
+            }
+            break;
+        }
+        chosen
+    }
+
+    /// 3R: solve each chosen contact that a thin instant's facet holds again from where it
+    /// is, asked to move out along the facet's normal with E_push of `weight` (see
+    /// `bands::push_asks`). The usable results, as new candidates of their bands; `solves`
+    /// counts the solves of the whole push, which number the new candidates.
+    fn push(
+        &self,
+        chosen: &[Candidate],
+        dx: f64,
+        weight: f64,
+        solves: &mut usize,
+    ) -> Vec<Candidate> {
+        let opts = self.opts;
+        let asks = push_asks(chosen, self.poses.len(), PUSH_GOAL, weight);
+        let jobs: Vec<(usize, &Candidate, Arc<Push>)> = chosen
+            .iter()
+            .zip(asks)
+            .filter_map(|(c, a)| a.map(|a| (c, a)))
+            .enumerate()
+            .map(|(j, (c, a))| (*solves + j, c, a))
+            .collect();
+        *solves += jobs.len();
+        let jobs = jobs
+            .into_iter()
+            .map(|(j, c, ask)| {
+                let mut pb = self.problem(dx, c.band);
+                pb.vary = c.vary;
+                pb.push = Some(ask);
+                // New indices after the band's own candidates: no two solves of the push
+                // share one, so each band's indices stay unique.
+                (opts.candidates + j, c, pb)
+            })
+            .collect();
+        self.solve_again(jobs, "pushed")
     }
 
     /// Record an attempt (and report it), keeping its combination if it is the best so far.
@@ -612,7 +752,7 @@ impl Search<'_> {
         c: &Combination,
         chosen: &[Candidate],
         accepted: bool,
-        left_out: Vec<usize>,
+        how: Derived,
     ) {
         let a = Attempt {
             k,
@@ -630,7 +770,8 @@ impl Search<'_> {
                 robust_max_dist: c.oversampled.robust_max_dist,
             }),
             exhaustive: c.exact,
-            left_out,
+            left_out: how.left_out,
+            pushed: how.pushed,
             closes: accepted,
             accepted,
         };
@@ -715,15 +856,7 @@ impl Search<'_> {
             }
             let kept: Vec<&Candidate> = chosen.iter().filter(|c| c.band != out).collect();
             let valid: Vec<Vec<&Candidate>> = kept.iter().map(|c| usable(c.band)).collect();
-            let start: Vec<usize> = kept
-                .iter()
-                .zip(&valid)
-                .map(|(c, v)| {
-                    v.iter()
-                        .position(|u| u.index == c.index)
-                        .expect("a chosen candidate is usable in its band")
-                })
-                .collect();
+            let start = positions_of(kept.iter().copied(), &valid);
             // The GA's combination or the closed one's, improved; the better of the two.
             // Only a combination that closes, and beats the best found leaving out an
             // earlier band, is of use.
@@ -763,12 +896,28 @@ impl Search<'_> {
             .enumerate()
             .filter_map(|(j, (c, a))| a.map(|a| (j, c, a)))
             .collect();
-        jobs.into_par_iter()
+        let jobs = jobs
+            .into_iter()
             .map(|(j, c, ask)| {
                 let mut pb = self.problem(dx, c.band);
                 pb.focus = Some(ask);
                 // New indices after the band's own candidates.
-                let index = opts.candidates * (1 + round) + j;
+                (opts.candidates * (1 + round) + j, c, pb)
+            })
+            .collect();
+        self.solve_again(jobs, "refined")
+    }
+
+    /// Solve candidates again (in parallel), each from a chosen one's design with its own
+    /// problem and new index; the usable results. `what` names them in the log.
+    fn solve_again(
+        &self,
+        jobs: Vec<(usize, &Candidate, PairProblem)>,
+        what: &str,
+    ) -> Vec<Candidate> {
+        let opts = self.opts;
+        jobs.into_par_iter()
+            .map(|(index, c, pb)| {
                 let r = candidate::solve_from(
                     &pb,
                     self.minimizer,
@@ -782,7 +931,7 @@ impl Search<'_> {
                     band = c.band,
                     index,
                     residual_deg = r.residual_deg,
-                    "refined candidate {}: {}",
+                    "{what} candidate {}: {}",
                     if r.valid { "usable" } else { "rejected" },
                     r.reason.as_deref().unwrap_or("passed the checks")
                 );
@@ -911,6 +1060,23 @@ impl Search<'_> {
     }
 }
 
+/// Where each chosen candidate sits in its band's usable list (`valid`, one list per chosen
+/// candidate, in the same order).
+fn positions_of<'c>(
+    chosen: impl IntoIterator<Item = &'c Candidate>,
+    valid: &[Vec<&Candidate>],
+) -> Vec<usize> {
+    chosen
+        .into_iter()
+        .zip(valid)
+        .map(|(c, v)| {
+            v.iter()
+                .position(|u| u.index == c.index)
+                .expect("a chosen candidate is usable in its band")
+        })
+        .collect()
+}
+
 /// The candidates a combination chose, one per band of `valid`.
 fn chosen_of(c: &Combination, valid: &[Vec<&Candidate>]) -> Vec<Candidate> {
     c.genome
@@ -933,6 +1099,7 @@ fn unscored_attempt(k: usize, dx: f64, valid_candidates: Vec<usize>) -> Attempt 
         oversampled: None,
         exhaustive: false,
         left_out: Vec::new(),
+        pushed: 0,
         closes: false,
         accepted: false,
     }
@@ -1023,6 +1190,66 @@ mod tests {
         assert_eq!(a.curve_pairs, b.curve_pairs);
         assert_eq!(a.closure, b.closure);
         assert_eq!(a.solve.attempts, b.solve.attempts);
+    }
+
+    /// Guards the 3R margin push on a reduced helicopter run (N = 90, M = 8, K = 6, d_x =
+    /// 6), where it widens the margin: the combination as found closes, each pushed round
+    /// after it is numbered in turn and widens the 4× margin, only the last attempt is
+    /// accepted, and the file holds the last round's design, whose closure (computed again
+    /// from its curves) is that attempt's. One and two threads give the same result.
+    #[test]
+    fn the_margin_push_widens_a_3r_margin_round_by_round() {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/motions/helicopter.toml");
+        let motion = crate::motion::Motion::from_file(&path).unwrap();
+        let run = |threads: usize| {
+            let opts = SynthOptions {
+                seed: 1,
+                k: Some(6),
+                dx: Some(6.0),
+                samples: 90,
+                candidates: 8,
+                generations: 30,
+                threads: Some(threads),
+                ..Default::default()
+            };
+            match crate::synth::synthesize(&motion, &opts, &NoProgress).unwrap() {
+                Outcome::Accepted(m) => m,
+                o => panic!("not accepted: {o:?}"),
+            }
+        };
+        let m = run(2);
+        let at = &m.solve.attempts;
+        let margin = |a: &Attempt| a.oversampled.as_ref().unwrap().robust_max_dist;
+        let first = at.iter().position(|a| a.closes).expect("K = 6 closes");
+        assert_eq!(at[first].pushed, 0, "{at:?}");
+        let pushed = &at[first + 1..];
+        assert!(!pushed.is_empty(), "no round widened the margin: {at:?}");
+        for (i, a) in pushed.iter().enumerate() {
+            assert_eq!(a.pushed, i + 1, "{at:?}");
+            assert_eq!(a.k, at[first].k);
+            assert!(a.closes);
+            let prev = if i == 0 { &at[first] } else { &pushed[i - 1] };
+            assert!(
+                margin(a) < margin(prev),
+                "round {} did not widen: {at:?}",
+                i + 1
+            );
+        }
+        assert!(pushed.len() <= PUSH_ROUNDS);
+        assert_eq!(at.iter().filter(|a| a.accepted).count(), 1);
+        let last = at.last().unwrap();
+        assert!(last.accepted);
+        let mo = m.closure.oversampled.as_ref().unwrap();
+        assert!(
+            (mo.robust_max_dist - margin(last)).abs() < 1e-9,
+            "file {} vs attempt {}",
+            mo.robust_max_dist,
+            margin(last)
+        );
+        let one = run(1);
+        assert_eq!(one.curve_pairs, m.curve_pairs);
+        assert_eq!(one.solve.attempts, m.solve.attempts);
     }
 
     /// Guards determinism of the whole K loop for 1R, including gap-filling bands (aimed at
