@@ -28,7 +28,7 @@
 //!
 //! **Margin push (3R).** An accepted 3R combination has the contacts that hold the hull's
 //! nearest facet at its thin instants solved again, asked (by E_push, see
-//! [`Push`]) to move out along the facet's normal, and its bands
+//! [`Push`](super::energy::Push)) to move out along the facet's normal, and its bands
 //! searched again with them (`Search::push_margin`), up to [`PUSH_ROUNDS`] rounds while
 //! each widens the margin. K is not changed: the push only widens what closed. With a
 //! `min_margin` above ε, a combination (or one with a band left out) that closes at ε but
@@ -59,7 +59,7 @@ use super::bands::{
 use super::candidate::{self, Candidate, NAN_REASON, OVERSAMPLE};
 use super::closure::{self, Class, NormalCone, EPSILON};
 use super::combine::{self, Combination, Fitness, Pool};
-use super::energy::{PairProblem, Push, MIN_DRIVER_RADIUS, MIN_FOLLOWER_RADIUS};
+use super::energy::{PairProblem, MIN_DRIVER_RADIUS, MIN_FOLLOWER_RADIUS};
 use super::error::SynthError;
 use super::ga::{self, GaSettings};
 use super::mechanism::{
@@ -167,7 +167,7 @@ pub const PUSH_ROUNDS: usize = 8;
 /// 0.08 gave lower margins than 0.1 on five of six; 0.2 widened only figure-eight, the
 /// contacts asked for that much failing the 1° conjugation check.
 pub const PUSH_GOAL: f64 = 0.1;
-/// Weights of E_push (see [`Push`]) the margin push tries in turn
+/// Weights of E_push (see [`Push`](super::energy::Push)) the margin push tries in turn
 /// each round. 5 000 first: E_push acts at the few samples of the thin instants and is
 /// divided by N with the rest, so 50 (E_focus's weight) barely moved the contacts
 /// (pick-and-place −0.025 → −0.029 in four rounds), 500 reached −0.044, 5 000 −0.063
@@ -724,14 +724,13 @@ impl Search<'_> {
             return None;
         }
         let mut last: Option<(Combination, Vec<Candidate>)> = None;
-        let mut solves = 0;
         'rounds: for round in 1..=PUSH_ROUNDS {
             let from = last.as_ref().map_or(chosen, |l| l.1.as_slice()).to_vec();
             for weight in PUSH_WEIGHTS {
                 if cancelled(self.opts) {
                     break 'rounds;
                 }
-                let pushed = self.push(&from, dx, weight, &mut solves);
+                let pushed = self.push(bands, &from, dx, weight);
                 if pushed.is_empty() {
                     continue;
                 }
@@ -771,34 +770,25 @@ impl Search<'_> {
 
     /// 3R: solve each chosen contact that a thin instant's facet holds again from where it
     /// is, asked to move out along the facet's normal with E_push of `weight` (see
-    /// `bands::push_asks`). The usable results, as new candidates of their bands; `solves`
-    /// counts the solves of the whole push, which number the new candidates.
+    /// `bands::push_asks`). The usable results, as new candidates of their bands, each
+    /// numbered by its band's length in `bands` (every candidate a 3R band holds was
+    /// appended under the number of its place, so no two share one).
     fn push(
         &self,
+        bands: &[Vec<Candidate>],
         chosen: &[Candidate],
         dx: f64,
         weight: f64,
-        solves: &mut usize,
     ) -> Vec<Candidate> {
-        let opts = self.opts;
         let asks = push_asks(chosen, self.poses.len(), PUSH_GOAL, weight);
-        let jobs: Vec<(usize, &Candidate, Arc<Push>)> = chosen
+        let jobs = chosen
             .iter()
             .zip(asks)
-            .filter_map(|(c, a)| a.map(|a| (c, a)))
-            .enumerate()
-            .map(|(j, (c, a))| (*solves + j, c, a))
-            .collect();
-        *solves += jobs.len();
-        let jobs = jobs
-            .into_iter()
-            .map(|(j, c, ask)| {
+            .filter_map(|(c, ask)| {
                 let mut pb = self.problem(dx, c.band);
                 pb.vary = c.vary;
-                pb.push = Some(ask);
-                // New indices after the band's own candidates: no two solves of the push
-                // share one, so each band's indices stay unique.
-                (opts.candidates + j, c, pb)
+                pb.push = Some(ask?);
+                Some((bands[c.band].len(), c, pb))
             })
             .collect();
         self.solve_again(jobs, "pushed")
