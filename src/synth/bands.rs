@@ -321,8 +321,6 @@ mod tests {
         }
     }
 
-    /// Guards the skipping of empty bands: K counts bands with usable candidates, an empty
-    /// band is passed over (and shown as 0), and too few usable bands are reported as such.
     /// A 3R candidate for `push_asks` tests: the same ñ at every instant of `n` samples,
     /// except that it vanishes at the instants nearest the samples in `lost`.
     fn contact_3r(v: [f64; 3], n: usize, lost: std::ops::Range<usize>) -> Candidate {
@@ -367,6 +365,8 @@ mod tests {
             .all(Option::is_none));
     }
 
+    /// Guards the skipping of empty bands: K counts bands with usable candidates, an empty
+    /// band is passed over (and shown as 0), and too few usable bands are reported as such.
     #[test]
     fn empty_bands_are_skipped_and_k_counts_curve_pairs() {
         let band = |usable: usize| -> Vec<Candidate> {
