@@ -612,14 +612,13 @@ impl Search<'_> {
         let meets = |c: &Combination| c.oversampled.closes(opts.min_margin) && !cancelled(opts);
         let counts = used_bands(&stack.bands, k).1;
         let first = self.attempts.len();
-        let as_laid_out = Derived::default();
         // Whether the combination taken was pushed already (to where the push stopped).
         let mut pushed = false;
-        self.record(k, dx, &counts, &c, &chosen, meets(&c), as_laid_out.clone());
+        self.record(k, dx, &counts, &c, &chosen, meets(&c), Derived::default());
         if !meets(&c) {
             // 3R: one that closes with less than `--min-margin` asks may reach it pushed.
-            match self.push_margin(&mut stack.bands, &c, &chosen, dx, &counts, &as_laid_out) {
-                Some((pc, pch)) if meets(&pc) => (chosen, pushed) = (pch, true),
+            match self.push_margin(&mut stack.bands, &c, &chosen, dx, &counts, &[]) {
+                Some(next) if meets(&next.0) => ((c, chosen), pushed) = (next, true),
                 _ => {
                     self.take(first, None);
                     return None;
@@ -649,10 +648,11 @@ impl Search<'_> {
                 how.clone(),
             );
             if meets(&c2) {
-                (chosen, pushed) = (ch2, false);
+                ((c, chosen), pushed) = ((c2, ch2), false);
             } else {
-                match self.push_margin(&mut stack.bands, &c2, &ch2, dx, &counts, &how) {
-                    Some((pc, pch)) if meets(&pc) => (chosen, pushed) = (pch, true),
+                let lo = &how.left_out;
+                match self.push_margin(&mut stack.bands, &c2, &ch2, dx, &counts, lo) {
+                    Some(next) if meets(&next.0) => ((c, chosen), pushed) = (next, true),
                     _ => break,
                 }
             }
@@ -660,15 +660,10 @@ impl Search<'_> {
             taken = self.attempts.len() - 1;
         }
         // 3R: widen what is taken, unless it was pushed to get there.
-        let how = Derived {
-            left_out,
-            pushed: 0,
-        };
-        let c = self.fitness_of(&stack.bands, &chosen);
         let more = if pushed {
             None
         } else {
-            self.push_margin(&mut stack.bands, &c, &chosen, dx, &counts, &how)
+            self.push_margin(&mut stack.bands, &c, &chosen, dx, &counts, &left_out)
         };
         if let Some((_, pch)) = more {
             chosen = pch;
@@ -686,20 +681,6 @@ impl Search<'_> {
         }
     }
 
-    /// The combination of the bands' usable candidates that `chosen` picks, with its
-    /// fitness.
-    fn fitness_of(&self, bands: &[Vec<Candidate>], chosen: &[Candidate]) -> Combination {
-        let valid = usable_of(bands, chosen);
-        let pool = self.pool_of(&valid);
-        let genome = positions_of(chosen, &valid);
-        Combination {
-            at_samples: pool.fitness(&genome, combine::Density::Samples),
-            oversampled: pool.fitness(&genome, combine::Density::Oversampled),
-            genome,
-            exact: false,
-        }
-    }
-
     /// 3R: widen the margin of a combination that closes (`c`, of the candidates `chosen`;
     /// nothing for other classes, or when it does not close at ε). A round solves again,
     /// from where they are, the chosen contacts that lie on the facet of the hull nearest
@@ -709,8 +690,8 @@ impl Search<'_> {
     /// a combination that beats it). A round that does not widen the margin is tried again
     /// with the next, gentler weight of [`PUSH_WEIGHTS`]; the push stops when none widens
     /// it, or after [`PUSH_ROUNDS`] rounds that did. Each round that does is recorded as an
-    /// attempt of the same K (`how`, with its round). The last round's combination and
-    /// candidates; `None` when no round widened the margin.
+    /// attempt of the same K (with `left_out`, the bands `c` leaves out, and its round). The
+    /// last round's combination and candidates; `None` when no round widened the margin.
     fn push_margin(
         &mut self,
         bands: &mut [Vec<Candidate>],
@@ -718,14 +699,18 @@ impl Search<'_> {
         chosen: &[Candidate],
         dx: f64,
         counts: &[usize],
-        how: &Derived,
+        left_out: &[usize],
     ) -> Option<(Combination, Vec<Candidate>)> {
         if self.class != Class::R3 || !c.oversampled.closes(EPSILON) {
             return None;
         }
         let mut last: Option<(Combination, Vec<Candidate>)> = None;
         'rounds: for round in 1..=PUSH_ROUNDS {
-            let from = last.as_ref().map_or(chosen, |l| l.1.as_slice()).to_vec();
+            let (current, from) = match &last {
+                Some((l, ch)) => (&l.oversampled, ch.clone()),
+                None => (&c.oversampled, chosen.to_vec()),
+            };
+            let current = current.clone();
             for weight in PUSH_WEIGHTS {
                 if cancelled(self.opts) {
                     break 'rounds;
@@ -739,15 +724,13 @@ impl Search<'_> {
                 }
                 let valid = usable_of(bands, &from);
                 let start = positions_of(&from, &valid);
-                let pool = self.pool_of(&valid);
-                let before = pool.fitness(&start, combine::Density::Oversampled);
-                let next = combine::improve(&pool, start, Some(&before));
-                if next.oversampled.cmp_better(&before) != CmpOrdering::Greater {
+                let next = combine::improve(&self.pool_of(&valid), start, Some(&current));
+                if next.oversampled.cmp_better(&current) != CmpOrdering::Greater {
                     continue;
                 }
                 let next_chosen = chosen_of(&next, &valid);
                 let round_how = Derived {
-                    left_out: how.left_out.clone(),
+                    left_out: left_out.to_vec(),
                     pushed: round,
                 };
                 let meets = next.oversampled.closes(self.opts.min_margin);
