@@ -211,6 +211,22 @@ fn demo_measures_the_parts_of_a_given_mechanism() {
             parts_dir.display()
         );
     }
+    // Every part's walls are measured (the figures themselves are the unit tests' and
+    // docs/build.md's).
+    let build: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(parts_dir.join("build.json")).unwrap())
+            .unwrap();
+    for part in build["parts"].as_array().unwrap() {
+        let w = &part["walls"];
+        let (area, thin) = (
+            w["area_mm2"].as_f64().unwrap(),
+            w["thin_area_mm2"].as_f64().unwrap(),
+        );
+        assert!(area > 0.0 && (0.0..=area).contains(&thin), "{part}");
+        assert_eq!(w["thin_below_mm"], serde_json::json!(0.8), "{part}");
+    }
+    let md = std::fs::read_to_string(parts_dir.join("build.md")).unwrap();
+    assert!(md.contains("\n- support: "), "{md}");
     let predicted = PathBuf::from(line_of(&stdout, "predicted:").trim());
     assert_eq!(predicted, parts_dir.join("prediction/prediction.json"));
     assert!(predicted.exists());

@@ -32,9 +32,11 @@ use rayon::prelude::*;
 use crate::geometry::mesh::{Aabb, Mesh};
 use crate::geometry::query::MeshQuery;
 use crate::geometry::sdf::Vec3;
+use crate::geometry::thickness::{wall_thickness, WallThickness};
 use crate::geometry::voxel::{distance_transform, VoxelGrid};
 use crate::synth::mechanism::Mechanism;
 
+use super::dims::SLIVER_MM;
 use super::kinematics::{Frame, Kinematics};
 use super::parts::Design;
 use super::swept::ExactSweep;
@@ -48,6 +50,11 @@ pub const PENETRATION_TOL_MM: f64 = 0.05;
 /// Accepted deviation of a design contact's gap from the clearance, mm: twice the mesh
 /// error of the two surfaces that meet there.
 pub const GAP_TOL_MM: f64 = 0.1;
+/// How far the wall measurement follows each ray, mm: the printed parts' walls of note are
+/// the thin ones (below [`SLIVER_MM`], which a slicer cannot lay as a wall, up to the 2.4 mm
+/// plates and 3.5 mm bands); a wall thicker than 5 mm is only said to be that thick, and the
+/// rays through the columns and the base stop there instead of crossing them.
+pub const WALL_REACH_MM: f64 = 5.0;
 /// Voxel of the occupancy grids that skip far vertices, mm.
 const OCCUPANCY_VOXEL_MM: f64 = 1.0;
 /// Vertices nearer than this to a part's surface (by the occupancy grid) are measured
@@ -156,6 +163,9 @@ pub struct CheckFigures {
     pub gaps: Vec<PairGap>,
     /// Closure from the contacts the parts keep.
     pub closure: BuiltClosure,
+    /// Each part's walls (driver, follower, support), measured, not judged: thin walls
+    /// are for the person printing to weigh.
+    pub walls: Vec<WallThickness>,
 }
 
 impl CheckFigures {
@@ -581,12 +591,16 @@ pub fn run(
         })
         .collect();
     let closure = built_closure(mech, &pairs, &per_pair, kept_limit);
+    let walls = [(&qd, driver), (&qf, follower), (&qs, support)]
+        .map(|(q, m)| wall_thickness(&q.tri, m, SLIVER_MM, WALL_REACH_MM))
+        .into();
     CheckFigures {
         times: CHECK_TIMES,
         clearance_mm: design.clearance,
         penetrations,
         gaps,
         closure,
+        walls,
     }
 }
 
@@ -870,6 +884,7 @@ mod tests {
             penetrations: Vec::new(),
             gaps: vec![lost],
             closure,
+            walls: Vec::new(),
         };
         assert_eq!(f.failure(), None);
         f.gaps.push(pair_gap(2, &[0.2, 0.05, 0.2, 0.2], 0.3));

@@ -29,6 +29,7 @@ use crate::geometry::io::threemf::{self, Bed, LayoutError, ThreeMfError};
 use crate::geometry::render::{RenderError, RenderOptions, Renderer, View};
 use crate::geometry::scene::{Pose, Scene, ScenePart};
 use crate::geometry::shading::{shade_scene, ShadedMesh};
+use crate::geometry::thickness::WallThickness;
 
 /// The `format` of `build.json`.
 pub const BUILD_FORMAT: &str = "mpcmech-build/2";
@@ -351,7 +352,7 @@ fn summary_json(summary: &Summary) -> serde_json::Value {
         "cell_mm": opts.cell_mm,
         "without_pair": opts.without_pair.map(|k| k + 1),
         "bench": built.design.layout.bench.to_string(),
-        "parts": built.parts.iter().map(|p| {
+        "parts": built.parts.iter().enumerate().map(|(i, p)| {
             let c = &p.check;
             let b = p.mesh.aabb();
             json!({
@@ -364,6 +365,16 @@ fn summary_json(summary: &Summary) -> serde_json::Value {
                 "bbox_max_mm": b.max,
                 "dropped_fragments_mm3": p.dropped,
                 "pieces_mm3": p.pieces,
+                "walls": f.walls.get(i).map(|w| json!({
+                    "min_mm": w.min_mm,
+                    "at_mm": w.at,
+                    "thin_below_mm": w.thin_below_mm,
+                    "thin_area_mm2": w.thin_area_mm2,
+                    "area_mm2": w.area_mm2,
+                    "edge_faces": w.edge_faces,
+                    "edge_area_mm2": w.edge_area_mm2,
+                    "reach_mm": w.reach_mm,
+                })),
                 "seconds": p.seconds,
             })
         }).collect::<Vec<_>>(),
@@ -395,6 +406,31 @@ fn summary_json(summary: &Summary) -> serde_json::Value {
         "timings_s": timings.iter().map(|(w, s)| json!({"stage": w, "seconds": s})).collect::<Vec<_>>(),
         "peak_memory_mb": peak_mb,
     })
+}
+
+/// A part's walls in words: `thinnest 0.62 mm at (12.0, -3.5, 40.2) mm; 1.3 % of the
+/// surface (85 mm²) over walls thinner than 0.8 mm`.
+pub fn walls_text(w: &WallThickness) -> String {
+    let thinnest = match w.min_mm {
+        Some(m) => format!(
+            "thinnest {} at ({:.1}, {:.1}, {:.1}) mm",
+            if m < 0.01 {
+                "below 0.01 mm".to_string()
+            } else {
+                format!("{m:.2} mm")
+            },
+            w.at[0],
+            w.at[1],
+            w.at[2]
+        ),
+        None => format!("every wall thicker than {} mm", w.reach_mm),
+    };
+    format!(
+        "{thinnest}; {:.1} % of the surface ({:.0} mm²) over walls thinner than {} mm",
+        100.0 * w.thin_share(),
+        w.thin_area_mm2,
+        w.thin_below_mm
+    )
 }
 
 /// `t 0.120–0.180, 0.700–0.710` or `none`.
@@ -528,6 +564,14 @@ fn summary_md(summary: &Summary) -> String {
             n = p.name
         );
     }
+    let _ = writeln!(
+        s,
+        "\nWalls, measured under every face along its inward normal (an estimate: a wall \
+         thinner than the faces are wide can fall between two of them):\n"
+    );
+    for (p, w) in built.parts.iter().zip(&built.figures.walls) {
+        let _ = writeln!(s, "- {}: {}", p.name, walls_text(w));
+    }
     for p in built.parts.iter().filter(|p| !p.dropped.is_empty()) {
         let _ = writeln!(
             s,
@@ -632,6 +676,36 @@ mod tests {
         std::hint::black_box(&block);
         let mb = peak_resident_mb().expect("Linux says its peak");
         assert!(mb >= 64.0, "{mb} MB");
+    }
+
+    /// Guards the words a part's walls are told in (the command's line and build.md's
+    /// list): a wall below a hundredth of a millimetre is not given to the micron, and a
+    /// part whose walls are all thicker than the rays reach says so.
+    #[test]
+    fn walls_are_told_in_words() {
+        let mut w = WallThickness {
+            min_mm: Some(0.004),
+            at: [12.04, -3.46, 40.24],
+            thin_below_mm: 0.8,
+            thin_area_mm2: 85.2,
+            area_mm2: 6540.0,
+            edge_faces: 3,
+            edge_area_mm2: 1.0,
+            reach_mm: 5.0,
+        };
+        assert_eq!(
+            walls_text(&w),
+            "thinnest below 0.01 mm at (12.0, -3.5, 40.2) mm; 1.3 % of the surface (85 mm²) \
+             over walls thinner than 0.8 mm"
+        );
+        w.min_mm = Some(0.623);
+        assert!(walls_text(&w).starts_with("thinnest 0.62 mm at"));
+        (w.min_mm, w.thin_area_mm2) = (None, 0.0);
+        assert_eq!(
+            walls_text(&w),
+            "every wall thicker than 5 mm; 0.0 % of the surface (0 mm²) over walls thinner \
+             than 0.8 mm"
+        );
     }
 
     /// Guards the gap table's row of a pair that keeps no contact (screw-bob's band 6,

@@ -80,6 +80,9 @@ pub fn run(args: BuildArgs) -> anyhow::Result<ExitCode> {
             p.seconds
         );
     }
+    for (p, w) in built.parts.iter().zip(&built.figures.walls) {
+        println!("{} walls: {}", p.name, output::walls_text(w));
+    }
     for pe in &built.figures.penetrations {
         println!("{:<24} {:.3} mm at t = {:.4}", pe.what, pe.depth_mm, pe.t);
     }

@@ -9,7 +9,8 @@
 //! | [`sweep`] | sections swept along closed curves, the segment BVH |
 //! | [`voxel`] | voxel grids, exact distance transforms, shortest free paths |
 //! | [`mesher`] | implicit solid → closed 2-manifold mesh (marching tetrahedra, sparse blocks) |
-//! | [`query`] | signed point–mesh distance (parry3d-f64, pseudo-normals) |
+//! | [`query`] | signed point–mesh distance (parry3d-f64, pseudo-normals), rays leaving a mesh |
+//! | [`thickness`] | a mesh's wall thickness, face by face (rays along the inward normals) |
 //! | [`primitive_meshes`] | closed meshes of boxes, UV spheres and tori, built directly |
 //! | [`shading`] | crease-split vertex normals, as the GLB and the renders shade a mesh |
 //! | [`io`] | files: binary STL, 3MF packages laid out on a bed, the animated GLB |
@@ -28,6 +29,7 @@ pub mod scene;
 pub mod sdf;
 pub mod shading;
 pub mod sweep;
+pub mod thickness;
 pub mod voxel;
 
 pub use mesh::{Aabb, Mesh, MeshCheck};

@@ -12,7 +12,7 @@
 //! grids).
 
 use parry3d_f64::math::{Real, Vector as PVec, VectorExt};
-use parry3d_f64::query::{PointProjection, PointQueryWithLocation};
+use parry3d_f64::query::{PointProjection, PointQueryWithLocation, Ray, RayCullingMode};
 use parry3d_f64::shape::{TriMesh, TriMeshFlags, Triangle, TrianglePointLocation};
 use rayon::prelude::*;
 
@@ -76,6 +76,21 @@ impl MeshQuery {
         };
         let inside = (point - pr.point).dot(normal) <= 0.0;
         Some(signed_from(&pr, p, inside))
+    }
+
+    /// Where a ray from `origin` along `dir` (unit) leaves the solid through a face, when
+    /// that is within `max_mm`: how far it travelled, mm, and the face (its index in the
+    /// mesh). The first face it crosses from behind (the face's outward normal along
+    /// `dir`); the faces it would enter through are passed by. From a point just inside a
+    /// face, along its inward normal, that is the material's thickness there.
+    pub fn exit_along(&self, origin: [f64; 3], dir: [f64; 3], max_mm: f64) -> Option<(f64, u32)> {
+        let ray = Ray::new(
+            PVec::new(origin[0], origin[1], origin[2]),
+            PVec::new(dir[0], dir[1], dir[2]),
+        );
+        self.tri
+            .cast_local_ray_with_culling(&ray, max_mm, RayCullingMode::IgnoreFrontfaces)
+            .map(|hit| (hit.time_of_impact, hit.subshape))
     }
 }
 
