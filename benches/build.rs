@@ -2,8 +2,10 @@
 //! (`mpc-rig synth MOTION --printable`, the layout docs/build.md says the parts need; the
 //! same options `demo` synthesizes with) and its parts (`mpc-rig build`), each in a child
 //! process as a user runs them. Prints per example: class, K, d_x, the synthesis seconds,
-//! the build's seconds per stage, its peak resident memory, the triangles per part and the
-//! verdict (printable, not printable and why, or where the command stopped).
+//! the build's seconds per stage, its peak resident memory, the triangles per part, the
+//! mesh error (99th percentile and largest, of the part where they are widest; see
+//! docs/build.md, "Mesh error") and the verdict (printable, not printable and why, or
+//! where the command stopped).
 //!
 //! Run with `cargo bench --bench build`. Designs are kept in `BUILD_BENCH_DIR` (default
 //! `target/build-bench`) and reused, so a second run times the builds alone; delete the
@@ -41,7 +43,7 @@ fn main() {
         work.display()
     );
     println!(
-        "{:<20} {:<5} {:>2} {:>5} {:>7} {:>8} {:>7} {:>7} {:>7} {:>6} {:>6} {:>6} {:>7}  {:>20}  result",
+        "{:<20} {:<5} {:>2} {:>5} {:>7} {:>8} {:>7} {:>7} {:>7} {:>6} {:>6} {:>6} {:>7}  {:>20} {:>11}  result",
         "motion",
         "class",
         "K",
@@ -55,7 +57,8 @@ fn main() {
         "check",
         "files",
         "peak MB",
-        "triangles d/f/s"
+        "triangles d/f/s",
+        "err p99/max"
     );
     for f in files {
         let name = f.file_stem().unwrap().to_string_lossy().into_owned();
@@ -119,6 +122,18 @@ fn main() {
             .as_array()
             .map(|ps| ps.iter().map(|p| p["triangles"].to_string()).collect())
             .unwrap_or_default();
+        // The mesh error of the part with the widest 99th percentile (mm).
+        let worst = |key: &str| {
+            b["parts"]
+                .as_array()
+                .and_then(|ps| {
+                    ps.iter()
+                        .filter_map(|p| p["mesh_error"][key].as_f64())
+                        .max_by(f64::total_cmp)
+                })
+                .map_or("–".to_string(), |v| format!("{v:.2}"))
+        };
+        let error = format!("{}/{}", worst("p99_mm"), worst("max_mm"));
         let verdict = if b["printable"] == true {
             "printable, check passes".to_string()
         } else {
@@ -126,7 +141,7 @@ fn main() {
             format!("NOT PRINTABLE: {first}")
         };
         println!(
-            "{head} {:>7} {:>7} {:>7} {:>6} {:>6} {:>6} {:>7}  {:>20}  {verdict}",
+            "{head} {:>7} {:>7} {:>7} {:>6} {:>6} {:>6} {:>7}  {:>20} {error:>11}  {verdict}",
             stage("design"),
             stage("mesh driver"),
             stage("mesh follower"),

@@ -211,8 +211,8 @@ fn demo_measures_the_parts_of_a_given_mechanism() {
             parts_dir.display()
         );
     }
-    // Every part's walls are measured (the figures themselves are the unit tests' and
-    // docs/build.md's).
+    // Every part's walls and mesh error are measured (the figures themselves are the unit
+    // tests' and docs/build.md's).
     let build: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(parts_dir.join("build.json")).unwrap())
             .unwrap();
@@ -224,6 +224,10 @@ fn demo_measures_the_parts_of_a_given_mechanism() {
         );
         assert!(area > 0.0 && (0.0..=area).contains(&thin), "{part}");
         assert_eq!(w["thin_below_mm"], serde_json::json!(0.8), "{part}");
+        let e = &part["mesh_error"];
+        let [mean, p99, max] = ["mean_mm", "p99_mm", "max_mm"].map(|k| e[k].as_f64().unwrap());
+        assert!(e["samples"].as_u64().unwrap() > 0, "{part}");
+        assert!(0.0 <= mean && mean <= p99 && p99 <= max, "{part}");
     }
     let md = std::fs::read_to_string(parts_dir.join("build.md")).unwrap();
     assert!(md.contains("\n- support: "), "{md}");

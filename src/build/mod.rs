@@ -32,6 +32,7 @@ pub mod bench;
 pub mod check;
 pub mod connect;
 pub mod dims;
+pub mod fidelity;
 pub mod kinematics;
 pub mod layout;
 pub mod output;
@@ -210,6 +211,10 @@ pub struct Part {
     pub pieces: Vec<f64>,
     /// Seconds spent meshing it.
     pub seconds: f64,
+    /// How far the mesh lies from the solid it was meshed from (`fidelity`).
+    pub error: fidelity::MeshError,
+    /// Seconds spent measuring that.
+    pub error_seconds: f64,
 }
 
 /// A finished build.
@@ -370,6 +375,10 @@ pub fn build(
     for p in &out {
         timings.push((format!("mesh {}", p.name), p.seconds));
     }
+    timings.push((
+        "mesh error".to_string(),
+        out.iter().map(|p| p.error_seconds).sum(),
+    ));
     progress("checking interference over the period");
     let t1 = Instant::now();
     let figures = check::run(&design, mech, &out[0].mesh, &out[1].mesh, &out[2].mesh);
@@ -468,7 +477,7 @@ fn mesh_part(
     }
     let mut shells = mesh.shells();
     let mut dropped = Vec::new();
-    if shells.len() > 1 {
+    let (mesh, check, pieces) = if shells.len() > 1 {
         shells.sort_by(|a, b| b.volume().total_cmp(&a.volume()));
         let keep = |m: &Mesh| match loose {
             Loose::Anchored(anchors) => anchors.iter().any(|a| m.contains([a.x, a.y, a.z])),
@@ -494,22 +503,23 @@ fn mesh_part(
         for s in &kept {
             mesh.append(s);
         }
-        return Ok(Part {
-            name,
-            check: mesh.check(),
-            mesh,
-            dropped,
-            pieces,
-            seconds: t.elapsed().as_secs_f64(),
-        });
-    }
+        let check = mesh.check();
+        (mesh, check, pieces)
+    } else {
+        (mesh, check, Vec::new())
+    };
+    let seconds = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let error = fidelity::mesh_error(solid, &mesh, cell);
     Ok(Part {
         name,
         mesh,
         check,
         dropped,
-        pieces: Vec::new(),
-        seconds: t.elapsed().as_secs_f64(),
+        pieces,
+        seconds,
+        error,
+        error_seconds: t.elapsed().as_secs_f64(),
     })
 }
 

@@ -21,6 +21,7 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 use serde_json::json;
 
+use super::fidelity::MeshError;
 use super::kinematics::Kinematics;
 use super::{BuildOptions, Built, Part};
 use crate::geometry::io::gltf::{write_glb_shaded, GltfError};
@@ -375,6 +376,14 @@ fn summary_json(summary: &Summary) -> serde_json::Value {
                     "edge_area_mm2": w.edge_area_mm2,
                     "reach_mm": w.reach_mm,
                 })),
+                "mesh_error": json!({
+                    "samples": p.error.samples,
+                    "mean_mm": p.error.mean_mm,
+                    "p99_mm": p.error.p99_mm,
+                    "max_mm": p.error.max_mm,
+                    "at_mm": p.error.at,
+                    "off_surface": p.error.off_surface,
+                }),
                 "seconds": p.seconds,
             })
         }).collect::<Vec<_>>(),
@@ -430,6 +439,25 @@ pub fn walls_text(w: &WallThickness) -> String {
         100.0 * w.thin_share(),
         w.thin_area_mm2,
         w.thin_below_mm
+    )
+}
+
+/// A part's mesh error in words: `mean 0.008 mm, 99 % within 0.098 mm, largest 0.772 mm
+/// at (18.9, 53.0, -47.3) mm (3993 faces; 7 more farther than 2 cells)`.
+pub fn mesh_error_text(e: &MeshError) -> String {
+    let off = if e.off_surface > 0 {
+        format!(
+            "; {} more farther than {} cells",
+            e.off_surface,
+            super::fidelity::ERROR_REACH_CELLS
+        )
+    } else {
+        String::new()
+    };
+    format!(
+        "mean {:.3} mm, 99 % within {:.3} mm, largest {:.3} mm at ({:.1}, {:.1}, {:.1}) mm \
+         ({} faces{off})",
+        e.mean_mm, e.p99_mm, e.max_mm, e.at[0], e.at[1], e.at[2], e.samples
     )
 }
 
@@ -572,6 +600,15 @@ fn summary_md(summary: &Summary) -> String {
     for (p, w) in built.parts.iter().zip(&built.figures.walls) {
         let _ = writeln!(s, "- {}: {}", p.name, walls_text(w));
     }
+    let _ = writeln!(
+        s,
+        "\nMesh error: how far the faces' centres lie from the solid they were meshed from, \
+         along their normals, over {} faces drawn at random per part:\n",
+        super::fidelity::ERROR_SAMPLES
+    );
+    for p in &built.parts {
+        let _ = writeln!(s, "- {}: {}", p.name, mesh_error_text(&p.error));
+    }
     for p in built.parts.iter().filter(|p| !p.dropped.is_empty()) {
         let _ = writeln!(
             s,
@@ -708,6 +745,27 @@ mod tests {
         );
     }
 
+    /// Guards the words a part's mesh error is told in, with and without faces off the
+    /// solid's surface.
+    #[test]
+    fn mesh_error_is_told_in_words() {
+        let mut e = MeshError {
+            samples: 3993,
+            mean_mm: 0.0081,
+            p99_mm: 0.0984,
+            max_mm: 0.7723,
+            at: [18.94, 53.01, -47.33],
+            off_surface: 7,
+        };
+        assert_eq!(
+            mesh_error_text(&e),
+            "mean 0.008 mm, 99 % within 0.098 mm, largest 0.772 mm at (18.9, 53.0, -47.3) mm \
+             (3993 faces; 7 more farther than 2 cells)"
+        );
+        e.off_surface = 0;
+        assert!(mesh_error_text(&e).ends_with("(3993 faces)"));
+    }
+
     /// Guards the gap table's row of a pair that keeps no contact (screw-bob's band 6,
     /// which no strut reached, wrote "NaN" for its mean): a dash, the rest as usual.
     #[test]
@@ -774,6 +832,8 @@ mod tests {
                 dropped: Vec::new(),
                 pieces: Vec::new(),
                 seconds: 0.0,
+                error: MeshError::default(),
+                error_seconds: 0.0,
             }
         };
         let parts = [
@@ -807,6 +867,8 @@ mod tests {
                 dropped: Vec::new(),
                 pieces: Vec::new(),
                 seconds: 0.0,
+                error: MeshError::default(),
+                error_seconds: 0.0,
             })
             .collect();
         let scene = scene(&kin, &parts);

@@ -83,6 +83,13 @@ pub fn run(args: BuildArgs) -> anyhow::Result<ExitCode> {
     for (p, w) in built.parts.iter().zip(&built.figures.walls) {
         println!("{} walls: {}", p.name, output::walls_text(w));
     }
+    for p in &built.parts {
+        println!(
+            "{} mesh error: {}",
+            p.name,
+            output::mesh_error_text(&p.error)
+        );
+    }
     for pe in &built.figures.penetrations {
         println!("{:<24} {:.3} mm at t = {:.4}", pe.what, pe.depth_mm, pe.t);
     }
