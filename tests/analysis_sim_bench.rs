@@ -91,7 +91,12 @@ fn parts_folder(dir: &Path) {
         "scale_mm": 10.0, "clearance_mm": 0.2, "without_pair": null,
         "printable": true, "problems": [],
         "parts": [{"name": "driver", "triangles": 2718, "volume_mm3": 57285.4,
-                   "bbox_min_mm": [-40.0, -40.0, 0.0], "bbox_max_mm": [40.0, 41.5, 92.0]}],
+                   "bbox_min_mm": [-40.0, -40.0, 0.0], "bbox_max_mm": [40.0, 41.5, 92.0],
+                   "walls": {"min_mm": 0.004, "thin_below_mm": 0.8, "thin_area_mm2": 358.0,
+                             "area_mm2": 44750.0},
+                   "mesh_error": {"p99_mm": 0.0984, "max_mm": 0.772}},
+                  {"name": "support", "triangles": 12, "volume_mm3": 1000.0,
+                   "bbox_min_mm": [0.0, 0.0, 0.0], "bbox_max_mm": [10.0, 10.0, 10.0]}],
         "check": {
             "gaps": [{"pair": 1, "min_mm": 0.183, "lost_t": []},
                      {"pair": 2, "min_mm": 0.191, "lost_t": []}],
@@ -116,8 +121,9 @@ fn parts_folder(dir: &Path) {
 /// no offset fit removes (the plain target plant gives about 0.02°), and under 0.2°
 /// against the prediction that says so. The play is the follower-side dead band, 2°
 /// (±0.2°), and the headline says so (it used to give only the driver-side figure,
-/// 0.002°). The report shows the parts (their figures and the copied picture) and draws
-/// the predicted error of each direction over the measured one.
+/// 0.002°). The report shows the parts (their figures, with the walls and mesh error the
+/// build measured and a dash where an older build did not, and the copied picture) and
+/// draws the predicted error of each direction over the measured one.
 #[test]
 fn the_geometry_plant_shows_the_parts_play_in_a_measurement() {
     use mpc_rig::predict::table::PlayTable;
@@ -155,8 +161,10 @@ fn the_geometry_plant_shows_the_parts_play_in_a_measurement() {
          `build.md` has every figure. Clearance 0.200 mm; over the period no part enters \
          another by more than 0.004 mm, and the smallest gap at a design contact is 0.183 \
          mm. The simulated follower is moved as these parts move it (the prediction \
-         above).\n\n| part | triangles | volume [mm³] | size [mm] |\n|---|---|---|---|\n\
-         | driver | 2718 | 57285 | 80 × 82 × 92 |\n",
+         above).\n\n| part | triangles | volume [mm³] | size [mm] | thin walls | mesh error, \
+         99 % [mm] |\n|---|---|---|---|---|---|\n\
+         | driver | 2718 | 57285 | 80 × 82 × 92 | 0.8 % of the surface under 0.8 mm | 0.098 |\n\
+         | support | 12 | 1000 | 10 × 10 × 10 | – | – |\n",
         parts.display()
     );
     assert!(text.contains(&section), "no\n{section}\nin\n{text}");

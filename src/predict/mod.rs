@@ -139,6 +139,34 @@ pub struct BuiltPart {
     pub bbox_min_mm: [f64; 3],
     /// See `bbox_min_mm`.
     pub bbox_max_mm: [f64; 3],
+    /// Its walls as the build measured them (builds before 2026-12-06 have none).
+    #[serde(default)]
+    pub walls: Option<BuiltWalls>,
+    /// How far its mesh lies from its solid (builds before 2026-12-06 have none).
+    #[serde(default)]
+    pub mesh_error: Option<BuiltMeshError>,
+}
+
+/// A part's walls as `build.json` gives them (`build`'s wall thickness estimate).
+#[derive(Debug, Clone, Deserialize)]
+pub struct BuiltWalls {
+    /// The thinnest wall measured, mm (none within the rays' reach).
+    pub min_mm: Option<f64>,
+    /// Walls thinner than this count as thin, mm.
+    pub thin_below_mm: f64,
+    /// Surface over thin walls, mm².
+    pub thin_area_mm2: f64,
+    /// Surface measured, mm².
+    pub area_mm2: f64,
+}
+
+/// A part's mesh error as `build.json` gives it (`build::fidelity`).
+#[derive(Debug, Clone, Deserialize)]
+pub struct BuiltMeshError {
+    /// 99th percentile over the faces sampled, mm.
+    pub p99_mm: f64,
+    /// Largest, mm.
+    pub max_mm: f64,
 }
 
 /// The part of the build's check read here.

@@ -268,6 +268,20 @@ pub struct PartsSummary {
     pub smallest_gap_mm: Option<f64>,
     /// Per part: name, triangles, volume (mm³) and bounding box size (mm).
     pub parts: Vec<(String, usize, f64, [f64; 3])>,
+    /// Per part, in the order of `parts`: what the build measured of its walls and mesh.
+    pub quality: Vec<PartQuality>,
+}
+
+/// What the build measured of one part's walls and mesh; `None` where a build made before
+/// 2026-12-06 did not measure it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PartQuality {
+    /// Share of the surface over walls thinner than `thin_below_mm`.
+    pub thin_share: Option<f64>,
+    /// The bound, mm.
+    pub thin_below_mm: Option<f64>,
+    /// 99th percentile of the mesh error, mm.
+    pub mesh_error_p99_mm: Option<f64>,
 }
 
 /// The assembly pictures of the build shown in the report, copied beside it as
@@ -323,6 +337,19 @@ fn parts_summary(
             .map(|p| {
                 let size = std::array::from_fn(|i| p.bbox_max_mm[i] - p.bbox_min_mm[i]);
                 (p.name.clone(), p.triangles, p.volume_mm3, size)
+            })
+            .collect(),
+        quality: built
+            .parts
+            .iter()
+            .map(|p| PartQuality {
+                thin_share: p
+                    .walls
+                    .as_ref()
+                    .filter(|w| w.area_mm2 > 0.0)
+                    .map(|w| w.thin_area_mm2 / w.area_mm2),
+                thin_below_mm: p.walls.as_ref().map(|w| w.thin_below_mm),
+                mesh_error_p99_mm: p.mesh_error.as_ref().map(|e| e.p99_mm),
             })
             .collect(),
     };
@@ -761,15 +788,28 @@ fn parts_blocks(s: &Summary, pictures: &[plots::Picture], b: &mut Vec<Block>) {
             "triangles".into(),
             "volume [mm³]".into(),
             "size [mm]".into(),
+            "thin walls".into(),
+            "mesh error, 99 % [mm]".into(),
         ],
         p.parts
             .iter()
-            .map(|(name, tri, vol, size)| {
+            .enumerate()
+            .map(|(i, (name, tri, vol, size))| {
+                let q = p.quality.get(i);
+                let thin = match q.and_then(|q| q.thin_share.zip(q.thin_below_mm)) {
+                    Some((share, below)) => {
+                        format!("{:.1} % of the surface under {below} mm", 100.0 * share)
+                    }
+                    None => "–".into(),
+                };
                 vec![
                     name.clone(),
                     tri.to_string(),
                     format!("{vol:.0}"),
                     format!("{:.0} × {:.0} × {:.0}", size[0], size[1], size[2]),
+                    thin,
+                    q.and_then(|q| q.mesh_error_p99_mm)
+                        .map_or("–".into(), |e| format!("{e:.3}")),
                 ]
             })
             .collect(),
