@@ -15,7 +15,9 @@
 //! - **closure of the printed parts**: at every sample time, the paper's dist(t) (and the
 //!   robust one, when the design holds it) from the contacts the parts keep: lost contacts
 //!   are harmless while the others still close the follower, which is the paper's dynamic
-//!   form closure applied to the parts as built.
+//!   form closure applied to the parts as built;
+//! - **walls**, measured and not judged: each part's wall thickness estimate
+//!   (`geometry::thickness`), with the queries made here.
 //!
 //! Distances come from `parry3d-f64`'s triangle-mesh queries (BVH, inside/outside by
 //! pseudo-normals), independent of the implicit solids the meshes were made from. A coarse

@@ -9,7 +9,13 @@
 //! distance (twisted sweeps, the driver's carve), and the distance along the normal is at
 //! least the distance to the surface, so the figure errs high, never low. A face whose
 //! line meets no surface within [`ERROR_REACH_CELLS`] cells is counted apart: where the
-//! mesher trims slivers (the driver) its surface departs from the solid on purpose.
+//! mesher trims slivers (the driver) its surface departs from the solid on purpose, and
+//! material thinner than a cell may come out of the mesher thicker or not at all.
+//!
+//! The figures are given over every face measured and again over the faces away from
+//! sharp edges ([`SHARP_TURN_DEG`]): marching tetrahedra cut a sharp edge off with facets
+//! about a cell across, an error of a fraction of a cell that no smooth surface has, and
+//! the two tell apart what the cell does on each (docs/build.md, "Mesh error").
 //!
 //! It does not decide the cell, nor judge the figure: the build reports it.
 
@@ -28,14 +34,15 @@ use crate::geometry::sdf::{Sdf, Vec3};
 pub const ERROR_SAMPLES: usize = 4_000;
 /// How far along a face's normal its surface is looked for, in mesher cells: the mesher
 /// puts a vertex on a cell's edge and a face within a cell of the surface it crosses, so a
-/// face farther than two cells from the solid's surface is not the surface's but a trim's.
+/// face farther than two cells from the solid's surface is not a meshing of that surface
+/// (a trim's, or material thinner than a cell that the mesher widened).
 pub const ERROR_REACH_CELLS: f64 = 2.0;
 /// The bisection stops within this of the surface, mm: a hundredth of the 0.1 mm the
 /// issue's resolution is judged by.
 const ERROR_TOL_MM: f64 = 1e-3;
 /// Seed of the sample (any fixed value: the same faces every build of the same mesh).
 const ERROR_SEED: u64 = 14;
-/// A face some face around it (sharing a corner) turns from by more than this sits at a
+/// A face that some face within two rings of it turns from by more than this sits at a
 /// sharp edge of the mesh, degrees. 40°: on a smooth surface meshed at 0.4 mm the faces
 /// around one turn by up to about h/R ≈ 27° (the rims' 0.85 mm apex), while the facets
 /// marching tetrahedra cut along a square edge turn 45° from the sides beside them.
