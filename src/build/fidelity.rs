@@ -86,14 +86,7 @@ pub fn mesh_error(solid: &dyn Sdf, mesh: &Mesh, cell: f64) -> MeshError {
     };
     // Neighbouring faces together: a solid that keeps work per region (the carve's
     // certificates) finds it again.
-    let centre = |i: usize| {
-        let [a, b, c] = mesh.corners(i);
-        Vec3::new(
-            (a[0] + b[0] + c[0]) / 3.0,
-            (a[1] + b[1] + c[1]) / 3.0,
-            (a[2] + b[2] + c[2]) / 3.0,
-        )
-    };
+    let centre = |i: usize| Vec3::from(mesh.face_centre(i));
     faces.sort_by_key(|&i| {
         let c = centre(i);
         ([c.z, c.y, c.x].map(|x| (x / 2.0).floor() as i64), i)

@@ -291,12 +291,19 @@ impl Mesh {
 
     /// Surface area, mm².
     pub fn area(&self) -> f64 {
-        (0..self.triangles.len())
-            .map(|i| {
-                let [a, b, c] = self.corners(i);
-                0.5 * norm(cross(sub(b, a), sub(c, a)))
-            })
-            .sum()
+        (0..self.triangles.len()).map(|i| self.face_area(i)).sum()
+    }
+
+    /// Area of triangle `i`, mm².
+    pub fn face_area(&self, i: usize) -> f64 {
+        let [a, b, c] = self.corners(i);
+        0.5 * norm(cross(sub(b, a), sub(c, a)))
+    }
+
+    /// Centre (centroid) of triangle `i`.
+    pub fn face_centre(&self, i: usize) -> [f64; 3] {
+        let [a, b, c] = self.corners(i);
+        [0, 1, 2].map(|k| (a[k] + b[k] + c[k]) / 3.0)
     }
 
     /// Bounding box of the vertices (all zero for an empty mesh).

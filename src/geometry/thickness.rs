@@ -85,6 +85,7 @@ pub fn wall_thickness(
     reach_mm: f64,
 ) -> WallThickness {
     debug_assert!(thin_below_mm <= reach_mm);
+    let facing = WALL_MAX_ANGLE_DEG.to_radians().cos();
     let tally = (0..mesh.triangles.len())
         .into_par_iter()
         .filter_map(|i| {
@@ -92,18 +93,9 @@ pub fn wall_thickness(
             if n == [0.0; 3] {
                 return None;
             }
-            let [a, b, c] = mesh.corners(i);
-            let centre = [0, 1, 2].map(|k| (a[k] + b[k] + c[k]) / 3.0);
-            let e1 = [0, 1, 2].map(|k| b[k] - a[k]);
-            let e2 = [0, 1, 2].map(|k| c[k] - a[k]);
-            let area = 0.5
-                * ((e1[1] * e2[2] - e1[2] * e2[1]).powi(2)
-                    + (e1[2] * e2[0] - e1[0] * e2[2]).powi(2)
-                    + (e1[0] * e2[1] - e1[1] * e2[0]).powi(2))
-                .sqrt();
+            let centre = mesh.face_centre(i);
             let inward = n.map(|x| -x);
             let origin = [0, 1, 2].map(|k| centre[k] + inward[k] * START_INSIDE_MM);
-            let facing = WALL_MAX_ANGLE_DEG.to_radians().cos();
             let wall = match query.exit_along(origin, inward, reach_mm) {
                 Some((t, out)) => {
                     let out = out as usize;
@@ -117,7 +109,7 @@ pub fn wall_thickness(
                 }
                 None => Wall::Beyond,
             };
-            Some((i, area, wall))
+            Some((i, mesh.face_area(i), wall))
         })
         .fold(Tally::default, |acc, (i, area, wall)| {
             acc.add(i, area, wall, thin_below_mm)
@@ -135,8 +127,7 @@ pub fn wall_thickness(
     WallThickness {
         min_mm: found.then_some(min),
         at: if found {
-            let [a, b, c] = mesh.corners(at);
-            [0, 1, 2].map(|k| (a[k] + b[k] + c[k]) / 3.0)
+            mesh.face_centre(at)
         } else {
             [0.0; 3]
         },
@@ -146,6 +137,16 @@ pub fn wall_thickness(
         edge_faces,
         edge_area_mm2: edge_area,
         reach_mm,
+    }
+}
+
+/// The thinner of two (wall, face) figures, the lower face index among equals, so the
+/// result does not depend on how the faces were shared out.
+fn thinner(a: (f64, usize), b: (f64, usize)) -> (f64, usize) {
+    if b.0 < a.0 || (b.0 == a.0 && b.1 < a.1) {
+        b
+    } else {
+        a
     }
 }
 
@@ -169,8 +170,7 @@ enum Wall {
 /// The faces' figures, summed over a share of them.
 #[derive(Clone, Copy, Debug)]
 struct Tally {
-    /// Thinnest wall so far and its face (the lowest index among equals, so the result
-    /// does not depend on how the faces were shared out).
+    /// Thinnest wall so far and its face ([`thinner`]).
     min: f64,
     at: usize,
     thin_area: f64,
@@ -205,20 +205,14 @@ impl Tally {
                 if w < thin_below {
                     self.thin_area += area;
                 }
-                if w < self.min || (w == self.min && i < self.at) {
-                    (self.min, self.at) = (w, i);
-                }
+                (self.min, self.at) = thinner((self.min, self.at), (w, i));
             }
         }
         self
     }
 
     fn merge(self, o: Tally) -> Tally {
-        let (min, at) = if o.min < self.min || (o.min == self.min && o.at < self.at) {
-            (o.min, o.at)
-        } else {
-            (self.min, self.at)
-        };
+        let (min, at) = thinner((self.min, self.at), (o.min, o.at));
         Tally {
             min,
             at,
