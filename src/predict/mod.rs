@@ -3,7 +3,8 @@
 //! Owns [`predict`] and [`Prediction`]. From a mechanism and the meshes `mpc-rig build`
 //! wrote for it, at every one of n driver angles (default [`DEFAULT_SAMPLES`]) it finds how
 //! far the follower can turn from its design pose either way before the printed parts
-//! touch ([`play`]), then where a quasi-static load leaves it driven forward and in reverse
+//! touch ([`crossings`] for a follower that only turns, [`play`] for one that also
+//! slides), then where a quasi-static load leaves it driven forward and in reverse
 //! ([`law`]). Where the free turn exceeds [`DRIVE_LOST_DEG`] the driver no longer holds the
 //! follower: the instant is reported as `drive_lost`, the paper's dynamic form closure
 //! failing on the parts as printed.
@@ -17,6 +18,7 @@
 //! guessing. It reads no serial port and does not build parts; `cli::simulate` writes its
 //! files.
 
+pub mod crossings;
 pub mod law;
 pub mod output;
 pub mod play;
@@ -587,7 +589,17 @@ pub fn predict(
         vec![(Screw::TURN, FREE_CAP_DEG.to_radians())]
     };
     let started = Instant::now();
-    let lines = free_along(&PartsMotion(&kin), &driver, &follower, n, &motions);
+    // A follower that only turns has its turns found exactly by `crossings`; the tracer
+    // takes the screws of a 1R1T one.
+    let turns = if slides {
+        None
+    } else {
+        crossings::free_turns(&PartsMotion(&kin), &driver, &follower, n, motions[0].1)
+    };
+    let lines = match turns {
+        Some(turns) => vec![turns],
+        None => free_along(&PartsMotion(&kin), &driver, &follower, n, &motions),
+    };
     let seconds = started.elapsed().as_secs_f64();
     let free = &lines[0];
 

@@ -1,7 +1,7 @@
 //! How far the follower can move, at one driver angle, before its mesh touches the driver's.
 //!
 //! Owns [`Solid`] (a part's mesh ready for distance queries, its vertices grouped in
-//! clusters), [`Screw`] (a motion the follower's joint allows: a turn about its axis, R's
+//! clusters, each with the faces it owns), [`Screw`] (a motion the follower's joint allows: a turn about its axis, R's
 //! z axis, a slide along it, or both at once) and [`free_along`], which answers, for every
 //! sample time of a period and each sense of each given screw, the largest motion δ ≤ a
 //! cap from the design pose that leaves the two meshes apart ([`free_turns`] for a turn
@@ -32,6 +32,10 @@
 //!   0.4 mm parts of half-turn-2to1 it skips about half the traced vertices.
 //!
 //! A test holds these against a plain trace of every vertex.
+//!
+//! `predict` uses it for a 1R1T follower's turn, slide and screws. A follower that only
+//! turns (1R) has its free turns found exactly by [`crossings`](super::crossings), which
+//! shares [`Solid`] but not the trace.
 //!
 //! Exact distances are parry3d-f64's point–mesh projections with pseudo-normals (inside or
 //! outside), the same queries the build's check uses. The module does not know the target
@@ -73,7 +77,7 @@ const GRID_MARGIN_MM: f64 = 4.0;
 const FAR_MM: f64 = 1.0;
 /// A vertex that moves less than this per unit of the motion is not traced, mm: one on the
 /// axis does not move under a turn.
-const ON_AXIS_MM: f64 = 1e-6;
+pub(crate) const ON_AXIS_MM: f64 = 1e-6;
 
 /// Error building a [`Solid`].
 #[derive(Debug, thiserror::Error)]
@@ -88,13 +92,22 @@ pub enum SolidError {
     },
 }
 
-/// One group of nearby vertices: a ball around them and their index range.
+/// One group of nearby vertices: a ball around them and their index range, and the
+/// triangles it owns (those whose first corner in the sorted order is one of its
+/// vertices) with a ball around all their corners.
 #[derive(Clone, Debug)]
-struct Cluster {
-    center: Point3<f64>,
-    radius: f64,
-    start: usize,
-    end: usize,
+pub(crate) struct Cluster {
+    pub(crate) center: Point3<f64>,
+    pub(crate) radius: f64,
+    pub(crate) start: usize,
+    pub(crate) end: usize,
+    /// Range of the cluster's triangles in [`Solid::tris`].
+    pub(crate) tri_start: usize,
+    /// See `tri_start`.
+    pub(crate) tri_end: usize,
+    /// Distance from `center` to the farthest vertex or corner of an owned triangle, mm
+    /// (at least `radius`).
+    pub(crate) tri_radius: f64,
 }
 
 /// The directions a vertex's faces look in: the mean of their unit normals (`axis`, unit)
@@ -121,10 +134,18 @@ impl NormalCone {
 /// vertices sorted into clusters.
 pub struct Solid {
     tri: MeshQuery,
-    verts: Vec<Point3<f64>>,
+    pub(crate) verts: Vec<Point3<f64>>,
+    /// The mesh's triangles as indices into `verts`, grouped by the cluster that owns
+    /// them.
+    pub(crate) tris: Vec<[u32; 3]>,
+    /// Per triangle (the order of `tris`), the distance from its cluster's centre to its
+    /// farthest corner, mm.
+    pub(crate) tri_offset: Vec<f32>,
+    /// Per vertex, its distance from its cluster's centre, mm.
+    pub(crate) vert_offset: Vec<f32>,
     /// Per vertex (the order of `verts`), the directions its faces look in.
     cones: Vec<NormalCone>,
-    clusters: Vec<Cluster>,
+    pub(crate) clusters: Vec<Cluster>,
     aabb: Aabb,
     grid: VoxelGrid,
     /// Distance from each voxel centre to the nearest voxel the surface passes through.
@@ -138,7 +159,7 @@ pub struct Solid {
 
 /// Subtracted from a stored centre distance for its rounding to f32, mm: an f32 near
 /// 300 mm is within 2e-5 mm of the f64 it came from.
-const F32_SLACK_MM: f64 = 1e-4;
+pub(crate) const F32_SLACK_MM: f64 = 1e-4;
 /// An entry of [`Solid::exact`] not computed yet (a NaN no distance has).
 const UNKNOWN: u32 = u32::MAX;
 /// Below this coarse bound a point asks its voxel centre's exact distance, mm. 2 mm: the
@@ -183,8 +204,55 @@ impl Solid {
                 radius,
                 start,
                 end,
+                tri_start: 0,
+                tri_end: 0,
+                tri_radius: radius,
             });
             start = end;
+        }
+        // Each triangle, its corners renumbered in the sorted order, goes to the cluster of
+        // its first corner there.
+        let mut rank = vec![0u32; order.len()];
+        for (new, &old) in order.iter().enumerate() {
+            rank[old] = new as u32;
+        }
+        let mut owner_of = vec![0u32; order.len()];
+        for (ci, c) in clusters.iter().enumerate() {
+            owner_of[c.start..c.end].fill(ci as u32);
+        }
+        let mut tris: Vec<[u32; 3]> = mesh
+            .triangles
+            .iter()
+            .map(|t| t.map(|v| rank[v as usize]))
+            .collect();
+        tris.sort_by_key(|t| {
+            (
+                owner_of[*t.iter().min().expect("three corners") as usize],
+                *t,
+            )
+        });
+        let mut tri_offset = Vec::with_capacity(tris.len());
+        let mut at = 0;
+        for (ci, c) in clusters.iter_mut().enumerate() {
+            c.tri_start = at;
+            while at < tris.len()
+                && owner_of[*tris[at].iter().min().expect("three corners") as usize] == ci as u32
+            {
+                let far = tris[at]
+                    .iter()
+                    .map(|&v| (verts[v as usize] - c.center).norm())
+                    .fold(0.0, f64::max);
+                c.tri_radius = c.tri_radius.max(far);
+                tri_offset.push(far as f32);
+                at += 1;
+            }
+            c.tri_end = at;
+        }
+        let mut vert_offset = vec![0f32; verts.len()];
+        for c in &clusters {
+            for v in c.start..c.end {
+                vert_offset[v] = (verts[v] - c.center).norm() as f32;
+            }
         }
         let cones = normal_cones(mesh);
         let cones = order.iter().map(|&i| cones[i]).collect();
@@ -213,6 +281,9 @@ impl Solid {
         Ok(Solid {
             tri,
             verts,
+            tris,
+            tri_offset,
+            vert_offset,
             cones,
             clusters,
             aabb,
@@ -264,6 +335,11 @@ impl Solid {
     /// is farther, at a fraction of the cost.
     pub fn signed_within(&self, p: &Point3<f64>, max_mm: f64) -> Option<f64> {
         self.tri.signed_within([p.x, p.y, p.z], max_mm)
+    }
+
+    /// Voxel centres whose exact distance was computed so far (a cost figure).
+    pub(crate) fn centre_queries(&self) -> u64 {
+        self.centres.load(Ordering::Relaxed)
     }
 
     /// Number of vertices.
@@ -587,7 +663,7 @@ fn sweep(
 /// Smallest search limit, a fraction of the cap (0.5° of the default 10° cap): a free
 /// motion near zero (parts nearly touching) still searches a useful span at the next
 /// sample.
-const SEARCH_FLOOR: f64 = 0.05;
+pub(crate) const SEARCH_FLOOR: f64 = 0.05;
 
 /// One (side, sense) test at one time.
 struct AtTime<'a> {
@@ -740,13 +816,13 @@ fn trace(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::geometry::primitive_meshes::cuboid;
 
     /// A fixed driver (identity pose) and a follower turning about z; speeds and reach
     /// from the boxes' sizes.
-    struct Still;
+    pub(crate) struct Still;
 
     impl PartMotion for Still {
         fn follower(&self, _: f64) -> Isometry3<f64> {
@@ -892,7 +968,7 @@ mod tests {
     /// arm along x ends in a ball (r 1.5). Each driver ball passes over the arm's end once
     /// per turn, its lowest point 4.5 mm above it, so they come within about 0.6 mm
     /// without touching.
-    struct Swing;
+    pub(crate) struct Swing;
 
     impl PartMotion for Swing {
         fn follower(&self, t: f64) -> Isometry3<f64> {
@@ -953,7 +1029,7 @@ mod tests {
         assert!(!cones[i].trails(&out.cross(&Vector3::z()).normalize()));
     }
 
-    fn joined(parts: &[Mesh]) -> Mesh {
+    pub(crate) fn joined(parts: &[Mesh]) -> Mesh {
         let mut out = Mesh::default();
         for m in parts {
             let off = out.vertices.len() as u32;

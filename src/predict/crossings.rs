@@ -1,0 +1,1195 @@
+//! The free turns of a 1R follower, from where each vertex's circle crosses the other
+//! part's faces.
+//!
+//! Owns [`free_turns`], the 1R counterpart of [`play::free_along`](super::play::free_along)
+//! that `predict` uses when the follower only turns. It answers the same question (how far
+//! the follower can turn from its design pose either way before a vertex of one part meets a
+//! face of the other, capped) with the same tests (every follower vertex against the
+//! driver's faces and every driver vertex against the follower's), but exactly and in bulk
+//! rather than by sphere-tracing each vertex with mesh queries:
+//!
+//! - Everything is seen from the follower's frame F, whose z axis is the joint axis: the
+//!   follower stands still and the driver is placed by the design motion at each time.
+//!   Turning the follower by δ turns each of its vertices by δ about z, and each driver
+//!   vertex by −δ.
+//! - A vertex turned about z stays on one circle: at its distance ρ from the axis and its
+//!   height z. So the only faces it can meet are those whose footprint in (ρ, z) holds its
+//!   own. The follower's vertices and faces are sorted once into bins of (ρ, z)
+//!   ([`BIN_MM`]), each bin's entries ordered by polar angle, so the candidates of a driver
+//!   face or vertex are a binary search away.
+//! - Where a circle crosses a face's plane is a quadratic in tan(β/2); a root within the
+//!   search limit that lies in the triangle is a crossing. The crossing is entering or
+//!   leaving by the face's outward normal. A vertex's first crossing each way that enters
+//!   is its free turn that way; no step size, no distance tolerance.
+//! - A vertex whose first crossing either way leaves the other part may be inside it: an
+//!   exact distance query decides, and a vertex inside is not counted (it would lock the
+//!   follower where the meshes already overlap) but reported as overlap, as the tracer does.
+//! - Only the driver's clusters near the follower are looked at, by the same carried lower
+//!   bounds the tracer uses (`Solid`'s coarse grid, the cluster's last distance and the
+//!   parts' speed bound), and within them only vertices and faces whose own bound leaves
+//!   them within reach of the search limit.
+//!
+//! Edge-against-edge contacts are not tested, as in the tracer.
+//!
+//! On the demo's half-turn-2to1 parts (1 336 616 + 715 366 vertices, 1 440 driver angles)
+//! the turns take 6.3 s where the tracer took 22.7 s (`cargo bench --bench simulate`;
+//! docs/simulate.md, "Exact free turns").
+
+use std::f64::consts::{PI, TAU};
+
+use nalgebra::{Isometry3, Point3, Vector3};
+use rayon::prelude::*;
+
+use super::play::{FreeTurns, PartMotion, Solid, F32_SLACK_MM, ON_AXIS_MM};
+
+/// Edge of the (ρ, z) bins the follower's vertices and faces are sorted into, mm. 0.5 mm:
+/// about one edge of the default 0.4 mm meshes, so a face's footprint spans a few bins and
+/// a bin holds a few vertices of each surface the circle crosses.
+pub const BIN_MM: f64 = 0.5;
+/// A follower whose pose moves its z axis off R's by more than this (mm of the origin, and
+/// the sine of the tilt) does not turn about that axis, and is left to the tracer.
+const AXIS_TOLERANCE: f64 = 1e-9;
+/// Slack of the inside test, relative to the squared edge: a circle through an edge
+/// shared by two faces crosses both, so none slips between them.
+const EDGE_SLACK: f64 = 1e-9;
+/// Two crossings of one vertex nearer than this in tan(β/2) are one, and count as entering
+/// if either does (a circle grazing a ridge touches it).
+const TIE: f64 = 1e-12;
+/// The search limit at a time is the last time's larger free turn times this, plus
+/// [`FLOOR_RAD`]. A pass costs about in proportion to its limit (the reach it looks within),
+/// and one that finds a free turn at its limit is run again wider. 1.25: on the demo's
+/// parts at 1 440 times the larger free turn grows at most 1.21 times from one time to the
+/// next, so no pass there is run twice.
+const GROWTH: f64 = 1.25;
+/// See [`GROWTH`]: 0.1°, so parts that touch at one time still search a useful turn at the
+/// next, rad.
+const FLOOR_RAD: f64 = 0.1 * PI / 180.0;
+/// A pass that finds a free turn at its limit is run again with the limit times this (up
+/// to the cap): a free turn that jumps (a contact lost) takes a few passes, not one at the
+/// whole cap each time.
+const RETRY_GROWTH: f64 = 4.0;
+/// Runs of consecutive times per thread: each run starts without carried bounds, so a few
+/// per thread balance the load at little cost.
+const RUNS_PER_THREAD: usize = 4;
+
+/// The free turns of the follower at `n` times per period, each capped at `cap` rad, or
+/// `None` when the follower's design motion is not a turn about R's z axis (the 1R case
+/// only; use the tracer).
+pub fn free_turns(
+    motion: &dyn PartMotion,
+    driver: &Solid,
+    follower: &Solid,
+    n: usize,
+    cap: f64,
+) -> Option<FreeTurns> {
+    let turns_about_z = (0..n).all(|i| {
+        let f = motion.follower(i as f64 / n as f64);
+        (f.rotation * Vector3::z() - Vector3::z()).norm() < AXIS_TOLERANCE
+            && f.translation.vector.xy().norm() < AXIS_TOLERANCE
+    });
+    if !turns_about_z {
+        return None;
+    }
+    let bins = Bins::new(follower);
+    let centres_before = driver.centre_queries() + follower.centre_queries();
+    let runs = (rayon::current_num_threads() * RUNS_PER_THREAD).clamp(1, n.max(1));
+    let per_run = n.div_ceil(runs);
+    // Each run's scratch is dropped as it ends; only its figures are kept.
+    let results: Vec<RunFigures> = (0..runs)
+        .into_par_iter()
+        .map(|k| {
+            let mut run = Run::new(motion, driver, follower, &bins, cap);
+            for i in (k * per_run)..((k + 1) * per_run).min(n) {
+                run.sample(i as f64 / n as f64);
+            }
+            (run.free, run.queries, run.overlap)
+        })
+        .collect();
+    let mut out = FreeTurns {
+        plus: Vec::with_capacity(n),
+        minus: Vec::with_capacity(n),
+        overlap_mm: 0.0,
+        overlap_t: 0.0,
+        queries: driver.centre_queries() + follower.centre_queries() - centres_before,
+    };
+    for (free, queries, overlap) in results {
+        out.plus.extend(free.iter().map(|f| f[0]));
+        out.minus.extend(free.iter().map(|f| f[1]));
+        out.queries += queries;
+        if overlap.0 > out.overlap_mm {
+            (out.overlap_mm, out.overlap_t) = overlap;
+        }
+    }
+    Some(out)
+}
+
+/// What a run leaves: the free turns per time, its queries, its deepest overlap and when.
+type RunFigures = (Vec<[f64; 2]>, u64, (f64, f64));
+
+/// A triangle's footprint about the z axis: the ranges of its points' distance from the
+/// axis, height and polar angle (`lo` in [−π, π), the angle growing `span` from it; the
+/// whole circle for a triangle about the axis).
+#[derive(Clone, Copy, Debug)]
+struct Footprint {
+    rho_lo: f64,
+    rho_hi: f64,
+    z_lo: f64,
+    z_hi: f64,
+    lo: f64,
+    span: f64,
+}
+
+impl Footprint {
+    fn of(c: &[Point3<f64>; 3]) -> Footprint {
+        Footprint::with(
+            c,
+            c.map(|p| p.coords.xy().norm()),
+            c.map(|p| p.y.atan2(p.x)),
+        )
+    }
+
+    /// The footprint of the triangle `c` whose corners' distances from the axis and polar
+    /// angles are `rho` and `theta`.
+    fn with(c: &[Point3<f64>; 3], rho: [f64; 3], theta: [f64; 3]) -> Footprint {
+        let rho_hi = rho[0].max(rho[1]).max(rho[2]);
+        let rho_lo = nearest_to_axis(c, rho);
+        let z_lo = c[0].z.min(c[1].z).min(c[2].z);
+        let z_hi = c[0].z.max(c[1].z).max(c[2].z);
+        let (lo, span) = if rho_lo <= ON_AXIS_MM {
+            (-PI, TAU)
+        } else {
+            // A convex set that leaves the origin out is seen from it within a half turn,
+            // and its extreme directions are corners.
+            let a0 = theta[0];
+            let rel = theta.map(|a| wrap(a - a0));
+            let lo = rel.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = rel.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            (wrap(a0 + lo), hi - lo)
+        };
+        Footprint {
+            rho_lo,
+            rho_hi,
+            z_lo,
+            z_hi,
+            lo,
+            span,
+        }
+    }
+
+    fn holds(&self, rho: f64, z: f64) -> bool {
+        rho >= self.rho_lo && rho <= self.rho_hi && z >= self.z_lo && z <= self.z_hi
+    }
+}
+
+/// The angle `a` taken into [−π, π). Angles here are sums and differences of a few polar
+/// angles and turns within a half turn, so a few steps of a full turn do; a remainder
+/// would cost more than the rest of a face's test.
+fn wrap(a: f64) -> f64 {
+    if !a.is_finite() {
+        return a;
+    }
+    if a.abs() > 4.0 * TAU {
+        return (a + PI).rem_euclid(TAU) - PI;
+    }
+    let mut w = a;
+    while w >= PI {
+        w -= TAU;
+    }
+    while w < -PI {
+        w += TAU;
+    }
+    w
+}
+
+/// A lower bound on the distance from the z axis to the triangle `c`, whose corners are
+/// `rho` from it. Where the nearest corner is farther than the longest edge (in the xy
+/// plane), the axis is outside the triangle's shadow and an edge dips towards it at most
+/// as a chord of that length does, so √(ρ² − e²/4) bounds it at the cost of a square root;
+/// otherwise the exact distance.
+fn nearest_to_axis(c: &[Point3<f64>; 3], rho: [f64; 3]) -> f64 {
+    let near = rho[0].min(rho[1]).min(rho[2]);
+    let edge2 = (0..3)
+        .map(|k| (c[(k + 1) % 3].xy() - c[k].xy()).norm_squared())
+        .fold(0.0, f64::max);
+    if near * near > edge2 {
+        (near * near - edge2 / 4.0).sqrt()
+    } else {
+        distance_to_origin_2d(c)
+    }
+}
+
+/// Distance from the z axis to the triangle: from the origin to its projection on the
+/// xy plane (0 when the projection holds the origin).
+fn distance_to_origin_2d(c: &[Point3<f64>; 3]) -> f64 {
+    let p = c.map(|v| [v.x, v.y]);
+    let cross = |a: [f64; 2], b: [f64; 2]| a[0] * b[1] - a[1] * b[0];
+    let s = [0, 1, 2].map(|k| cross(p[k], p[(k + 1) % 3]));
+    if (s[0] >= 0.0 && s[1] >= 0.0 && s[2] >= 0.0) || (s[0] <= 0.0 && s[1] <= 0.0 && s[2] <= 0.0) {
+        return 0.0;
+    }
+    (0..3)
+        .map(|k| {
+            let (a, b) = (p[k], p[(k + 1) % 3]);
+            let e = [b[0] - a[0], b[1] - a[1]];
+            let len2 = e[0] * e[0] + e[1] * e[1];
+            let s = if len2 > 0.0 {
+                (-(a[0] * e[0] + a[1] * e[1]) / len2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            {
+                let (x, y) = (a[0] + s * e[0], a[1] + s * e[1]);
+                (x * x + y * y).sqrt()
+            }
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// The ranges of `keys` (sorted, in [−π, π), each an f32 rounding of an angle) that hold
+/// every angle on the arc from `a` to `b` (b ≥ a) round the circle: one or two runs,
+/// widened by [`ANGLE_SLACK`] for the rounding. A run is found by a binary search for its
+/// start and a walk to its end, which is near: the keys are compact so that the search
+/// touches few cache lines, the cost that dominated the bins' lookups.
+fn on_arc(keys: &[f32], a: f64, b: f64) -> [std::ops::Range<usize>; 2] {
+    if b - a >= TAU - 2.0 * ANGLE_SLACK {
+        return [0..keys.len(), 0..0];
+    }
+    let start = wrap(a) - ANGLE_SLACK;
+    let end = start + (b - a) + 2.0 * ANGLE_SLACK;
+    let run = |lo: f64, hi: f64| {
+        let (lo, hi) = (lo as f32, hi as f32);
+        let i = keys.partition_point(|&k| k < lo);
+        let mut j = i;
+        while j < keys.len() && keys[j] <= hi {
+            j += 1;
+        }
+        i..j
+    };
+    if end < PI {
+        [run(start, end), 0..0]
+    } else {
+        [run(start, PI), run(-PI, end - TAU)]
+    }
+}
+
+/// Widening of a window of polar angles for their rounding to f32 in the bins' keys, rad:
+/// an f32 near π is within 2.4e-7 of the angle it rounds.
+const ANGLE_SLACK: f64 = 1e-6;
+
+/// A follower vertex in its bin.
+#[derive(Clone, Copy, Debug)]
+struct VertexEntry {
+    theta: f64,
+    rho: f64,
+    z: f64,
+    id: u32,
+}
+
+/// A follower face in a bin its footprint meets.
+#[derive(Clone, Copy, Debug)]
+struct FaceEntry {
+    lo: f64,
+    /// The face's footprint in (ρ, z), widened to f32 outwards: kept with the entry so that
+    /// the faces a vertex is tested against are read in order, not fetched one by one.
+    rho_lo: f32,
+    rho_hi: f32,
+    z_lo: f32,
+    z_hi: f32,
+    id: u32,
+}
+
+impl FaceEntry {
+    fn new(f: &Footprint, id: usize) -> FaceEntry {
+        let down = |x: f64| (x - F32_SLACK_MM) as f32;
+        let up = |x: f64| (x + F32_SLACK_MM) as f32;
+        FaceEntry {
+            lo: f.lo,
+            rho_lo: down(f.rho_lo),
+            rho_hi: up(f.rho_hi),
+            z_lo: down(f.z_lo),
+            z_hi: up(f.z_hi),
+            id: id as u32,
+        }
+    }
+
+    /// Whether the footprint holds a point at `rho` and `z` (perhaps a hair beyond it).
+    fn holds(&self, rho: f32, z: f32) -> bool {
+        rho >= self.rho_lo && rho <= self.rho_hi && z >= self.z_lo && z <= self.z_hi
+    }
+}
+
+/// A triangle's plane: its unit outward normal and offset (n · x = d on the plane).
+#[derive(Clone, Copy, Debug)]
+struct Plane {
+    n: Vector3<f64>,
+    d: f64,
+}
+
+impl Plane {
+    fn of(c: &[Point3<f64>; 3]) -> Option<Plane> {
+        let n = (c[1] - c[0]).cross(&(c[2] - c[0])).try_normalize(0.0)?;
+        Some(Plane {
+            n,
+            d: n.dot(&c[0].coords),
+        })
+    }
+}
+
+/// The follower's vertices and faces sorted into (ρ, z) bins of [`BIN_MM`], each bin's by
+/// polar angle.
+struct Bins {
+    z0: f64,
+    n_rho: usize,
+    n_z: usize,
+    vert_start: Vec<u32>,
+    verts: Vec<VertexEntry>,
+    /// The vertices' polar angles, in the order of `verts`.
+    vert_keys: Vec<f32>,
+    face_start: Vec<u32>,
+    faces: Vec<FaceEntry>,
+    /// The faces' least polar angles, in the order of `faces`.
+    face_keys: Vec<f32>,
+    /// Per bin, the widest angular span of its faces.
+    face_span: Vec<f64>,
+    /// Per follower face (the order of `Solid::tris`), its plane.
+    planes: Vec<Option<Plane>>,
+}
+
+impl Bins {
+    fn new(follower: &Solid) -> Bins {
+        let corners = |t: &[u32; 3]| t.map(|v| follower.verts[v as usize]);
+        let footprints: Vec<Footprint> = follower
+            .tris
+            .par_iter()
+            .map(|t| Footprint::of(&corners(t)))
+            .collect();
+        let planes: Vec<Option<Plane>> = follower
+            .tris
+            .par_iter()
+            .map(|t| Plane::of(&corners(t)))
+            .collect();
+        let rho_max = footprints.iter().map(|f| f.rho_hi).fold(0.0, f64::max);
+        let z_lo = footprints
+            .iter()
+            .map(|f| f.z_lo)
+            .fold(f64::INFINITY, f64::min);
+        let z_hi = footprints
+            .iter()
+            .map(|f| f.z_hi)
+            .fold(f64::NEG_INFINITY, f64::max);
+        let z0 = if z_lo.is_finite() { z_lo } else { 0.0 };
+        let mut bins = Bins {
+            z0,
+            n_rho: (rho_max / BIN_MM).floor() as usize + 1,
+            n_z: ((z_hi - z0).max(0.0) / BIN_MM).floor() as usize + 1,
+            vert_start: Vec::new(),
+            verts: Vec::new(),
+            vert_keys: Vec::new(),
+            face_start: Vec::new(),
+            faces: Vec::new(),
+            face_keys: Vec::new(),
+            face_span: Vec::new(),
+            planes,
+        };
+        let mut verts: Vec<(usize, VertexEntry)> = follower
+            .verts
+            .iter()
+            .enumerate()
+            .filter_map(|(id, p)| {
+                let rho = p.coords.xy().norm();
+                let bin = bins.bin(rho, p.z)?;
+                Some((
+                    bin,
+                    VertexEntry {
+                        theta: wrap(p.y.atan2(p.x)),
+                        rho,
+                        z: p.z,
+                        id: id as u32,
+                    },
+                ))
+            })
+            .collect();
+        verts.par_sort_unstable_by(|a, b| {
+            (a.0, a.1.theta)
+                .partial_cmp(&(b.0, b.1.theta))
+                .expect("finite")
+        });
+        bins.vert_start = starts(verts.iter().map(|v| v.0), bins.len());
+        bins.verts = verts.into_iter().map(|v| v.1).collect();
+        bins.vert_keys = bins.verts.iter().map(|v| v.theta as f32).collect();
+        let mut faces: Vec<(usize, FaceEntry)> = Vec::new();
+        for (id, f) in footprints.iter().enumerate() {
+            bins.for_bins(f, |bin| faces.push((bin, FaceEntry::new(f, id))));
+        }
+        faces.par_sort_unstable_by(|a, b| {
+            (a.0, a.1.lo).partial_cmp(&(b.0, b.1.lo)).expect("finite")
+        });
+        bins.face_start = starts(faces.iter().map(|f| f.0), bins.len());
+        let mut span = vec![0.0f64; bins.len()];
+        for (bin, f) in &faces {
+            span[*bin] = span[*bin].max(footprints[f.id as usize].span);
+        }
+        bins.face_span = span;
+        bins.faces = faces.into_iter().map(|f| f.1).collect();
+        bins.face_keys = bins.faces.iter().map(|f| f.lo as f32).collect();
+        bins
+    }
+
+    fn len(&self) -> usize {
+        self.n_rho * self.n_z
+    }
+
+    /// The bin of a point at distance `rho` from the axis and height `z`, if any.
+    fn bin(&self, rho: f64, z: f64) -> Option<usize> {
+        let (r, h) = (rho / BIN_MM, (z - self.z0) / BIN_MM);
+        // Both are at least 0 here, where truncation is the floor.
+        if !(r >= 0.0 && h >= 0.0) || r as usize >= self.n_rho || h as usize >= self.n_z {
+            return None;
+        }
+        Some(r as usize * self.n_z + h as usize)
+    }
+
+    /// Calls `f` with every bin the footprint meets.
+    fn for_bins(&self, f: &Footprint, mut each: impl FnMut(usize)) {
+        // Clamped at 0 first, where truncation is the floor.
+        let cell = |x: f64, n: usize| ((x / BIN_MM).max(0.0) as usize).min(n);
+        let (r0, r1) = (cell(f.rho_lo, self.n_rho), cell(f.rho_hi, self.n_rho - 1));
+        if f.z_hi < self.z0 {
+            return;
+        }
+        let (h0, h1) = (
+            cell(f.z_lo - self.z0, self.n_z),
+            cell(f.z_hi - self.z0, self.n_z - 1),
+        );
+        for r in r0..=r1.min(self.n_rho - 1) {
+            for h in h0..=h1.min(self.n_z - 1) {
+                each(r * self.n_z + h);
+            }
+        }
+    }
+
+    /// The vertices of `bin` whose polar angle lies on the arc from `a` to `b`.
+    fn verts_on_arc(&self, bin: usize, a: f64, b: f64) -> impl Iterator<Item = &VertexEntry> {
+        let (s, e) = (
+            self.vert_start[bin] as usize,
+            self.vert_start[bin + 1] as usize,
+        );
+        on_arc(&self.vert_keys[s..e], a, b)
+            .into_iter()
+            .flat_map(move |r| &self.verts[s + r.start..s + r.end])
+    }
+
+    /// The faces of `bin` whose least polar angle lies on the arc from `a` to `b`.
+    fn faces_on_arc(&self, bin: usize, a: f64, b: f64) -> impl Iterator<Item = &FaceEntry> {
+        let (s, e) = (
+            self.face_start[bin] as usize,
+            self.face_start[bin + 1] as usize,
+        );
+        on_arc(&self.face_keys[s..e], a, b)
+            .into_iter()
+            .flat_map(move |r| &self.faces[s + r.start..s + r.end])
+    }
+}
+
+/// Start offsets of each bin's run in a list sorted by bin (one more than bins).
+fn starts(sorted_bins: impl Iterator<Item = usize>, bins: usize) -> Vec<u32> {
+    let mut count = vec![0u32; bins + 1];
+    for b in sorted_bins {
+        count[b + 1] += 1;
+    }
+    for i in 0..bins {
+        count[i + 1] += count[i];
+    }
+    count
+}
+
+/// The search limit of one pass: turns β with |β| ≤ `limit` rad.
+#[derive(Clone, Copy, Debug)]
+struct Limit {
+    limit: f64,
+    /// 1 − cos(limit) and sin(limit): how far a plane's value can change along the arc.
+    one_minus_cos: f64,
+    sin: f64,
+    /// tan(limit / 2): the largest root taken.
+    tau: f64,
+}
+
+impl Limit {
+    fn new(limit: f64) -> Limit {
+        Limit {
+            limit,
+            one_minus_cos: 1.0 - limit.cos(),
+            sin: limit.sin(),
+            tau: (limit / 2.0).tan(),
+        }
+    }
+}
+
+/// Where the circle of `p` turned by β about z (|β| within the limit) crosses the triangle
+/// `c` on `plane`: calls `hit` with tan(β/2) and whether the point enters the face's part
+/// there as β grows.
+fn crossings(
+    p: &Point3<f64>,
+    plane: &Plane,
+    c: &[Point3<f64>; 3],
+    lim: &Limit,
+    mut hit: impl FnMut(f64, bool),
+) {
+    let n = &plane.n;
+    // n · p(β) − d = u cos β + v sin β + w.
+    let u = n.x * p.x + n.y * p.y;
+    let v = n.y * p.x - n.x * p.y;
+    let w = n.z * p.z - plane.d;
+    let at_zero = u + w;
+    if at_zero.abs() > u.abs() * lim.one_minus_cos + v.abs() * lim.sin + 1e-12 {
+        return;
+    }
+    // With τ = tan(β/2): (w − u) τ² + 2 v τ + (u + w) = 0.
+    let (a, b, cc) = (w - u, 2.0 * v, at_zero);
+    let mut roots = [f64::NAN; 2];
+    if a.abs() <= 1e-14 * (b.abs() + cc.abs()) {
+        if b != 0.0 {
+            roots[0] = -cc / b;
+        }
+    } else {
+        let disc = b * b - 4.0 * a * cc;
+        if disc < 0.0 {
+            return;
+        }
+        let q = -0.5 * (b + b.signum() * disc.sqrt());
+        roots[0] = q / a;
+        if q != 0.0 {
+            roots[1] = cc / q;
+        }
+    }
+    for tau in roots {
+        // NaN: no such root.
+        if tau.is_nan() || tau.abs() > lim.tau {
+            continue;
+        }
+        let den = 1.0 + tau * tau;
+        let (cos, sin) = ((1.0 - tau * tau) / den, 2.0 * tau / den);
+        let q = Point3::new(p.x * cos - p.y * sin, p.x * sin + p.y * cos, p.z);
+        if inside(c, n, &q) {
+            // The point's velocity as β grows is z × q.
+            hit(tau, n.y * q.x - n.x * q.y < 0.0);
+        }
+    }
+}
+
+/// Whether `q`, on the triangle's plane, lies in the triangle (edges included).
+fn inside(c: &[Point3<f64>; 3], n: &Vector3<f64>, q: &Point3<f64>) -> bool {
+    (0..3).all(|k| {
+        let e = c[(k + 1) % 3] - c[k];
+        e.cross(&(q - c[k])).dot(n) >= -EDGE_SLACK * e.norm_squared()
+    })
+}
+
+/// A vertex's first crossings each way along its circle, in |tan(β/2)|: index 0 as β grows,
+/// 1 as it falls.
+#[derive(Clone, Copy, Debug)]
+struct Firsts {
+    first: [f64; 2],
+    first_enters: [bool; 2],
+    enter: [f64; 2],
+}
+
+impl Firsts {
+    const NONE: Firsts = Firsts {
+        first: [f64::INFINITY; 2],
+        first_enters: [true; 2],
+        enter: [f64::INFINITY; 2],
+    };
+
+    fn add(&mut self, tau: f64, enters_growing: bool) {
+        let mut side = |k: usize, mag: f64, enters: bool| {
+            if mag < self.first[k] - TIE {
+                self.first[k] = mag;
+                self.first_enters[k] = enters;
+            } else if mag <= self.first[k] + TIE {
+                self.first_enters[k] |= enters;
+            }
+            if enters && mag < self.enter[k] {
+                self.enter[k] = mag;
+            }
+        };
+        if tau >= 0.0 {
+            side(0, tau, enters_growing);
+        }
+        if tau <= 0.0 {
+            side(1, -tau, !enters_growing);
+        }
+    }
+
+    /// The first crossing one way leaves the other part: the vertex may be inside it.
+    fn maybe_inside(&self) -> bool {
+        (0..2).any(|k| !self.first_enters[k] && self.first[k].is_finite())
+    }
+
+    /// The free turn each way, rad (π when nothing is entered).
+    fn free(&self) -> [f64; 2] {
+        self.enter.map(|t| 2.0 * t.atan())
+    }
+}
+
+/// A driver vertex placed in F: where, its distance from the axis and its polar angle.
+#[derive(Clone, Copy, Debug)]
+struct Placed {
+    p: Point3<f64>,
+    rho: f64,
+    theta: f64,
+}
+
+/// One run of consecutive times, with what it carries from one to the next.
+struct Run<'a> {
+    motion: &'a dyn PartMotion,
+    driver: &'a Solid,
+    follower: &'a Solid,
+    bins: &'a Bins,
+    cap: f64,
+    /// Per driver cluster, bounds on its points' speed seen from the follower and on how
+    /// far they move per radian of turn.
+    speed: Vec<f64>,
+    reach: Vec<f64>,
+    /// Per driver cluster, its last distance to the follower and when.
+    last: Vec<(f64, f64)>,
+    /// Per follower vertex, the pass that last met it and its slot in `firsts`.
+    seen: Vec<(u32, u32)>,
+    /// The follower vertices met in this pass and their crossings.
+    firsts: Vec<(u32, Firsts)>,
+    /// Per driver vertex, the pass that last placed it and its slot in `placed`.
+    placed_at: Vec<(u32, u32)>,
+    /// The driver vertices placed in this pass.
+    placed: Vec<Placed>,
+    pass: u32,
+    /// Free turns of the follower per time, [positive sense, negative sense], rad.
+    free: Vec<[f64; 2]>,
+    queries: u64,
+    overlap: (f64, f64),
+}
+
+impl<'a> Run<'a> {
+    fn new(
+        motion: &'a dyn PartMotion,
+        driver: &'a Solid,
+        follower: &'a Solid,
+        bins: &'a Bins,
+        cap: f64,
+    ) -> Run<'a> {
+        let speed = driver
+            .clusters
+            .iter()
+            .map(|c| motion.driver_speed(&c.center))
+            .collect();
+        let reach = driver
+            .clusters
+            .iter()
+            .map(|c| c.tri_radius + motion.driver_reach(&c.center))
+            .collect();
+        Run {
+            motion,
+            driver,
+            follower,
+            bins,
+            cap,
+            speed,
+            reach,
+            last: vec![(f64::NEG_INFINITY, 0.0); driver.clusters.len()],
+            seen: vec![(0, 0); follower.verts.len()],
+            firsts: Vec::new(),
+            placed_at: vec![(0, 0); driver.verts.len()],
+            placed: Vec::new(),
+            pass: 0,
+            free: Vec::new(),
+            queries: 0,
+            overlap: (0.0, 0.0),
+        }
+    }
+
+    /// The free turns at time `t`: within twice the last ones first, the whole cap when
+    /// either reaches that.
+    fn sample(&mut self, t: f64) {
+        let to_f = self.motion.follower(t).inverse() * self.motion.driver(t);
+        let mut limit = match self.free.last() {
+            None => self.cap,
+            Some(f) => (GROWTH * f[0].max(f[1]) + FLOOR_RAD).min(self.cap),
+        };
+        loop {
+            let free = self.pass_at(t, &to_f, limit);
+            if (free[0] < limit && free[1] < limit) || limit >= self.cap {
+                self.free.push(free);
+                return;
+            }
+            limit = (limit * RETRY_GROWTH).min(self.cap);
+        }
+    }
+
+    /// One pass at time `t` (driver → F by `to_f`) within `limit` rad: the free turns,
+    /// each at most `limit`.
+    fn pass_at(&mut self, t: f64, to_f: &Isometry3<f64>, limit: f64) -> [f64; 2] {
+        let lim = Limit::new(limit);
+        self.pass += 1;
+        self.firsts.clear();
+        self.placed.clear();
+        let mut best = [limit; 2];
+        let driver = self.driver;
+        for (ci, c) in driver.clusters.iter().enumerate() {
+            let (d_last, t_last) = self.last[ci];
+            let lower = d_last - self.speed[ci] * (t - t_last) - c.tri_radius;
+            if lower > self.reach[ci] * limit {
+                continue;
+            }
+
+            let w = to_f * c.center;
+            let lever = w.coords.xy().norm() + c.tri_radius;
+            let within = c.tri_radius + lever * limit;
+            let mut d = self.follower.lower_bound(&w);
+            if d > within {
+                self.last[ci] = (d, t);
+                continue;
+            }
+            self.queries += 1;
+
+            match self.follower.signed_within(&w, within) {
+                Some(exact) => d = exact.max(0.0),
+                None => {
+                    self.last[ci] = (within, t);
+                    continue;
+                }
+            }
+            self.last[ci] = (d, t);
+            // Each vertex and face: its distance to the follower is at least the centre's
+            // less its offset from the centre, and a turn moves it at most `lever` per rad.
+            let near = |offset: f32| d - f64::from(offset) - F32_SLACK_MM <= lever * limit;
+            for vi in c.start..c.end {
+                if near(driver.vert_offset[vi]) {
+                    let p = self.place(vi, to_f);
+                    self.driver_vertex(&p, &lim, t, &mut best);
+                }
+            }
+            for ti in c.tri_start..c.tri_end {
+                if near(driver.tri_offset[ti]) {
+                    let corners = driver.tris[ti].map(|v| self.place(v as usize, to_f));
+                    self.driver_face(&corners, &lim);
+                }
+            }
+        }
+        for k in 0..self.firsts.len() {
+            let (id, firsts) = self.firsts[k];
+            let id = id as usize;
+            let (driver, p) = (self.driver, self.follower.verts[id]);
+            let inside = || driver.signed(&to_f.inverse_transform_point(&p));
+            // A follower vertex turns with the follower.
+            if let Some(free) = self.allowed(&firsts, inside, t) {
+                best[0] = best[0].min(free[0]);
+                best[1] = best[1].min(free[1]);
+            }
+        }
+        best
+    }
+
+    /// Driver vertex `vi` placed in F by `to_f`, once per pass.
+    fn place(&mut self, vi: usize, to_f: &Isometry3<f64>) -> Placed {
+        let slot = &mut self.placed_at[vi];
+        if slot.0 == self.pass {
+            return self.placed[slot.1 as usize];
+        }
+        let p = to_f * self.driver.verts[vi];
+        let placed = Placed {
+            p,
+            rho: p.coords.xy().norm(),
+            theta: p.y.atan2(p.x),
+        };
+        *slot = (self.pass, self.placed.len() as u32);
+        self.placed.push(placed);
+        placed
+    }
+
+    /// The free turns a vertex's crossings allow it as its own turn grows and as it falls,
+    /// or `None` when its first crossing one way leaves the other part and its exact
+    /// distance to that part (`signed`) finds it inside: such a vertex does not count, and
+    /// the run notes how deep it is.
+    fn allowed(
+        &mut self,
+        firsts: &Firsts,
+        signed: impl FnOnce() -> f64,
+        t: f64,
+    ) -> Option<[f64; 2]> {
+        if firsts.maybe_inside() {
+            self.queries += 1;
+            let s = signed();
+            if s < 0.0 {
+                if -s > self.overlap.0 {
+                    self.overlap = (-s, t);
+                }
+                return None;
+            }
+        }
+        Some(firsts.free())
+    }
+
+    /// A driver vertex placed in F against the follower's faces.
+    fn driver_vertex(&mut self, placed: &Placed, lim: &Limit, t: f64, best: &mut [f64; 2]) {
+        let Placed { p, rho, theta } = placed;
+        let (p, rho, theta) = (p, *rho, *theta);
+        if rho < ON_AXIS_MM {
+            return;
+        }
+        let Some(bin) = self.bins.bin(rho, p.z) else {
+            return;
+        };
+        let bins = self.bins;
+        let mut firsts = Firsts::NONE;
+        let span = bins.face_span[bin];
+        let (rho32, z32) = (rho as f32, p.z as f32);
+        for e in bins.faces_on_arc(bin, theta - lim.limit - span, theta + lim.limit) {
+            if !e.holds(rho32, z32) {
+                continue;
+            }
+            let id = e.id as usize;
+            let Some(plane) = &bins.planes[id] else {
+                continue;
+            };
+            let c = self.follower.tris[id].map(|v| self.follower.verts[v as usize]);
+            crossings(p, plane, &c, lim, |tau, up| firsts.add(tau, up));
+        }
+        let follower = self.follower;
+        // The follower turning by +δ turns a driver vertex, seen from it, by −δ.
+        if let Some(free) = self.allowed(&firsts, || follower.signed(p), t) {
+            best[0] = best[0].min(free[1]);
+            best[1] = best[1].min(free[0]);
+        }
+    }
+
+    /// A driver face with corners placed in F against the follower's vertices.
+    fn driver_face(&mut self, corners: &[Placed; 3], lim: &Limit) {
+        let c = &corners.map(|k| k.p);
+        let f = Footprint::with(c, corners.map(|k| k.rho), corners.map(|k| k.theta));
+        // Worked out for the first vertex that needs it: most faces have none.
+        let mut plane: Option<Option<Plane>> = None;
+        let bins = self.bins;
+        let pass = self.pass;
+        let (seen, firsts, follower) = (&mut self.seen, &mut self.firsts, self.follower);
+        bins.for_bins(&f, |bin| {
+            for e in bins.verts_on_arc(bin, f.lo - lim.limit, f.lo + f.span + lim.limit) {
+                if !f.holds(e.rho, e.z) {
+                    continue;
+                }
+                let Some(plane) = plane.get_or_insert_with(|| Plane::of(c)) else {
+                    return;
+                };
+                let id = e.id as usize;
+                crossings(&follower.verts[id], plane, c, lim, |tau, up| {
+                    let slot = &mut seen[id];
+                    if slot.0 != pass {
+                        *slot = (pass, firsts.len() as u32);
+                        firsts.push((id as u32, Firsts::NONE));
+                    }
+                    firsts[slot.1 as usize].1.add(tau, up);
+                });
+            }
+        });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::mesh::Mesh;
+    use crate::geometry::primitive_meshes::{cuboid, uv_sphere};
+    use crate::predict::play::tests::{joined, Still, Swing};
+
+    /// The tracer's bar between two posts: a bar along +x (tip at 20 mm, faces at
+    /// y = ±0.5) turning between posts whose near faces are at y = +1.5 (beyond x = 10)
+    /// and y = −2.5.
+    fn bar_and_posts() -> (Solid, Solid) {
+        let bar = cuboid([0.0, -0.5, -1.0], [20.0, 0.5, 1.0]);
+        let posts = joined(&[
+            cuboid([10.0, 1.5, -3.0], [30.0, 6.0, 3.0]),
+            cuboid([10.0, -8.0, -3.0], [30.0, -2.5, 3.0]),
+        ]);
+        (
+            Solid::new(&posts, "driver").unwrap(),
+            Solid::new(&bar, "follower").unwrap(),
+        )
+    }
+
+    /// Guards the whole path against a closed form, exactly (no step or distance
+    /// tolerance): turning +δ the bar's top corner at (20, 0.5) meets the upper post's face
+    /// when 20 sin δ + 0.5 cos δ = 1.5; turning −δ its lower corner meets y = −2.5.
+    #[test]
+    fn a_bar_between_two_posts_turns_to_the_closed_form_angle() {
+        let (driver, follower) = bar_and_posts();
+        let f = free_turns(&Still, &driver, &follower, 4, 0.5).unwrap();
+        // a sin δ + b cos δ = c, with R = √(a² + b²): δ = asin(c/R) − atan2(b, a).
+        let solve = |a: f64, b: f64, c: f64| (c / a.hypot(b)).asin() - b.atan2(a);
+        for i in 0..4 {
+            assert!(
+                (f.plus[i] - solve(20.0, 0.5, 1.5)).abs() < 1e-12,
+                "{}",
+                f.plus[i]
+            );
+            assert!(
+                (f.minus[i] - solve(20.0, 0.5, 2.5)).abs() < 1e-12,
+                "{}",
+                f.minus[i]
+            );
+        }
+        assert_eq!(f.overlap_mm, 0.0);
+    }
+
+    /// Guards the driver-vertex side: a thin pin of the driver whose tip is 1 mm from the
+    /// bar's face and between its corners stops the turn although no bar vertex meets it;
+    /// the other way the bar turns the whole cap.
+    #[test]
+    fn a_driver_pin_against_a_flat_face_stops_the_turn() {
+        let bar = cuboid([0.0, -0.5, -5.0], [20.0, 0.5, 5.0]);
+        let pin = cuboid([14.9, 1.5, -0.1], [15.1, 8.0, 0.1]);
+        let driver = Solid::new(&pin, "driver").unwrap();
+        let follower = Solid::new(&bar, "follower").unwrap();
+        let cap = 0.5;
+        let f = free_turns(&Still, &driver, &follower, 2, cap).unwrap();
+        assert_eq!(f.minus[0], cap);
+        // The tip corner (15.1, 1.5) meets the turned face y = 0.5 when
+        // 1.5 cos δ − 15.1 sin δ = 0.5.
+        // As R cos(δ + φ) = 0.5.
+        let (r, phi) = (1.5f64.hypot(15.1), 15.1f64.atan2(1.5));
+        let want = (0.5 / r).acos() - phi;
+        assert!((f.plus[0] - want).abs() < 1e-12, "{} vs {want}", f.plus[0]);
+    }
+
+    /// Guards the circle–plane solution and the sense of a crossing: a point at (10, 0, 0)
+    /// turned about z meets the plane y = 3 at β = asin(0.3), entering the part above
+    /// it as β grows, and the plane y = −3 at β = −asin(0.3), where as β grows it leaves
+    /// the part below (it enters it as β falls).
+    #[test]
+    fn a_circle_crosses_a_plane_where_its_sine_says() {
+        let p = Point3::new(10.0, 0.0, 0.0);
+        let lim = Limit::new(0.5);
+        let above = [
+            Point3::new(0.0, 3.0, -5.0),
+            Point3::new(20.0, 3.0, -5.0),
+            Point3::new(0.0, 3.0, 5.0),
+        ];
+        let plane = Plane::of(&above).unwrap();
+        assert!((plane.n - Vector3::new(0.0, -1.0, 0.0)).norm() < 1e-15);
+        let mut hits = Vec::new();
+        crossings(&p, &plane, &above, &lim, |tau, enters| {
+            hits.push((tau, enters))
+        });
+        assert_eq!(hits.len(), 1);
+        assert!((2.0 * hits[0].0.atan() - 0.3f64.asin()).abs() < 1e-15);
+        assert!(hits[0].1);
+        // The same face at y = −3, wound the other way: its part lies below it.
+        let mut below = above.map(|c| Point3::new(c.x, -3.0, c.z));
+        below.swap(1, 2);
+        let plane = Plane::of(&below).unwrap();
+        assert!((plane.n - Vector3::new(0.0, 1.0, 0.0)).norm() < 1e-15);
+        let mut hits = Vec::new();
+        crossings(&p, &plane, &below, &lim, |tau, enters| {
+            hits.push((tau, enters))
+        });
+        assert_eq!(hits.len(), 1);
+        assert!((2.0 * hits[0].0.atan() + 0.3f64.asin()).abs() < 1e-15);
+        assert!(
+            !hits[0].1,
+            "as β grows the point leaves the part below y = −3"
+        );
+        // Beyond the limit, nothing.
+        let mut hits = 0;
+        crossings(&p, &plane, &below, &Limit::new(0.2), |_, _| hits += 1);
+        assert_eq!(hits, 0);
+    }
+
+    /// Guards the flush case the tracer gets wrong: a bar whose top face lies in the plane
+    /// of a driver plate's bottom face slides along it, which enters nothing, so the bar
+    /// turns the whole cap both ways (the tracer, which counts any vertex within its
+    /// `HIT_MM` of a face as touching, stops it).
+    #[test]
+    fn a_face_sliding_in_the_plane_of_another_does_not_stop_the_turn() {
+        let bar = cuboid([0.0, -0.5, -1.0], [20.0, 0.5, 1.0]);
+        let plate = cuboid([-30.0, -30.0, 1.0], [30.0, 30.0, 2.0]);
+        let driver = Solid::new(&plate, "driver").unwrap();
+        let follower = Solid::new(&bar, "follower").unwrap();
+        let f = free_turns(&Still, &driver, &follower, 2, 0.3).unwrap();
+        assert_eq!(f.plus, vec![0.3; 2]);
+        assert_eq!(f.minus, vec![0.3; 2]);
+        let traced = crate::predict::play::free_turns(&Still, &driver, &follower, 2, 0.3);
+        assert!(
+            traced.plus[0] < 1e-6,
+            "the tracer stops at once: {}",
+            traced.plus[0]
+        );
+    }
+
+    /// Guards the overlap rule: with the upper post pushed 0.3 mm into the bar, the bar's
+    /// vertices inside it do not count (they would lock the bar where the meshes already
+    /// overlap) and the overlap is reported; the lower post still stops the turn the other
+    /// way where the closed form says.
+    #[test]
+    fn vertices_inside_the_other_part_are_reported_not_counted() {
+        let bar = cuboid([0.0, -0.5, -1.0], [20.0, 0.5, 1.0]);
+        let posts = joined(&[
+            cuboid([10.0, 0.2, -3.0], [30.0, 6.0, 3.0]),
+            cuboid([10.0, -8.0, -3.0], [30.0, -2.5, 3.0]),
+        ]);
+        let driver = Solid::new(&posts, "driver").unwrap();
+        let follower = Solid::new(&bar, "follower").unwrap();
+        let f = free_turns(&Still, &driver, &follower, 2, 0.5).unwrap();
+        assert!((f.overlap_mm - 0.3).abs() < 1e-9, "{}", f.overlap_mm);
+        let solve = |a: f64, b: f64, c: f64| (c / a.hypot(b)).asin() - b.atan2(a);
+        assert!(
+            (f.minus[0] - solve(20.0, 0.5, 2.5)).abs() < 1e-12,
+            "{}",
+            f.minus[0]
+        );
+    }
+
+    /// Guards the precondition: a follower whose design pose moves its axis off R's z axis
+    /// is left to the tracer.
+    #[test]
+    fn a_follower_off_the_axis_is_left_to_the_tracer() {
+        struct Shifted;
+        impl PartMotion for Shifted {
+            fn follower(&self, _: f64) -> Isometry3<f64> {
+                Isometry3::translation(0.5, 0.0, 0.0)
+            }
+            fn driver(&self, t: f64) -> Isometry3<f64> {
+                Still.driver(t)
+            }
+            fn follower_speed(&self, q: &Point3<f64>) -> f64 {
+                Still.follower_speed(q)
+            }
+            fn driver_speed(&self, p: &Point3<f64>) -> f64 {
+                Still.driver_speed(p)
+            }
+            fn follower_reach(&self, q: &Point3<f64>) -> f64 {
+                Still.follower_reach(q)
+            }
+            fn driver_reach(&self, p: &Point3<f64>) -> f64 {
+                Still.driver_reach(p)
+            }
+        }
+        let (driver, follower) = bar_and_posts();
+        assert!(free_turns(&Shifted, &driver, &follower, 4, 0.5).is_none());
+        assert!(free_turns(&Still, &driver, &follower, 4, 0.5).is_some());
+    }
+
+    /// Guards the angle windows round ±π and their slack for the keys' rounding.
+    #[test]
+    fn windows_of_angles_wrap_round_the_circle() {
+        let keys: Vec<f32> = [-3.1, -1.0, 0.0, 1.0, 3.1].map(|k| k as f32).to_vec();
+        let picked = |a: f64, b: f64| -> Vec<f32> {
+            on_arc(&keys, a, b)
+                .into_iter()
+                .flat_map(|r| keys[r].to_vec())
+                .collect()
+        };
+        assert_eq!(picked(-0.5, 0.5), vec![0.0]);
+        assert_eq!(picked(3.0, 3.0 + 0.2), vec![3.1, -3.1]);
+        assert_eq!(picked(-3.2, -3.0), vec![3.1, -3.1]);
+        assert_eq!(picked(1.0, 1.0), vec![1.0], "an end on a key holds it");
+        assert_eq!(picked(-10.0, 10.0).len(), 5);
+        assert!(picked(1.5, 2.5).is_empty());
+    }
+
+    /// Every vertex of each part against every face of the other with the same circle–
+    /// plane crossings, no bins, clusters or limits: the reference for the shortcuts.
+    fn every_pair(driver: &Solid, follower: &Solid, n: usize, cap: f64) -> Vec<[f64; 2]> {
+        let lim = Limit::new(cap);
+        let faces = |s: &Solid, place: &dyn Fn(&Point3<f64>) -> Point3<f64>| {
+            s.tris
+                .iter()
+                .filter_map(|t| {
+                    let c = t.map(|v| place(&s.verts[v as usize]));
+                    Plane::of(&c).map(|p| (p, c))
+                })
+                .collect::<Vec<_>>()
+        };
+        let firsts = |p: &Point3<f64>, faces: &[(Plane, [Point3<f64>; 3])]| {
+            let mut f = Firsts::NONE;
+            for (plane, c) in faces {
+                crossings(p, plane, c, &lim, |tau, up| f.add(tau, up));
+            }
+            f
+        };
+        (0..n)
+            .map(|i| {
+                let t = i as f64 / n as f64;
+                let to_f = Swing.follower(t).inverse() * Swing.driver(t);
+                let mut best = [cap; 2];
+                let driver_faces = faces(driver, &|p| to_f * p);
+                for v in &follower.verts {
+                    let f = firsts(v, &driver_faces);
+                    if f.maybe_inside() && driver.signed(&to_f.inverse_transform_point(v)) < 0.0 {
+                        continue;
+                    }
+                    best = [best[0].min(f.free()[0]), best[1].min(f.free()[1])];
+                }
+                let follower_faces = faces(follower, &|p| *p);
+                for w in &driver.verts {
+                    let p = to_f * w;
+                    let f = firsts(&p, &follower_faces);
+                    if f.maybe_inside() && follower.signed(&p) < 0.0 {
+                        continue;
+                    }
+                    best = [best[0].min(f.free()[1]), best[1].min(f.free()[0])];
+                }
+                best
+            })
+            .collect()
+    }
+
+    fn swing_parts() -> (Solid, Solid) {
+        let follower: Mesh = joined(&[
+            cuboid([0.0, -0.6, -0.6], [18.0, 0.6, 0.6]),
+            uv_sphere([18.0, 0.0, 0.0], 1.5, 24, 12),
+        ]);
+        let driver: Mesh = joined(&[
+            uv_sphere([-7.5, 0.0, 0.0], 1.5, 24, 12),
+            uv_sphere([0.0, 7.5, 0.0], 1.5, 24, 12),
+        ]);
+        (
+            Solid::new(&driver, "driver").unwrap(),
+            Solid::new(&follower, "follower").unwrap(),
+        )
+    }
+
+    /// Guards the shortcuts (clusters skipped by carried bounds, vertices and faces by
+    /// their offsets, the bins and their windows of angles, the search limit carried from
+    /// the last time and widened when reached): on two parts in motion the free turns are
+    /// those of every vertex against every face, to the last bit.
+    #[test]
+    fn the_shortcuts_find_the_same_free_turns_as_every_pair() {
+        let (driver, follower) = swing_parts();
+        let (n, cap) = (144, 0.3);
+        let fast = free_turns(&Swing, &driver, &follower, n, cap).unwrap();
+        let slow = every_pair(&driver, &follower, n, cap);
+        let mut touching = 0;
+        for (i, want) in slow.iter().enumerate() {
+            assert_eq!([fast.plus[i], fast.minus[i]], *want, "sample {i}");
+            touching += want.iter().filter(|&&f| f < cap).count();
+        }
+        // The case exercises contacts, not only free turns.
+        assert!(touching > 10 && touching < 2 * n - 10, "{touching}");
+        assert_eq!(fast.overlap_mm, 0.0);
+    }
+
+    /// Guards determinism: the period split into runs for one thread or for several gives
+    /// the same free turns.
+    #[test]
+    fn the_free_turns_do_not_depend_on_the_threads() {
+        let (driver, follower) = swing_parts();
+        let on = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| free_turns(&Swing, &driver, &follower, 288, 0.3).unwrap())
+        };
+        let one = on(1);
+        let three = on(3);
+        assert_eq!(one.plus, three.plus);
+        assert_eq!(one.minus, three.minus);
+    }
+}
