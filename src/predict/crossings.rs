@@ -706,8 +706,9 @@ impl<'a> Run<'a> {
         }
     }
 
-    /// The free turns at time `t`: within twice the last ones first, the whole cap when
-    /// either reaches that.
+    /// The free turns at time `t`: searched first within [`GROWTH`] times the larger of
+    /// the last time's plus [`FLOOR_RAD`] (the whole cap at a run's first time), then
+    /// [`RETRY_GROWTH`] times wider while either reaches the limit, up to the cap.
     fn sample(&mut self, t: f64) {
         let to_f = self.motion.follower(t).inverse() * self.motion.driver(t);
         let mut limit = match self.free.last() {

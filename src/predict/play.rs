@@ -478,8 +478,8 @@ pub struct FreeTurns {
     /// Largest free turn in the negative sense, rad (a magnitude), ≤ cap.
     pub minus: Vec<f64>,
     /// Deepest vertex of one part inside the other at the design pose, mm, over the
-    /// period (0 when they never overlap), and its time. Such vertices are not traced:
-    /// they would lock the follower where the meshes already overlap.
+    /// period (0 when they never overlap), and its time. Such vertices do not stop the
+    /// follower: they would lock it where the meshes already overlap.
     pub overlap_mm: f64,
     /// Time of `overlap_mm`.
     pub overlap_t: f64,
