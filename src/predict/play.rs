@@ -18,10 +18,11 @@
 //! - clusters of vertices (cells of [`CLUSTER_MM`]) are skipped while a lower bound on
 //!   their distance, carried from their last query by the parts' speed bound, shows they
 //!   cannot touch within the search limit;
-//! - each part carries a coarse distance grid ([`GRID_MM`]) whose lower bound answers for
-//!   points more than about a millimetre away without a mesh query, and nearer the
-//!   surface the exact distance of the point's voxel centre, computed once for every
-//!   point and every sample that asks there (its own query the first time);
+//! - each part carries a coarse distance grid ([`GRID_MM`], made when first asked) whose
+//!   lower bound answers for points more than about a millimetre away without a mesh
+//!   query, and nearer the surface the exact distance of the point's voxel centre,
+//!   computed once for every point and every sample that asks there (its own query the
+//!   first time);
 //! - the search limit starts at twice the last sample's free motion (the whole cap only when
 //!   nothing touches within it), and the vertex that touched first at the last sample is
 //!   traced first;
@@ -42,6 +43,7 @@
 //! law, the load or the files; it does not look at the support.
 
 use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
+use std::sync::OnceLock;
 
 use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 use rayon::prelude::*;
@@ -147,14 +149,55 @@ pub struct Solid {
     cones: Vec<NormalCone>,
     pub(crate) clusters: Vec<Cluster>,
     aabb: Aabb,
+    /// The distance grid behind [`Solid::lower_bound`], made when first needed: a part
+    /// only ever placed against the other's bounds (the driver of a 1R prediction) never
+    /// needs its own, and it is the largest thing a `Solid` holds.
+    bounds: OnceLock<Bounds>,
+    /// Voxel centres whose exact distance was computed (mesh queries, a cost figure).
+    centres: AtomicU64,
+}
+
+/// A part's coarse distance grid and the exact distances of its voxel centres.
+struct Bounds {
     grid: VoxelGrid,
     /// Distance from each voxel centre to the nearest voxel the surface passes through.
     coarse: Vec<f32>,
     /// The exact distance from each voxel centre to the surface, as f32 bits, computed the
     /// first time a point near the surface asks ([`UNKNOWN`] until then).
     exact: Vec<AtomicU32>,
-    /// Voxel centres whose exact distance was computed (mesh queries, a cost figure).
-    centres: AtomicU64,
+}
+
+impl Bounds {
+    /// The grid of [`GRID_MM`] voxels over `aabb` and [`GRID_MARGIN_MM`] around it, with
+    /// the coarse distances of the triangles `tris` of `verts`.
+    fn new(aabb: Aabb, verts: &[Point3<f64>], tris: &[[u32; 3]]) -> Bounds {
+        let grid = VoxelGrid::covering(aabb.inflate(GRID_MARGIN_MM), GRID_MM);
+        // Every voxel whose cell meets a triangle's box holds the surface points there.
+        let mut marks = vec![false; grid.len()];
+        let cell_of = |x: f64, k: usize| -> usize {
+            let o = [grid.origin.x, grid.origin.y, grid.origin.z][k];
+            (((x - o) / grid.h + 0.5).floor().max(0.0) as usize).min(grid.n[k] - 1)
+        };
+        for t in tris {
+            let c = t.map(|v| verts[v as usize]);
+            let lo = [0, 1, 2].map(|k| cell_of(c[0][k].min(c[1][k]).min(c[2][k]), k));
+            let hi = [0, 1, 2].map(|k| cell_of(c[0][k].max(c[1][k]).max(c[2][k]), k));
+            for a in lo[0]..=hi[0] {
+                for b in lo[1]..=hi[1] {
+                    for z in lo[2]..=hi[2] {
+                        marks[grid.index([a, b, z])] = true;
+                    }
+                }
+            }
+        }
+        let coarse = distance_transform(&grid, &marks);
+        let exact = (0..grid.len()).map(|_| AtomicU32::new(UNKNOWN)).collect();
+        Bounds {
+            grid,
+            coarse,
+            exact,
+        }
+    }
 }
 
 /// Subtracted from a stored centre distance for its rounding to f32, mm: an f32 near
@@ -257,27 +300,6 @@ impl Solid {
         let cones = normal_cones(mesh);
         let cones = order.iter().map(|&i| cones[i]).collect();
         let aabb = mesh.aabb();
-        let grid = VoxelGrid::covering(aabb.inflate(GRID_MARGIN_MM), GRID_MM);
-        // Every voxel whose cell meets a triangle's box holds the surface points there.
-        let mut marks = vec![false; grid.len()];
-        let cell_of = |x: f64, k: usize| -> usize {
-            let o = [grid.origin.x, grid.origin.y, grid.origin.z][k];
-            (((x - o) / grid.h + 0.5).floor().max(0.0) as usize).min(grid.n[k] - 1)
-        };
-        for i in 0..mesh.triangles.len() {
-            let c = mesh.corners(i);
-            let lo = [0, 1, 2].map(|k| cell_of(c[0][k].min(c[1][k]).min(c[2][k]), k));
-            let hi = [0, 1, 2].map(|k| cell_of(c[0][k].max(c[1][k]).max(c[2][k]), k));
-            for a in lo[0]..=hi[0] {
-                for b in lo[1]..=hi[1] {
-                    for z in lo[2]..=hi[2] {
-                        marks[grid.index([a, b, z])] = true;
-                    }
-                }
-            }
-        }
-        let coarse = distance_transform(&grid, &marks);
-        let exact = (0..grid.len()).map(|_| AtomicU32::new(UNKNOWN)).collect();
         Ok(Solid {
             tri,
             verts,
@@ -287,11 +309,26 @@ impl Solid {
             cones,
             clusters,
             aabb,
-            grid,
-            coarse,
-            exact,
+            bounds: OnceLock::new(),
             centres: AtomicU64::new(0),
         })
+    }
+
+    /// Make the distance grid behind [`lower_bound`](Self::lower_bound) now, if not yet
+    /// made. Otherwise the first call makes it, and other threads asking meanwhile wait.
+    pub fn prepare_bounds(&self) {
+        self.bounds();
+    }
+
+    /// Whether the distance grid has been made.
+    #[cfg(test)]
+    pub(crate) fn has_bounds(&self) -> bool {
+        self.bounds.get().is_some()
+    }
+
+    fn bounds(&self) -> &Bounds {
+        self.bounds
+            .get_or_init(|| Bounds::new(self.aabb, &self.verts, &self.tris))
     }
 
     /// A lower bound on the distance of `p` to the surface, mm. From the coarse grid: the
@@ -301,21 +338,26 @@ impl Solid {
     /// `p`'s distance from it (the distance is 1-Lipschitz), the centre's computed once
     /// and kept. Far from the grid, the distance to the mesh's box.
     pub fn lower_bound(&self, p: &Point3<f64>) -> f64 {
-        let Some(v) = self.grid.voxel_of(Vec3::new(p.x, p.y, p.z)) else {
+        let Bounds {
+            grid,
+            coarse,
+            exact,
+        } = self.bounds();
+        let Some(v) = grid.voxel_of(Vec3::new(p.x, p.y, p.z)) else {
             return self.aabb.distance([p.x, p.y, p.z]);
         };
-        let i = self.grid.index(v);
-        let coarse = (f64::from(self.coarse[i]) - 3f64.sqrt() * self.grid.h).max(0.0);
+        let i = grid.index(v);
+        let coarse = (f64::from(coarse[i]) - 3f64.sqrt() * grid.h).max(0.0);
         if coarse >= EXACT_BELOW_MM {
             return coarse;
         }
-        let c = self.grid.center(v);
+        let c = grid.center(v);
         let centre = Point3::new(c.x, c.y, c.z);
-        let known = self.exact[i].load(Ordering::Relaxed);
+        let known = exact[i].load(Ordering::Relaxed);
         let at_centre = if known == UNKNOWN {
             // Racing threads store the same value.
             let d = self.signed(&centre).abs() as f32;
-            self.exact[i].store(d.to_bits(), Ordering::Relaxed);
+            exact[i].store(d.to_bits(), Ordering::Relaxed);
             self.centres.fetch_add(1, Ordering::Relaxed);
             d
         } else {
@@ -530,6 +572,9 @@ pub fn free_along(
     n: usize,
     motions: &[(Screw, f64)],
 ) -> Vec<FreeTurns> {
+    // Every sweep asks both parts' distance grids: made first, side by side, not by
+    // whichever sweep asks first while the others wait.
+    rayon::join(|| driver.prepare_bounds(), || follower.prepare_bounds());
     let jobs: Vec<(Side, Screw, f64)> = motions
         .iter()
         .flat_map(|&(screw, cap)| {
