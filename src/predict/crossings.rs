@@ -742,7 +742,6 @@ impl<'a> Run<'a> {
             if lower > self.reach[ci] * limit {
                 continue;
             }
-
             let w = to_f * c.center;
             let lever = w.coords.xy().norm() + c.tri_radius;
             let within = c.tri_radius + lever * limit;
@@ -752,7 +751,6 @@ impl<'a> Run<'a> {
                 continue;
             }
             self.queries += 1;
-
             match self.follower.signed_within(&w, within) {
                 Some(exact) => d = exact.max(0.0),
                 None => {

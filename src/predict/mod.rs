@@ -575,10 +575,9 @@ pub fn predict(
     let kin = Kinematics::new(mech, built.scale_mm)?;
     // Each part is read and prepared on its own thread: reading the STL and building
     // parry's BVH are serial inside. On the demo's parts `simulate` went from 55.6 to
-    // 48.4 s wall (2026-12-05).
-    // The distance grids are made here too, where asked: the follower's always, the
-    // driver's only for the tracer (a 1R1T follower), which also asks it; so the 1R
-    // driver, the larger mesh, is the part without one.
+    // 48.4 s wall (2026-12-05). The distance grids are made here too where they will be
+    // asked: the follower's always, the driver's only for the tracer (a 1R1T follower);
+    // so the 1R driver, the larger mesh, is the part without one.
     let load = |part: &str| -> Result<Solid, PredictError> {
         let mesh = read_stl(&parts_dir.join(format!("{part}.stl")))?;
         let solid = Solid::new(&mesh, part)?;

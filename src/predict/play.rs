@@ -1,11 +1,11 @@
 //! How far the follower can move, at one driver angle, before its mesh touches the driver's.
 //!
 //! Owns [`Solid`] (a part's mesh ready for distance queries, its vertices grouped in
-//! clusters, each with the faces it owns), [`Screw`] (a motion the follower's joint allows: a turn about its axis, R's
-//! z axis, a slide along it, or both at once) and [`free_along`], which answers, for every
-//! sample time of a period and each sense of each given screw, the largest motion δ ≤ a
-//! cap from the design pose that leaves the two meshes apart ([`free_turns`] for a turn
-//! alone). Both ways are tested: every follower vertex against the driver's mesh and every
+//! clusters, each with the faces it owns), [`Screw`] (a motion the follower's joint
+//! allows: a turn about its axis, R's z axis, a slide along it, or both at once) and
+//! [`free_along`], which answers, for every sample time of a period and each sense of each
+//! given screw, the largest motion δ ≤ a cap from the design pose that leaves the two
+//! meshes apart ([`free_turns`] for a turn alone). Both ways are tested: every follower vertex against the driver's mesh and every
 //! driver vertex against the follower's, so an edge of either part that would cut into a
 //! face of the other is seen.
 //!
@@ -203,7 +203,7 @@ impl Bounds {
 /// Subtracted from a stored centre distance for its rounding to f32, mm: an f32 near
 /// 300 mm is within 2e-5 mm of the f64 it came from.
 pub(crate) const F32_SLACK_MM: f64 = 1e-4;
-/// An entry of [`Solid::exact`] not computed yet (a NaN no distance has).
+/// An entry of `Bounds::exact` not computed yet (a NaN no distance has).
 const UNKNOWN: u32 = u32::MAX;
 /// Below this coarse bound a point asks its voxel centre's exact distance, mm. 2 mm: the
 /// bound is compared with free arcs (r × free turn, up to about 1.5 mm at the examples'
