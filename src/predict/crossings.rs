@@ -41,6 +41,7 @@ use nalgebra::{Isometry3, Point3, Vector3};
 use rayon::prelude::*;
 
 use super::play::{FreeTurns, PartMotion, Solid, F32_SLACK_MM, ON_AXIS_MM};
+use crate::geometry::sdf::{segment_distance, Vec3};
 
 /// Edge of the (ρ, z) bins the follower's vertices and faces are sorted into, mm. 0.5 mm:
 /// about one edge of the default 0.4 mm meshes, so a face's footprint spans a few bins and
@@ -229,21 +230,9 @@ fn distance_to_origin_2d(c: &[Point3<f64>; 3]) -> f64 {
     if (s[0] >= 0.0 && s[1] >= 0.0 && s[2] >= 0.0) || (s[0] <= 0.0 && s[1] <= 0.0 && s[2] <= 0.0) {
         return 0.0;
     }
+    let flat = |k: usize| Vec3::new(p[k][0], p[k][1], 0.0);
     (0..3)
-        .map(|k| {
-            let (a, b) = (p[k], p[(k + 1) % 3]);
-            let e = [b[0] - a[0], b[1] - a[1]];
-            let len2 = e[0] * e[0] + e[1] * e[1];
-            let s = if len2 > 0.0 {
-                (-(a[0] * e[0] + a[1] * e[1]) / len2).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            {
-                let (x, y) = (a[0] + s * e[0], a[1] + s * e[1]);
-                (x * x + y * y).sqrt()
-            }
-        })
+        .map(|k| segment_distance(Vec3::zeros(), flat(k), flat((k + 1) % 3)))
         .fold(f64::INFINITY, f64::min)
 }
 
@@ -472,25 +461,29 @@ impl Bins {
 
     /// The vertices of `bin` whose polar angle lies on the arc from `a` to `b`.
     fn verts_on_arc(&self, bin: usize, a: f64, b: f64) -> impl Iterator<Item = &VertexEntry> {
-        let (s, e) = (
-            self.vert_start[bin] as usize,
-            self.vert_start[bin + 1] as usize,
-        );
-        on_arc(&self.vert_keys[s..e], a, b)
-            .into_iter()
-            .flat_map(move |r| &self.verts[s + r.start..s + r.end])
+        bin_on_arc(&self.vert_start, &self.vert_keys, &self.verts, bin, a, b)
     }
 
     /// The faces of `bin` whose least polar angle lies on the arc from `a` to `b`.
     fn faces_on_arc(&self, bin: usize, a: f64, b: f64) -> impl Iterator<Item = &FaceEntry> {
-        let (s, e) = (
-            self.face_start[bin] as usize,
-            self.face_start[bin + 1] as usize,
-        );
-        on_arc(&self.face_keys[s..e], a, b)
-            .into_iter()
-            .flat_map(move |r| &self.faces[s + r.start..s + r.end])
+        bin_on_arc(&self.face_start, &self.face_keys, &self.faces, bin, a, b)
     }
+}
+
+/// The entries of `bin` (its run of `items` from `start[bin]` to `start[bin + 1]`, sorted
+/// by `keys`) whose key lies on the arc from `a` to `b`.
+fn bin_on_arc<'a, T>(
+    start: &[u32],
+    keys: &[f32],
+    items: &'a [T],
+    bin: usize,
+    a: f64,
+    b: f64,
+) -> impl Iterator<Item = &'a T> {
+    let (s, e) = (start[bin] as usize, start[bin + 1] as usize);
+    on_arc(&keys[s..e], a, b)
+        .into_iter()
+        .flat_map(move |r| &items[s + r.start..s + r.end])
 }
 
 /// Start offsets of each bin's run in a list sorted by bin (one more than bins).
@@ -898,17 +891,13 @@ mod tests {
     use super::*;
     use crate::geometry::mesh::Mesh;
     use crate::geometry::primitive_meshes::{cuboid, uv_sphere};
-    use crate::predict::play::tests::{joined, Still, Swing};
+    use crate::predict::play::tests::{
+        bar_between_posts, bar_between_posts_turns, joined, pin_by_a_bar, pin_by_a_bar_turn, Still,
+        Swing,
+    };
 
-    /// The tracer's bar between two posts: a bar along +x (tip at 20 mm, faces at
-    /// y = ±0.5) turning between posts whose near faces are at y = +1.5 (beyond x = 10)
-    /// and y = −2.5.
     fn bar_and_posts() -> (Solid, Solid) {
-        let bar = cuboid([0.0, -0.5, -1.0], [20.0, 0.5, 1.0]);
-        let posts = joined(&[
-            cuboid([10.0, 1.5, -3.0], [30.0, 6.0, 3.0]),
-            cuboid([10.0, -8.0, -3.0], [30.0, -2.5, 3.0]),
-        ]);
+        let (posts, bar) = bar_between_posts();
         (
             Solid::new(&posts, "driver").unwrap(),
             Solid::new(&bar, "follower").unwrap(),
@@ -922,19 +911,10 @@ mod tests {
     fn a_bar_between_two_posts_turns_to_the_closed_form_angle() {
         let (driver, follower) = bar_and_posts();
         let f = free_turns(&Still, &driver, &follower, 4, 0.5).unwrap();
-        // a sin δ + b cos δ = c, with R = √(a² + b²): δ = asin(c/R) − atan2(b, a).
-        let solve = |a: f64, b: f64, c: f64| (c / a.hypot(b)).asin() - b.atan2(a);
+        let [plus, minus] = bar_between_posts_turns();
         for i in 0..4 {
-            assert!(
-                (f.plus[i] - solve(20.0, 0.5, 1.5)).abs() < 1e-12,
-                "{}",
-                f.plus[i]
-            );
-            assert!(
-                (f.minus[i] - solve(20.0, 0.5, 2.5)).abs() < 1e-12,
-                "{}",
-                f.minus[i]
-            );
+            assert!((f.plus[i] - plus).abs() < 1e-12, "{}", f.plus[i]);
+            assert!((f.minus[i] - minus).abs() < 1e-12, "{}", f.minus[i]);
         }
         assert_eq!(f.overlap_mm, 0.0);
     }
@@ -944,18 +924,13 @@ mod tests {
     /// the other way the bar turns the whole cap.
     #[test]
     fn a_driver_pin_against_a_flat_face_stops_the_turn() {
-        let bar = cuboid([0.0, -0.5, -5.0], [20.0, 0.5, 5.0]);
-        let pin = cuboid([14.9, 1.5, -0.1], [15.1, 8.0, 0.1]);
+        let (pin, bar) = pin_by_a_bar();
         let driver = Solid::new(&pin, "driver").unwrap();
         let follower = Solid::new(&bar, "follower").unwrap();
         let cap = 0.5;
         let f = free_turns(&Still, &driver, &follower, 2, cap).unwrap();
         assert_eq!(f.minus[0], cap);
-        // The tip corner (15.1, 1.5) meets the turned face y = 0.5 when
-        // 1.5 cos δ − 15.1 sin δ = 0.5.
-        // As R cos(δ + φ) = 0.5.
-        let (r, phi) = (1.5f64.hypot(15.1), 15.1f64.atan2(1.5));
-        let want = (0.5 / r).acos() - phi;
+        let want = pin_by_a_bar_turn();
         assert!((f.plus[0] - want).abs() < 1e-12, "{} vs {want}", f.plus[0]);
     }
 

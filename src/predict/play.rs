@@ -898,22 +898,12 @@ pub(crate) mod tests {
     /// face the bar's flat sides.
     #[test]
     fn a_bar_between_two_posts_turns_to_the_closed_form_angle() {
-        let bar = cuboid([0.0, -0.5, -1.0], [20.0, 0.5, 1.0]);
-        let mut posts = cuboid([10.0, 1.5, -3.0], [30.0, 6.0, 3.0]);
-        let low = cuboid([10.0, -8.0, -3.0], [30.0, -2.5, 3.0]);
-        let off = posts.vertices.len() as u32;
-        posts.vertices.extend(low.vertices);
-        posts
-            .triangles
-            .extend(low.triangles.iter().map(|t| t.map(|i| i + off)));
+        let (posts, bar) = bar_between_posts();
         let driver = Solid::new(&posts, "driver").unwrap();
         let follower = Solid::new(&bar, "follower").unwrap();
         let cap = 0.5;
         let f = free_turns(&Still, &driver, &follower, 4, cap);
-        // a sin δ + b cos δ = c, with R = √(a² + b²): δ = asin(c/R) − atan2(b, a).
-        let solve = |a: f64, b: f64, c: f64| (c / a.hypot(b)).asin() - b.atan2(a);
-        let plus = solve(20.0, 0.5, 1.5);
-        let minus = solve(20.0, 0.5, 2.5);
+        let [plus, minus] = bar_between_posts_turns();
         for i in 0..4 {
             assert!(
                 (f.plus[i] - plus).abs() < 2.0 * HIT_MM / 20.0,
@@ -980,32 +970,55 @@ pub(crate) mod tests {
     /// (the pin is narrower than the bar's face and between its corners).
     #[test]
     fn a_driver_pin_against_a_flat_face_stops_the_turn() {
-        let bar = cuboid([0.0, -0.5, -5.0], [20.0, 0.5, 5.0]);
-        // A thin pin standing on y > 1, its tip 1 mm from the bar's face at x = 15.
-        let pin = cuboid([14.9, 1.5, -0.1], [15.1, 8.0, 0.1]);
+        let (pin, bar) = pin_by_a_bar();
         let driver = Solid::new(&pin, "driver").unwrap();
         let follower = Solid::new(&bar, "follower").unwrap();
         let cap = 0.5;
         let f = free_turns(&Still, &driver, &follower, 2, cap);
         assert_eq!(f.minus[0], cap);
-        // A tip corner (x, 1.5) of the pin meets the face y = 0.5 of the turned bar when
-        // 1.5 cos δ − x sin δ = 0.5; the corner at x = 15.1 has the longer lever and
-        // arrives first.
-        let mut lo = 0.0;
-        let mut hi = cap;
-        for _ in 0..60 {
-            let mid = 0.5 * (lo + hi);
-            if 1.5 * f64::cos(mid) - 15.1 * f64::sin(mid) > 0.5 {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
+        let want = pin_by_a_bar_turn();
         assert!(
-            (f.plus[0] - lo).abs() < 2.0 * HIT_MM / 15.0,
-            "{} vs {lo}",
+            (f.plus[0] - want).abs() < 2.0 * HIT_MM / 15.0,
+            "{} vs {want}",
             f.plus[0]
         );
+    }
+
+    /// A thin bar along +x (tip at 20 mm, faces at y = ±0.5, z = ±1) and two posts whose
+    /// near faces are at y = +1.5 (beyond x = 10) and y = −2.5: (posts, bar).
+    pub(crate) fn bar_between_posts() -> (Mesh, Mesh) {
+        let bar = cuboid([0.0, -0.5, -1.0], [20.0, 0.5, 1.0]);
+        let posts = joined(&[
+            cuboid([10.0, 1.5, -3.0], [30.0, 6.0, 3.0]),
+            cuboid([10.0, -8.0, -3.0], [30.0, -2.5, 3.0]),
+        ]);
+        (posts, bar)
+    }
+
+    /// The bar's free turns between the posts, [positive, negative] sense, rad: turning +δ
+    /// its top corner at (20, 0.5) meets the upper post's face when
+    /// 20 sin δ + 0.5 cos δ = 1.5; turning −δ its lower corner meets y = −2.5.
+    pub(crate) fn bar_between_posts_turns() -> [f64; 2] {
+        // a sin δ + b cos δ = c, with R = √(a² + b²): δ = asin(c/R) − atan2(b, a).
+        let solve = |a: f64, b: f64, c: f64| (c / a.hypot(b)).asin() - b.atan2(a);
+        [solve(20.0, 0.5, 1.5), solve(20.0, 0.5, 2.5)]
+    }
+
+    /// A thin pin of the driver standing on y > 1, its tip 1 mm from the face y = 0.5 of a
+    /// bar and between the bar's corners (at x = 15): (pin, bar).
+    pub(crate) fn pin_by_a_bar() -> (Mesh, Mesh) {
+        let bar = cuboid([0.0, -0.5, -5.0], [20.0, 0.5, 5.0]);
+        let pin = cuboid([14.9, 1.5, -0.1], [15.1, 8.0, 0.1]);
+        (pin, bar)
+    }
+
+    /// The bar's free turn in the positive sense against the pin, rad: a tip corner
+    /// (x, 1.5) of the pin meets the face y = 0.5 of the turned bar when
+    /// 1.5 cos δ − x sin δ = 0.5, and the corner at x = 15.1, with the longer lever,
+    /// arrives first. As R cos(δ + φ) = 0.5.
+    pub(crate) fn pin_by_a_bar_turn() -> f64 {
+        let (r, phi) = (1.5f64.hypot(15.1), 15.1f64.atan2(1.5));
+        (0.5 / r).acos() - phi
     }
 
     /// Two parts in motion: a driver turning about a vertical axis at (18, 12, 0) carrying
