@@ -1,26 +1,33 @@
-//! The free turns of a 1R follower, from where each vertex's circle crosses the other
-//! part's faces.
+//! The free motions of a follower about its joint axis (1R: turns; 1R1T: turns, slides and
+//! the screws between), from where each vertex's path crosses the other part's faces.
 //!
-//! Owns [`free_turns`], the 1R counterpart of [`play::free_along`](super::play::free_along)
-//! that `predict` uses when the follower only turns. It answers the same question (how far
-//! the follower can turn from its design pose either way before a vertex of one part meets a
-//! face of the other, capped) with the same tests (every follower vertex against the
-//! driver's faces and every driver vertex against the follower's), but exactly and in bulk
-//! rather than by sphere-tracing each vertex with mesh queries:
+//! Owns [`free_along`] (and [`free_turns`], its 1R case), the counterpart of
+//! [`play::free_along`](super::play::free_along) that `predict` uses whenever the follower
+//! moves about R's z axis. It answers the same question (how far the follower can move from
+//! its design pose along a screw about that axis, either way, before a vertex of one part
+//! meets a face of the other, capped) with the same tests (every follower vertex against
+//! the driver's faces and every driver vertex against the follower's), but exactly and in
+//! bulk rather than by sphere-tracing each vertex with mesh queries:
 //!
 //! - Everything is seen from the follower's frame F, whose z axis is the joint axis: the
 //!   follower stands still and the driver is placed by the design motion at each time.
-//!   Turning the follower by δ turns each of its vertices by δ about z, and each driver
-//!   vertex by −δ.
-//! - A vertex turned about z stays on one circle: at its distance ρ from the axis and its
-//!   height z. So the only faces it can meet are those whose footprint in (ρ, z) holds its
-//!   own. The follower's vertices and faces are sorted once into bins of (ρ, z)
-//!   ([`BIN_MM`]), each bin's entries ordered by polar angle, so the candidates of a driver
-//!   face or vertex are a binary search away.
-//! - Where a circle crosses a face's plane is a quadratic in tan(β/2); a root within the
-//!   search limit that lies in the triangle is a crossing. The crossing is entering or
-//!   leaving by the face's outward normal. A vertex's first crossing each way that enters
-//!   is its free turn that way; no step size, no distance tolerance.
+//!   Moving the follower by s along a screw moves each of its vertices by s, and each
+//!   driver vertex by −s.
+//! - A vertex turned about z stays at its distance ρ from the axis; a turn keeps its
+//!   height z too, a slide or a screw moves it along z by the screw's rise. So the only
+//!   faces it can meet are those whose footprint in (ρ, z) holds its own (or the heights
+//!   it rises through). The follower's vertices and faces are sorted once into bins of
+//!   (ρ, z) ([`BIN_MM`]), each bin's entries ordered by polar angle, so the candidates of a
+//!   driver face or vertex are a binary search away. Along a screw the polar angle and the
+//!   height both grow in proportion to s, so a face's box of angles and heights gives an
+//!   interval of s that the path must meet.
+//! - Where a circle crosses a face's plane is a quadratic in tan(β/2). Along a helix the
+//!   plane's value is u cos ωs + v sin ωs + k s + w: cut where its derivative vanishes (in
+//!   closed form), each monotone piece holds at most one root, found by Newton's steps
+//!   kept in its bracket; along a slide it is linear. A root within the search limit that
+//!   lies in the triangle is a crossing, entering or leaving by the face's outward normal.
+//!   A vertex's first crossing each way that enters is its free motion that way; no step
+//!   size, no distance tolerance.
 //! - A vertex whose first crossing either way leaves the other part may be inside it: an
 //!   exact distance query decides, and a vertex inside is not counted (it would lock the
 //!   follower where the meshes already overlap) but reported as overlap, as the tracer does.
@@ -33,14 +40,15 @@
 //!
 //! On the demo's half-turn-2to1 parts (1 336 616 + 715 366 vertices, 1 440 driver angles)
 //! the turns take 6.3 s where the tracer took 22.7 s (`cargo bench --bench simulate`;
-//! docs/simulate.md, "Exact free turns").
+//! docs/simulate.md, "Exact free turns"); on screw-bob's (1R1T, 1 523 040 + 660 284
+//! vertices) the four lines take 40 s where the tracer took 53 s.
 
 use std::f64::consts::{PI, TAU};
 
 use nalgebra::{Isometry3, Point3, Vector3};
 use rayon::prelude::*;
 
-use super::play::{FreeTurns, PartMotion, Solid, F32_SLACK_MM, ON_AXIS_MM};
+use super::play::{FreeTurns, PartMotion, Screw, Solid, F32_SLACK_MM, ON_AXIS_MM};
 use crate::geometry::sdf::{segment_distance, Vec3};
 
 /// Edge of the (ρ, z) bins the follower's vertices and faces are sorted into, mm. 0.5 mm:
@@ -56,15 +64,15 @@ const EDGE_SLACK: f64 = 1e-9;
 /// Two crossings of one vertex nearer than this in tan(β/2) are one, and count as entering
 /// if either does (a circle grazing a ridge touches it).
 const TIE: f64 = 1e-12;
-/// The search limit at a time is the last time's larger free turn times this, plus
-/// [`FLOOR_RAD`]. A pass costs about in proportion to its limit (the reach it looks within),
-/// and one that finds a free turn at its limit is run again wider. 1.25: on the demo's
-/// parts at 1 440 times the larger free turn grows at most 1.21 times from one time to the
-/// next, so no pass there is run twice.
+/// The search limit at a time is the last time's larger free motion times this, plus
+/// [`FLOOR_OF_CAP`] of the cap. A pass costs about in proportion to its limit (the reach it
+/// looks within), and one that finds a free motion at its limit is run again wider. 1.25:
+/// on the demo's parts at 1 440 times the larger free turn grows at most 1.21 times from
+/// one time to the next, so no pass there is run twice.
 const GROWTH: f64 = 1.25;
-/// See [`GROWTH`]: 0.1°, so parts that touch at one time still search a useful turn at the
-/// next, rad.
-const FLOOR_RAD: f64 = 0.1 * PI / 180.0;
+/// See [`GROWTH`]: 1 % of the cap (0.1° of `simulate`'s 10° turn, 0.05 mm of its 5.2 mm
+/// slide), so parts that touch at one time still search a useful motion at the next.
+const FLOOR_OF_CAP: f64 = 0.01;
 /// A pass that finds a free turn at its limit is run again with the limit times this (up
 /// to the cap): a free turn that jumps (a contact lost) takes a few passes, not one at the
 /// whole cap each time.
@@ -74,8 +82,7 @@ const RETRY_GROWTH: f64 = 4.0;
 const RUNS_PER_THREAD: usize = 4;
 
 /// The free turns of the follower at `n` times per period, each capped at `cap` rad, or
-/// `None` when the follower's design motion is not a turn about R's z axis (the 1R case
-/// only; use the tracer).
+/// `None` when the follower's design motion is not about R's z axis (use the tracer).
 pub fn free_turns(
     motion: &dyn PartMotion,
     driver: &Solid,
@@ -83,47 +90,69 @@ pub fn free_turns(
     n: usize,
     cap: f64,
 ) -> Option<FreeTurns> {
-    let turns_about_z = (0..n).all(|i| {
+    free_along(motion, driver, follower, n, &[(Screw::TURN, cap)]).map(|mut lines| lines.remove(0))
+}
+
+/// The free motions of the follower along each of `lines` (a screw about R's z axis and
+/// its cap, in the screw's unit) at `n` times per period, one [`FreeTurns`] per line in
+/// their order: the counterpart of [`play::free_along`](super::play::free_along). `None`
+/// when the follower's design pose moves its axis off R's z axis (use the tracer).
+pub fn free_along(
+    motion: &dyn PartMotion,
+    driver: &Solid,
+    follower: &Solid,
+    n: usize,
+    lines: &[(Screw, f64)],
+) -> Option<Vec<FreeTurns>> {
+    let about_z = (0..n).all(|i| {
         let f = motion.follower(i as f64 / n as f64);
         (f.rotation * Vector3::z() - Vector3::z()).norm() < AXIS_TOLERANCE
             && f.translation.vector.xy().norm() < AXIS_TOLERANCE
     });
-    if !turns_about_z {
+    if !about_z {
         return None;
     }
     // Only the follower's distance grid is asked (where the driver's clusters are), so
     // the driver's is never made; the follower's is made beside its bins.
     let (bins, ()) = rayon::join(|| Bins::new(follower), || follower.prepare_bounds());
-    let centres_before = driver.centre_queries() + follower.centre_queries();
     let runs = (rayon::current_num_threads() * RUNS_PER_THREAD).clamp(1, n.max(1));
     let per_run = n.div_ceil(runs);
-    // Each run's scratch is dropped as it ends; only its figures are kept.
-    let results: Vec<RunFigures> = (0..runs)
-        .into_par_iter()
-        .map(|k| {
-            let mut run = Run::new(motion, driver, follower, &bins, cap);
-            for i in (k * per_run)..((k + 1) * per_run).min(n) {
-                run.sample(i as f64 / n as f64);
+    let along = |screw: Screw, cap: f64| {
+        let centres_before = driver.centre_queries() + follower.centre_queries();
+        // Each run's scratch is dropped as it ends; only its figures are kept.
+        let results: Vec<RunFigures> = (0..runs)
+            .into_par_iter()
+            .map(|k| {
+                let mut run = Run::new(motion, driver, follower, &bins, screw, cap);
+                for i in (k * per_run)..((k + 1) * per_run).min(n) {
+                    run.sample(i as f64 / n as f64);
+                }
+                (run.free, run.queries, run.overlap)
+            })
+            .collect();
+        let mut out = FreeTurns {
+            plus: Vec::with_capacity(n),
+            minus: Vec::with_capacity(n),
+            overlap_mm: 0.0,
+            overlap_t: 0.0,
+            queries: driver.centre_queries() + follower.centre_queries() - centres_before,
+        };
+        for (free, queries, overlap) in results {
+            out.plus.extend(free.iter().map(|f| f[0]));
+            out.minus.extend(free.iter().map(|f| f[1]));
+            out.queries += queries;
+            if overlap.0 > out.overlap_mm {
+                (out.overlap_mm, out.overlap_t) = overlap;
             }
-            (run.free, run.queries, run.overlap)
-        })
-        .collect();
-    let mut out = FreeTurns {
-        plus: Vec::with_capacity(n),
-        minus: Vec::with_capacity(n),
-        overlap_mm: 0.0,
-        overlap_t: 0.0,
-        queries: driver.centre_queries() + follower.centre_queries() - centres_before,
-    };
-    for (free, queries, overlap) in results {
-        out.plus.extend(free.iter().map(|f| f[0]));
-        out.minus.extend(free.iter().map(|f| f[1]));
-        out.queries += queries;
-        if overlap.0 > out.overlap_mm {
-            (out.overlap_mm, out.overlap_t) = overlap;
         }
-    }
-    Some(out)
+        out
+    };
+    Some(
+        lines
+            .iter()
+            .map(|&(screw, cap)| along(screw, cap))
+            .collect(),
+    )
 }
 
 /// What a run leaves: the free turns per time, its queries, its deepest overlap and when.
@@ -182,6 +211,37 @@ impl Footprint {
     fn holds(&self, rho: f64, z: f64) -> bool {
         rho >= self.rho_lo && rho <= self.rho_hi && z >= self.z_lo && z <= self.z_hi
     }
+}
+
+/// Whether a point at polar angle `theta` and height `z`, moved by the limit's screw by
+/// some s with |s| ≤ limit, can come within the box of polar angles from `lo` to
+/// `lo + span` and heights from `z_lo` to `z_hi` (its distance from the axis does not
+/// change). Along the path both grow in proportion to s, so each gives an interval of s.
+/// The callers have widened the box for rounding.
+fn path_meets(theta: f64, z: f64, lim: &Limit, lo: f64, span: f64, z_lo: f64, z_hi: f64) -> bool {
+    let (om, sg) = (lim.screw.spin, lim.screw.slide);
+    let (mut a, mut b) = (-lim.limit, lim.limit);
+    if sg == 0.0 {
+        if z < z_lo || z > z_hi {
+            return false;
+        }
+    } else {
+        let (s1, s2) = ((z_lo - z) / sg, (z_hi - z) / sg);
+        a = a.max(s1.min(s2));
+        b = b.min(s1.max(s2));
+        if a > b {
+            return false;
+        }
+    }
+    // The box's angles from the point's: [d, d + span], or that less a full turn.
+    let d = wrap(lo - theta);
+    if om == 0.0 {
+        return d <= 0.0 && d + span >= 0.0 || d - TAU + span >= 0.0;
+    }
+    [d, d - TAU].into_iter().any(|d| {
+        let (s1, s2) = (d / om, (d + span) / om);
+        a.max(s1.min(s2)) <= b.min(s1.max(s2))
+    })
 }
 
 /// The angle `a` taken into [−π, π). Angles here are sums and differences of a few polar
@@ -287,6 +347,8 @@ struct FaceEntry {
     z_lo: f32,
     z_hi: f32,
     id: u32,
+    /// The footprint's angular span from `lo`, widened by [`ANGLE_SLACK`].
+    span: f32,
 }
 
 impl FaceEntry {
@@ -300,12 +362,14 @@ impl FaceEntry {
             z_lo: down(f.z_lo),
             z_hi: up(f.z_hi),
             id: id as u32,
+            span: (f.span + ANGLE_SLACK) as f32,
         }
     }
 
-    /// Whether the footprint holds a point at `rho` and `z` (perhaps a hair beyond it).
-    fn holds(&self, rho: f32, z: f32) -> bool {
-        rho >= self.rho_lo && rho <= self.rho_hi && z >= self.z_lo && z <= self.z_hi
+    /// Whether the footprint holds a point at `rho` with a height from `z_lo` to `z_hi`
+    /// (perhaps a hair beyond it).
+    fn holds(&self, rho: f32, z_lo: f32, z_hi: f32) -> bool {
+        rho >= self.rho_lo && rho <= self.rho_hi && z_hi >= self.z_lo && z_lo <= self.z_hi
     }
 }
 
@@ -440,6 +504,20 @@ impl Bins {
         Some(r as usize * self.n_z + h as usize)
     }
 
+    /// Calls `each` with every bin at distance `rho` from the axis from height `z_lo` to
+    /// `z_hi`.
+    fn for_column(&self, rho: f64, z_lo: f64, z_hi: f64, each: impl FnMut(usize)) {
+        let column = Footprint {
+            rho_lo: rho,
+            rho_hi: rho,
+            z_lo,
+            z_hi,
+            lo: -PI,
+            span: TAU,
+        };
+        self.for_bins(&column, each);
+    }
+
     /// Calls `f` with every bin the footprint meets.
     fn for_bins(&self, f: &Footprint, mut each: impl FnMut(usize)) {
         // Clamped at 0 first, where truncation is the floor.
@@ -498,32 +576,92 @@ fn starts(sorted_bins: impl Iterator<Item = usize>, bins: usize) -> Vec<u32> {
     count
 }
 
-/// The search limit of one pass: turns β with |β| ≤ `limit` rad.
+/// The search limit of one pass: the follower's motion `screw` by a parameter s with
+/// |s| ≤ `limit` (rad for a turn, mm for a slide, the screw's own unit otherwise).
 #[derive(Clone, Copy, Debug)]
 struct Limit {
+    screw: Screw,
     limit: f64,
-    /// 1 − cos(limit) and sin(limit): how far a plane's value can change along the arc.
+    /// The largest turn and rise within the limit: |spin|·limit rad, |slide|·limit mm.
+    turn: f64,
+    rise: f64,
+    /// 1 − cos(turn) and sin(turn): how far the turning part of a plane's value can change
+    /// along the path.
     one_minus_cos: f64,
     sin: f64,
-    /// tan(limit / 2): the largest root taken.
+    /// tan(turn / 2): the largest root taken by a pure turn's quadratic.
     tau: f64,
+    /// cos(turn): a screw's path at its ends (±limit) needs no other sine or cosine.
+    cos: f64,
 }
 
 impl Limit {
-    fn new(limit: f64) -> Limit {
+    fn new(screw: Screw, limit: f64) -> Limit {
+        let turn = screw.spin.abs() * limit;
         Limit {
+            screw,
             limit,
-            one_minus_cos: 1.0 - limit.cos(),
-            sin: limit.sin(),
-            tau: (limit / 2.0).tan(),
+            turn,
+            rise: screw.slide.abs() * limit,
+            one_minus_cos: 1.0 - turn.cos(),
+            sin: turn.sin(),
+            tau: (turn / 2.0).tan(),
+            cos: turn.cos(),
+        }
+    }
+
+    /// A turn about +z, found by the quadratic in tan(β/2): its crossings are recorded in
+    /// tan(β/2) ([`Limit::param`] turns that into β).
+    fn pure_turn(&self) -> bool {
+        self.screw.slide == 0.0 && self.screw.spin > 0.0
+    }
+
+    /// The parameter of a crossing recorded as `key`.
+    fn param(&self, key: f64) -> f64 {
+        if self.pure_turn() {
+            2.0 * key.atan() / self.screw.spin
+        } else {
+            key
         }
     }
 }
 
-/// Where the circle of `p` turned by β about z (|β| within the limit) crosses the triangle
-/// `c` on `plane`: calls `hit` with tan(β/2) and whether the point enters the face's part
-/// there as β grows.
+/// Where the path of `p` moved by the screw (|s| within the limit) crosses the triangle `c`
+/// on `plane`: calls `hit` with the crossing's key (tan(β/2) for a pure turn, s otherwise;
+/// both grow with s) and whether the point enters the face's part there as s grows.
 fn crossings(
+    p: &Point3<f64>,
+    plane: &Plane,
+    c: &[Point3<f64>; 3],
+    lim: &Limit,
+    hit: impl FnMut(f64, bool),
+) {
+    if lim.pure_turn() {
+        turn_crossings(p, plane, c, lim, hit);
+    } else {
+        screw_crossings(p, plane, c, lim, hit);
+    }
+}
+
+/// The terms of a plane's value along a point's turn about z by β:
+/// n · R(β) p − d = u cos β + v sin β + w, as (u, v, w) (a rise adds n_z times itself).
+fn plane_terms(p: &Point3<f64>, plane: &Plane) -> (f64, f64, f64) {
+    let n = &plane.n;
+    (
+        n.x * p.x + n.y * p.y,
+        n.y * p.x - n.x * p.y,
+        n.z * p.z - plane.d,
+    )
+}
+
+/// `p` turned about z by the angle whose cosine and sine are given, and raised by `rise`.
+fn moved(p: &Point3<f64>, cos: f64, sin: f64, rise: f64) -> Point3<f64> {
+    Point3::new(p.x * cos - p.y * sin, p.x * sin + p.y * cos, p.z + rise)
+}
+
+/// [`crossings`] for a pure turn: where the circle meets the plane is a quadratic in
+/// tan(β/2).
+fn turn_crossings(
     p: &Point3<f64>,
     plane: &Plane,
     c: &[Point3<f64>; 3],
@@ -531,10 +669,7 @@ fn crossings(
     mut hit: impl FnMut(f64, bool),
 ) {
     let n = &plane.n;
-    // n · p(β) − d = u cos β + v sin β + w.
-    let u = n.x * p.x + n.y * p.y;
-    let v = n.y * p.x - n.x * p.y;
-    let w = n.z * p.z - plane.d;
+    let (u, v, w) = plane_terms(p, plane);
     let at_zero = u + w;
     if at_zero.abs() > u.abs() * lim.one_minus_cos + v.abs() * lim.sin + 1e-12 {
         return;
@@ -563,13 +698,165 @@ fn crossings(
             continue;
         }
         let den = 1.0 + tau * tau;
-        let (cos, sin) = ((1.0 - tau * tau) / den, 2.0 * tau / den);
-        let q = Point3::new(p.x * cos - p.y * sin, p.x * sin + p.y * cos, p.z);
+        let q = moved(p, (1.0 - tau * tau) / den, 2.0 * tau / den, 0.0);
         if inside(c, n, &q) {
             // The point's velocity as β grows is z × q.
             hit(tau, n.y * q.x - n.x * q.y < 0.0);
         }
     }
+}
+
+/// Newton steps of a screw's root at most; each halves the bracket at least (a step that
+/// would leave it is a bisection), and a smooth monotone piece takes about five.
+const ROOT_STEPS: usize = 80;
+
+/// [`crossings`] for a slide or a screw: the plane's value along the helix,
+/// g(s) = u cos ωs + v sin ωs + k s + w, is split where its derivative vanishes (in closed
+/// form), and each monotone piece whose ends differ in sign holds one root, found by
+/// Newton's steps kept inside the bracket.
+fn screw_crossings(
+    p: &Point3<f64>,
+    plane: &Plane,
+    c: &[Point3<f64>; 3],
+    lim: &Limit,
+    mut hit: impl FnMut(f64, bool),
+) {
+    let n = &plane.n;
+    let (om, sg) = (lim.screw.spin, lim.screw.slide);
+    let (u, v, w) = plane_terms(p, plane);
+    let k = n.z * sg;
+    if u == 0.0 && v == 0.0 && k == 0.0 {
+        // The path runs in a plane parallel to the face's: on it (flush) it slides along
+        // the face and enters nothing.
+        return;
+    }
+    let at_zero = u + w;
+    // Along the path the turning part changes by at most this (for turns within a quarter
+    // turn) and the rising part by |k| per unit.
+    let turning = if lim.turn <= std::f64::consts::FRAC_PI_2 {
+        u.abs() * lim.one_minus_cos + v.abs() * lim.sin
+    } else {
+        2.0 * u.hypot(v)
+    };
+    if at_zero.abs() > turning + k.abs() * lim.limit + 1e-12 {
+        return;
+    }
+    // Closer: g(s) lies within ω²A·s²/2 of its tangent at 0 (|g''| ≤ ω²A, A = |(u, v)|),
+    // so a side whose tangent stays that far from 0 at both ends holds no root. Most
+    // faces near the path end here, before any sine or cosine.
+    let a = (u * u + v * v).sqrt();
+    let slope = om * v + k;
+    let bend = 0.5 * om * om * a * lim.limit * lim.limit + 1e-12;
+    let clear = |end: f64| (at_zero > bend && end > bend) || (at_zero < -bend && end < -bend);
+    let (plus_clear, minus_clear) = (
+        clear(at_zero + slope * lim.limit),
+        clear(at_zero - slope * lim.limit),
+    );
+    if plus_clear && minus_clear {
+        return;
+    }
+    let g = |s: f64| {
+        let (sin, cos) = (om * s).sin_cos();
+        u * cos + v * sin + k * s + w
+    };
+    let dg = |s: f64| {
+        let (sin, cos) = (om * s).sin_cos();
+        om * (v * cos - u * sin) + k
+    };
+    // g at ±limit from the limit's own cosine and sine (ω·limit = ±turn).
+    let sin_end = lim.sin.copysign(om);
+    let g_end = |sign: f64| u * lim.cos + sign * v * sin_end + sign * k * lim.limit + w;
+    // Where g' = 0: v cos x − u sin x = A cos(x + φ) = −k/ω, with x = ωs.
+    let mut cuts = [f64::NAN; 8];
+    let mut m_cuts = 0;
+    if om != 0.0 && a > 0.0 && (k / (om * a)).abs() <= 1.0 {
+        let base = (-k / (om * a)).acos();
+        let phi = u.atan2(v);
+        let reach = (lim.turn / TAU).ceil() as i32 + 1;
+        for m in -reach..=reach {
+            for x in [base - phi, -base - phi] {
+                let s = (x + TAU * f64::from(m)) / om;
+                if s.abs() < lim.limit && m_cuts < cuts.len() {
+                    cuts[m_cuts] = s;
+                    m_cuts += 1;
+                }
+            }
+        }
+    }
+    let cuts = &mut cuts[..m_cuts];
+    cuts.sort_by(f64::total_cmp);
+    let mut found = |s: f64| {
+        let (sin, cos) = (om * s).sin_cos();
+        let q = moved(p, cos, sin, sg * s);
+        if inside(c, n, &q) {
+            // The point's velocity as s grows is ω z × q + σ z.
+            hit(s, om * (n.y * q.x - n.x * q.y) + k < 0.0);
+        }
+    };
+    let mut lo = -lim.limit;
+    let mut g_lo = g_end(-1.0);
+    let ends = cuts.iter().copied().chain(std::iter::once(lim.limit));
+    for hi in ends {
+        let g_hi = if hi == lim.limit { g_end(1.0) } else { g(hi) };
+        // A piece on a side the tangent test cleared holds no root.
+        let skip = (hi <= 0.0 && minus_clear) || (lo >= 0.0 && plus_clear);
+        if !skip {
+            if g_lo == 0.0 {
+                found(lo);
+            } else if g_lo.signum() != g_hi.signum() && g_hi != 0.0 {
+                found(bracketed_root(&g, &dg, lo, hi, g_lo, at_zero, slope));
+            }
+        }
+        (lo, g_lo) = (hi, g_hi);
+    }
+    if g_lo == 0.0 {
+        found(lo);
+    }
+}
+
+/// The root of `g` between `lo` and `hi`, where g is monotone and `g_lo` = g(lo) and g(hi)
+/// differ in sign: Newton's steps from where the tangent at 0 (`at_zero`, `slope`) meets 0
+/// (the bracket's middle if that is outside it), a step that would leave the bracket taken
+/// as a bisection, until the bracket or the step is at the last bits.
+fn bracketed_root(
+    g: &impl Fn(f64) -> f64,
+    dg: &impl Fn(f64) -> f64,
+    mut lo: f64,
+    mut hi: f64,
+    g_lo: f64,
+    at_zero: f64,
+    slope: f64,
+) -> f64 {
+    let rising = g_lo < 0.0;
+    let guess = -at_zero / slope;
+    let mut s = if guess > lo && guess < hi {
+        guess
+    } else {
+        0.5 * (lo + hi)
+    };
+    for _ in 0..ROOT_STEPS {
+        let gs = g(s);
+        if gs == 0.0 {
+            return s;
+        }
+        if (gs < 0.0) == rising {
+            lo = s;
+        } else {
+            hi = s;
+        }
+        let d = dg(s);
+        let newton = s - gs / d;
+        let next = if d != 0.0 && newton > lo && newton < hi {
+            newton
+        } else {
+            0.5 * (lo + hi)
+        };
+        if next == s || hi - lo <= 4.0 * f64::EPSILON * s.abs().max(lo.abs()).max(hi.abs()) {
+            return next;
+        }
+        s = next;
+    }
+    s
 }
 
 /// Whether `q`, on the triangle's plane, lies in the triangle (edges included).
@@ -621,9 +908,10 @@ impl Firsts {
         (0..2).any(|k| !self.first_enters[k] && self.first[k].is_finite())
     }
 
-    /// The free turn each way, rad (π when nothing is entered).
-    fn free(&self) -> [f64; 2] {
-        self.enter.map(|t| 2.0 * t.atan())
+    /// The free motion each way, in the screw's parameter (beyond every limit when nothing
+    /// is entered).
+    fn free(&self, lim: &Limit) -> [f64; 2] {
+        self.enter.map(|key| lim.param(key))
     }
 }
 
@@ -641,9 +929,11 @@ struct Run<'a> {
     driver: &'a Solid,
     follower: &'a Solid,
     bins: &'a Bins,
+    /// The follower's motion and its cap, in the screw's unit.
+    screw: Screw,
     cap: f64,
-    /// Per driver cluster, bounds on its points' speed seen from the follower and on how
-    /// far they move per radian of turn.
+    /// Per driver cluster, bounds on its points' speed seen from the follower and on their
+    /// distance from the axis (how far they move per radian of turn).
     speed: Vec<f64>,
     reach: Vec<f64>,
     /// Per driver cluster, its last distance to the follower and when.
@@ -669,6 +959,7 @@ impl<'a> Run<'a> {
         driver: &'a Solid,
         follower: &'a Solid,
         bins: &'a Bins,
+        screw: Screw,
         cap: f64,
     ) -> Run<'a> {
         let speed = driver
@@ -686,6 +977,7 @@ impl<'a> Run<'a> {
             driver,
             follower,
             bins,
+            screw,
             cap,
             speed,
             reach,
@@ -701,14 +993,15 @@ impl<'a> Run<'a> {
         }
     }
 
-    /// The free turns at time `t`: searched first within [`GROWTH`] times the larger of
-    /// the last time's plus [`FLOOR_RAD`] (the whole cap at a run's first time), then
-    /// [`RETRY_GROWTH`] times wider while either reaches the limit, up to the cap.
+    /// The free motions at time `t`: searched first within [`GROWTH`] times the larger of
+    /// the last time's plus [`FLOOR_OF_CAP`] of the cap (the whole cap at a run's first
+    /// time), then [`RETRY_GROWTH`] times wider while either reaches the limit, up to the
+    /// cap.
     fn sample(&mut self, t: f64) {
         let to_f = self.motion.follower(t).inverse() * self.motion.driver(t);
         let mut limit = match self.free.last() {
             None => self.cap,
-            Some(f) => (GROWTH * f[0].max(f[1]) + FLOOR_RAD).min(self.cap),
+            Some(f) => (GROWTH * f[0].max(f[1]) + FLOOR_OF_CAP * self.cap).min(self.cap),
         };
         loop {
             let free = self.pass_at(t, &to_f, limit);
@@ -720,10 +1013,11 @@ impl<'a> Run<'a> {
         }
     }
 
-    /// One pass at time `t` (driver → F by `to_f`) within `limit` rad: the free turns,
-    /// each at most `limit`.
+    /// One pass at time `t` (driver → F by `to_f`) within `limit`: the free motions, each
+    /// at most `limit`.
     fn pass_at(&mut self, t: f64, to_f: &Isometry3<f64>, limit: f64) -> [f64; 2] {
-        let lim = Limit::new(limit);
+        let lim = Limit::new(self.screw, limit);
+        let screw = self.screw;
         self.pass += 1;
         self.firsts.clear();
         self.placed.clear();
@@ -732,11 +1026,12 @@ impl<'a> Run<'a> {
         for (ci, c) in driver.clusters.iter().enumerate() {
             let (d_last, t_last) = self.last[ci];
             let lower = d_last - self.speed[ci] * (t - t_last) - c.tri_radius;
-            if lower > self.reach[ci] * limit {
+            if lower > screw.lever(self.reach[ci]) * limit {
                 continue;
             }
             let w = to_f * c.center;
-            let lever = w.coords.xy().norm() + c.tri_radius;
+            // How far the cluster's points move per unit of the motion, at most.
+            let lever = screw.lever(w.coords.xy().norm() + c.tri_radius);
             let within = c.tri_radius + lever * limit;
             let mut d = self.follower.lower_bound(&w);
             if d > within {
@@ -753,7 +1048,8 @@ impl<'a> Run<'a> {
             }
             self.last[ci] = (d, t);
             // Each vertex and face: its distance to the follower is at least the centre's
-            // less its offset from the centre, and a turn moves it at most `lever` per rad.
+            // less its offset from the centre, and the motion moves it at most `lever` per
+            // unit.
             let near = |offset: f32| d - f64::from(offset) - F32_SLACK_MM <= lever * limit;
             for vi in c.start..c.end {
                 if near(driver.vert_offset[vi]) {
@@ -774,7 +1070,7 @@ impl<'a> Run<'a> {
             let (driver, p) = (self.driver, self.follower.verts[id]);
             let inside = || driver.signed(&to_f.inverse_transform_point(&p));
             // A follower vertex turns with the follower.
-            if let Some(free) = self.allowed(&firsts, inside, t) {
+            if let Some(free) = self.allowed(&firsts, &lim, inside, t) {
                 best[0] = best[0].min(free[0]);
                 best[1] = best[1].min(free[1]);
             }
@@ -806,6 +1102,7 @@ impl<'a> Run<'a> {
     fn allowed(
         &mut self,
         firsts: &Firsts,
+        lim: &Limit,
         signed: impl FnOnce() -> f64,
         t: f64,
     ) -> Option<[f64; 2]> {
@@ -819,7 +1116,7 @@ impl<'a> Run<'a> {
                 return None;
             }
         }
-        Some(firsts.free())
+        Some(firsts.free(lim))
     }
 
     /// A driver vertex placed in F against the follower's faces.
@@ -829,27 +1126,50 @@ impl<'a> Run<'a> {
         if rho < ON_AXIS_MM {
             return;
         }
-        let Some(bin) = self.bins.bin(rho, p.z) else {
-            return;
-        };
         let bins = self.bins;
-        let mut firsts = Firsts::NONE;
-        let span = bins.face_span[bin];
-        let (rho32, z32) = (rho as f32, p.z as f32);
-        for e in bins.faces_on_arc(bin, theta - lim.limit - span, theta + lim.limit) {
-            if !e.holds(rho32, z32) {
-                continue;
-            }
-            let id = e.id as usize;
-            let Some(plane) = &bins.planes[id] else {
-                continue;
-            };
-            let c = self.follower.tris[id].map(|v| self.follower.verts[v as usize]);
-            crossings(p, plane, &c, lim, |tau, up| firsts.add(tau, up));
-        }
         let follower = self.follower;
-        // The follower turning by +δ turns a driver vertex, seen from it, by −δ.
-        if let Some(free) = self.allowed(&firsts, || follower.signed(p), t) {
+        let mut firsts = Firsts::NONE;
+        let mut against = |bin: usize, z_lo: f64, z_hi: f64| {
+            let span = bins.face_span[bin];
+            let (rho32, z_lo32, z_hi32) = (rho as f32, z_lo as f32, z_hi as f32);
+            for e in bins.faces_on_arc(bin, theta - lim.turn - span, theta + lim.turn) {
+                if !e.holds(rho32, z_lo32, z_hi32) {
+                    continue;
+                }
+                if lim.rise > 0.0
+                    && !path_meets(
+                        theta,
+                        p.z,
+                        lim,
+                        e.lo,
+                        f64::from(e.span),
+                        f64::from(e.z_lo),
+                        f64::from(e.z_hi),
+                    )
+                {
+                    continue;
+                }
+                let id = e.id as usize;
+                let Some(plane) = &bins.planes[id] else {
+                    continue;
+                };
+                let c = follower.tris[id].map(|v| follower.verts[v as usize]);
+                crossings(p, plane, &c, lim, |key, up| firsts.add(key, up));
+            }
+        };
+        if lim.rise == 0.0 {
+            match bins.bin(rho, p.z) {
+                Some(bin) => against(bin, p.z, p.z),
+                None => return,
+            }
+        } else {
+            // A slide or screw moves the vertex along z too: every bin of its column within
+            // the rise.
+            let (z_lo, z_hi) = (p.z - lim.rise, p.z + lim.rise);
+            bins.for_column(rho, z_lo, z_hi, |bin| against(bin, z_lo, z_hi));
+        }
+        // The follower moving by +s moves a driver vertex, seen from it, by −s.
+        if let Some(free) = self.allowed(&firsts, lim, || follower.signed(p), t) {
             best[0] = best[0].min(free[1]);
             best[1] = best[1].min(free[0]);
         }
@@ -858,15 +1178,32 @@ impl<'a> Run<'a> {
     /// A driver face with corners placed in F against the follower's vertices.
     fn driver_face(&mut self, corners: &[Placed; 3], lim: &Limit) {
         let c = &corners.map(|k| k.p);
-        let f = Footprint::with(c, corners.map(|k| k.rho), corners.map(|k| k.theta));
+        let face = Footprint::with(c, corners.map(|k| k.rho), corners.map(|k| k.theta));
+        // The bins the follower's vertices can come from: the face's grown by the rise.
+        let mut f = face;
+        f.z_lo -= lim.rise;
+        f.z_hi += lim.rise;
         // Worked out for the first vertex that needs it: most faces have none.
         let mut plane: Option<Option<Plane>> = None;
         let bins = self.bins;
         let pass = self.pass;
         let (seen, firsts, follower) = (&mut self.seen, &mut self.firsts, self.follower);
         bins.for_bins(&f, |bin| {
-            for e in bins.verts_on_arc(bin, f.lo - lim.limit, f.lo + f.span + lim.limit) {
+            for e in bins.verts_on_arc(bin, f.lo - lim.turn, f.lo + f.span + lim.turn) {
                 if !f.holds(e.rho, e.z) {
+                    continue;
+                }
+                if lim.rise > 0.0
+                    && !path_meets(
+                        e.theta,
+                        e.z,
+                        lim,
+                        face.lo - ANGLE_SLACK,
+                        face.span + 2.0 * ANGLE_SLACK,
+                        face.z_lo - F32_SLACK_MM,
+                        face.z_hi + F32_SLACK_MM,
+                    )
+                {
                     continue;
                 }
                 let Some(plane) = plane.get_or_insert_with(|| Plane::of(c)) else {
@@ -934,6 +1271,130 @@ mod tests {
         assert!((f.plus[0] - want).abs() < 1e-12, "{} vs {want}", f.plus[0]);
     }
 
+    /// Guards slides and screws against closed forms: the bar between the posts (prisms
+    /// along z) screws to the turn's own angles, each divided by the screw's turn per unit;
+    /// under a plate and over a floor it slides up and down by the gaps.
+    #[test]
+    fn a_bar_slides_and_screws_to_the_closed_forms() {
+        let (driver, follower) = bar_and_posts();
+        let screw = Screw {
+            spin: 0.05,
+            slide: 0.7,
+        };
+        let f = free_along(&Still, &driver, &follower, 2, &[(screw, 4.0)]).unwrap();
+        let [plus, minus] = bar_between_posts_turns();
+        assert!(
+            (f[0].plus[0] - plus / 0.05).abs() < 1e-9,
+            "{}",
+            f[0].plus[0]
+        );
+        assert!(
+            (f[0].minus[0] - minus / 0.05).abs() < 1e-9,
+            "{}",
+            f[0].minus[0]
+        );
+
+        let bar = cuboid([0.0, -0.5, -1.0], [20.0, 0.5, 1.0]);
+        let plates = joined(&[
+            cuboid([-30.0, -30.0, 1.5], [30.0, 30.0, 2.5]),
+            cuboid([-30.0, -30.0, -3.0], [30.0, 30.0, -2.0]),
+        ]);
+        let driver = Solid::new(&plates, "driver").unwrap();
+        let follower = Solid::new(&bar, "follower").unwrap();
+        let f = free_along(&Still, &driver, &follower, 2, &[(Screw::SLIDE, 3.0)]).unwrap();
+        assert!((f[0].plus[0] - 0.5).abs() < 1e-12, "{}", f[0].plus[0]);
+        assert!((f[0].minus[0] - 1.0).abs() < 1e-12, "{}", f[0].minus[0]);
+        // Sideways the plates are flush with nothing: the turn is free up to the cap.
+        let f = free_along(&Still, &driver, &follower, 2, &[(Screw::TURN, 0.3)]).unwrap();
+        assert_eq!([f[0].plus[0], f[0].minus[0]], [0.3, 0.3]);
+    }
+
+    /// Guards the helix–plane solution: a rise against a horizontal face (linear), a turn
+    /// against a vertical one through a screw's sine, and a path that meets one plane twice
+    /// (its value turns back between the crossings, where the pieces are cut).
+    #[test]
+    fn a_helix_crosses_a_plane_where_its_closed_form_says() {
+        let p = Point3::new(10.0, 0.0, 0.0);
+        let hits_of = |c: [Point3<f64>; 3], screw: Screw, limit: f64| {
+            let mut hits = Vec::new();
+            crossings(
+                &p,
+                &Plane::of(&c).unwrap(),
+                &c,
+                &Limit::new(screw, limit),
+                |s, enters| hits.push((s, enters)),
+            );
+            hits
+        };
+        // The part above z = 1 (its face's normal is −z).
+        let roof = [
+            Point3::new(-40.0, -40.0, 1.0),
+            Point3::new(-40.0, 60.0, 1.0),
+            Point3::new(60.0, -40.0, 1.0),
+        ];
+        let hits = hits_of(
+            roof,
+            Screw {
+                spin: 0.1,
+                slide: 1.0,
+            },
+            2.0,
+        );
+        assert_eq!(hits.len(), 1);
+        assert!((hits[0].0 - 1.0).abs() < 1e-15 && hits[0].1, "{hits:?}");
+        // The part beyond y = 3: 10 sin(0.5 s) = 3.
+        let wall = [
+            Point3::new(0.0, 3.0, -50.0),
+            Point3::new(40.0, 3.0, -50.0),
+            Point3::new(0.0, 3.0, 100.0),
+        ];
+        let hits = hits_of(
+            wall,
+            Screw {
+                spin: 0.5,
+                slide: 2.0,
+            },
+            1.0,
+        );
+        assert_eq!(hits.len(), 1);
+        let want = 2.0 * 0.3f64.asin();
+        assert!((hits[0].0 - want).abs() < 1e-14 && hits[0].1, "{hits:?}");
+        // The part short of x = 9.99: the point's x, 10 cos(0.2 s), dips under it, so it
+        // leaves the part as s grows to −root and enters it again at +root.
+        let near = [
+            Point3::new(9.99, -40.0, -60.0),
+            Point3::new(9.99, 60.0, -60.0),
+            Point3::new(9.99, -40.0, 60.0),
+        ];
+        let hits = hits_of(
+            near,
+            Screw {
+                spin: 0.2,
+                slide: 1.0,
+            },
+            1.0,
+        );
+        let root = 0.999f64.acos() / 0.2;
+        assert_eq!(hits.len(), 2, "{hits:?}");
+        assert!((hits[0].0 + root).abs() < 1e-12 && !hits[0].1, "{hits:?}");
+        assert!((hits[1].0 - root).abs() < 1e-12 && hits[1].1, "{hits:?}");
+        // A path in the plane of a face slides along it.
+        let flush = [
+            Point3::new(-20.0, -20.0, 0.0),
+            Point3::new(20.0, -20.0, 0.0),
+            Point3::new(-20.0, 20.0, 0.0),
+        ];
+        assert!(hits_of(
+            flush,
+            Screw {
+                spin: 0.3,
+                slide: 0.0
+            },
+            1.0
+        )
+        .is_empty());
+    }
+
     /// Guards the circle–plane solution and the sense of a crossing: a point at (10, 0, 0)
     /// turned about z meets the plane y = 3 at β = asin(0.3), entering the part above
     /// it as β grows, and the plane y = −3 at β = −asin(0.3), where as β grows it leaves
@@ -941,7 +1402,7 @@ mod tests {
     #[test]
     fn a_circle_crosses_a_plane_where_its_sine_says() {
         let p = Point3::new(10.0, 0.0, 0.0);
-        let lim = Limit::new(0.5);
+        let lim = Limit::new(Screw::TURN, 0.5);
         let above = [
             Point3::new(0.0, 3.0, -5.0),
             Point3::new(20.0, 3.0, -5.0),
@@ -973,7 +1434,9 @@ mod tests {
         );
         // Beyond the limit, nothing.
         let mut hits = 0;
-        crossings(&p, &plane, &below, &Limit::new(0.2), |_, _| hits += 1);
+        crossings(&p, &plane, &below, &Limit::new(Screw::TURN, 0.2), |_, _| {
+            hits += 1
+        });
         assert_eq!(hits, 0);
     }
 
@@ -1082,8 +1545,14 @@ mod tests {
 
     /// Every vertex of each part against every face of the other with the same circle–
     /// plane crossings, no bins, clusters or limits: the reference for the shortcuts.
-    fn every_pair(driver: &Solid, follower: &Solid, n: usize, cap: f64) -> Vec<[f64; 2]> {
-        let lim = Limit::new(cap);
+    fn every_pair(
+        driver: &Solid,
+        follower: &Solid,
+        n: usize,
+        screw: Screw,
+        cap: f64,
+    ) -> Vec<[f64; 2]> {
+        let lim = Limit::new(screw, cap);
         let faces = |s: &Solid, place: &dyn Fn(&Point3<f64>) -> Point3<f64>| {
             s.tris
                 .iter()
@@ -1111,7 +1580,8 @@ mod tests {
                     if f.maybe_inside() && driver.signed(&to_f.inverse_transform_point(v)) < 0.0 {
                         continue;
                     }
-                    best = [best[0].min(f.free()[0]), best[1].min(f.free()[1])];
+                    let free = f.free(&lim);
+                    best = [best[0].min(free[0]), best[1].min(free[1])];
                 }
                 let follower_faces = faces(follower, &|p| *p);
                 for w in &driver.verts {
@@ -1120,7 +1590,8 @@ mod tests {
                     if f.maybe_inside() && follower.signed(&p) < 0.0 {
                         continue;
                     }
-                    best = [best[0].min(f.free()[1]), best[1].min(f.free()[0])];
+                    let free = f.free(&lim);
+                    best = [best[0].min(free[1]), best[1].min(free[0])];
                 }
                 best
             })
@@ -1142,24 +1613,63 @@ mod tests {
         )
     }
 
+    /// [`swing_parts`] with one more driver sphere, which passes 0.3 mm over the
+    /// follower's sphere and 1.2 mm over the end of its bar: contacts along z.
+    fn stacked_parts() -> (Solid, Solid) {
+        let follower: Mesh = joined(&[
+            cuboid([0.0, -0.6, -0.6], [18.0, 0.6, 0.6]),
+            uv_sphere([18.0, 0.0, 0.0], 1.5, 24, 12),
+        ]);
+        let driver: Mesh = joined(&[
+            uv_sphere([-7.5, 0.0, 0.0], 1.5, 24, 12),
+            uv_sphere([0.0, 7.5, 0.0], 1.5, 24, 12),
+            uv_sphere([0.0, -12.0, 2.8], 1.0, 24, 12),
+        ]);
+        (
+            Solid::new(&driver, "driver").unwrap(),
+            Solid::new(&follower, "follower").unwrap(),
+        )
+    }
+
     /// Guards the shortcuts (clusters skipped by carried bounds, vertices and faces by
-    /// their offsets, the bins and their windows of angles, the search limit carried from
-    /// the last time and widened when reached): on two parts in motion the free turns are
-    /// those of every vertex against every face, to the last bit.
+    /// their offsets, the bins and their windows of angles and heights, the paths' boxes,
+    /// the search limit carried from the last time and widened when reached): on two parts
+    /// in motion the free turns, slides and screws are those of every vertex against every
+    /// face, to the last bit.
     #[test]
-    fn the_shortcuts_find_the_same_free_turns_as_every_pair() {
-        let (driver, follower) = swing_parts();
-        let (n, cap) = (96, 0.3);
-        let fast = free_turns(&Swing, &driver, &follower, n, cap).unwrap();
-        let slow = every_pair(&driver, &follower, n, cap);
-        let mut touching = 0;
-        for (i, want) in slow.iter().enumerate() {
-            assert_eq!([fast.plus[i], fast.minus[i]], *want, "sample {i}");
-            touching += want.iter().filter(|&&f| f < cap).count();
+    fn the_shortcuts_find_the_same_free_motions_as_every_pair() {
+        let (driver, follower) = stacked_parts();
+        let n = 96;
+        let lines = [
+            (Screw::TURN, 0.3),
+            (Screw::SLIDE, 3.0),
+            (
+                Screw {
+                    spin: -0.04,
+                    slide: 0.7,
+                },
+                3.0,
+            ),
+        ];
+        let fast = free_along(&Swing, &driver, &follower, n, &lines).unwrap();
+        for (k, &(screw, cap)) in lines.iter().enumerate() {
+            let slow = every_pair(&driver, &follower, n, screw, cap);
+            let mut touching = 0;
+            for (i, want) in slow.iter().enumerate() {
+                assert_eq!(
+                    [fast[k].plus[i], fast[k].minus[i]],
+                    *want,
+                    "{screw:?}, sample {i}"
+                );
+                touching += want.iter().filter(|&&f| f < cap).count();
+            }
+            // The case exercises contacts, not only free motions.
+            assert!(
+                touching > 6 && touching < 2 * n - 6,
+                "{screw:?}: {touching}"
+            );
+            assert_eq!(fast[k].overlap_mm, 0.0);
         }
-        // The case exercises contacts, not only free turns.
-        assert!(touching > 6 && touching < 2 * n - 6, "{touching}");
-        assert_eq!(fast.overlap_mm, 0.0);
     }
 
     /// Guards determinism: the period split into runs for one thread or for several gives

@@ -488,7 +488,7 @@ impl Screw {
 
     /// How far a point at distance `r` from the axis moves per unit of the parameter, mm
     /// (exactly `|spin|·r` for a turn, so a turn traces as it always did).
-    fn lever(&self, r: f64) -> f64 {
+    pub(crate) fn lever(&self, r: f64) -> f64 {
         if self.slide == 0.0 {
             self.spin.abs() * r
         } else {
