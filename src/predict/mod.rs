@@ -3,15 +3,16 @@
 //! Owns [`predict`] and [`Prediction`]. From a mechanism and the meshes `mpc-rig build`
 //! wrote for it, at every one of n driver angles (default [`DEFAULT_SAMPLES`]) it finds how
 //! far the follower can turn from its design pose either way before the printed parts
-//! touch ([`crossings`] for a follower that only turns, [`play`] for one that also
-//! slides), then where a quasi-static load leaves it driven forward and in reverse
+//! touch (exactly by [`crossings`], for any follower moving about R's z axis; [`play`]'s
+//! tracer would take one whose axis moved), then where a quasi-static load leaves it
+//! driven forward and in reverse
 //! ([`law`]). Where the free turn exceeds [`DRIVE_LOST_DEG`] the driver no longer holds the
 //! follower: the instant is reported as `drive_lost`, the paper's dynamic form closure
 //! failing on the parts as printed.
 //!
 //! It handles 1R mechanisms under a drag (friction that opposes motion, the default), a
 //! constant torque or a spring ([`law::Load`]), and 1R1T mechanisms under a drag. A 1R1T
-//! follower turns and slides, so its play is traced along eight rays of the plane of its
+//! follower turns and slides, so its play is found along eight rays of the plane of its
 //! two deviations (a turn, a slide and the screws between them, weighed by
 //! [`SCREW_LEVER_MM`]), and the drag moves it within the region they outline. The
 //! spherical joint (3R) is issue 15's next step, and [`predict`] says so instead of
@@ -575,13 +576,13 @@ pub fn predict(
     let kin = Kinematics::new(mech, built.scale_mm)?;
     // Each part is read and prepared on its own thread: reading the STL and building
     // parry's BVH are serial inside. On the demo's parts `simulate` went from 55.6 to
-    // 48.4 s wall (2026-12-05). The distance grids are made here too where they will be
-    // asked: the follower's always, the driver's only for the tracer (a 1R1T follower);
-    // so the 1R driver, the larger mesh, is the part without one.
+    // 48.4 s wall (2026-12-05). The follower's distance grid is made here too, the one
+    // `crossings` asks; the driver, the larger mesh, gets none (the tracer, needed only
+    // for a follower whose axis moves, makes both itself).
     let load = |part: &str| -> Result<Solid, PredictError> {
         let mesh = read_stl(&parts_dir.join(format!("{part}.stl")))?;
         let solid = Solid::new(&mesh, part)?;
-        if part == "follower" || slides {
+        if part == "follower" {
             solid.prepare_bounds();
         }
         Ok(solid)
@@ -595,17 +596,10 @@ pub fn predict(
         vec![(Screw::TURN, FREE_CAP_DEG.to_radians())]
     };
     let started = Instant::now();
-    // A follower that only turns has its turns found exactly by `crossings`; the tracer
-    // takes the screws of a 1R1T one.
-    let turns = if slides {
-        None
-    } else {
-        crossings::free_turns(&PartsMotion(&kin), &driver, &follower, n, motions[0].1)
-    };
-    let lines = match turns {
-        Some(turns) => vec![turns],
-        None => free_along(&PartsMotion(&kin), &driver, &follower, n, &motions),
-    };
+    // A follower moving about R's z axis has its free motions found exactly by
+    // `crossings`; the tracer takes any other.
+    let lines = crossings::free_along(&PartsMotion(&kin), &driver, &follower, n, &motions)
+        .unwrap_or_else(|| free_along(&PartsMotion(&kin), &driver, &follower, n, &motions));
     let seconds = started.elapsed().as_secs_f64();
     let free = &lines[0];
 
