@@ -34,9 +34,10 @@
 //!
 //! A test holds these against a plain trace of every vertex.
 //!
-//! `predict` uses it for a 1R1T follower's turn, slide and screws. A follower that only
-//! turns (1R) has its free turns found exactly by [`crossings`](super::crossings), which
-//! shares [`Solid`] but not the trace.
+//! `predict` finds every free motion of a follower that moves about R's z axis (1R and
+//! 1R1T, so every class it takes today) exactly by [`crossings`](super::crossings), which
+//! shares [`Solid`] and [`Screw`] but not the trace; the trace is kept for a follower
+//! whose design pose moves its axis, which the crossings refuse.
 //!
 //! Exact distances are parry3d-f64's point–mesh projections with pseudo-normals (inside or
 //! outside), the same queries the build's check uses. The module does not know the target
