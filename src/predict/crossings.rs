@@ -233,12 +233,13 @@ fn path_meets(theta: f64, z: f64, lim: &Limit, lo: f64, span: f64, z_lo: f64, z_
             return false;
         }
     }
-    // The box's angles from the point's: [d, d + span], or that less a full turn.
+    // The box's angles from the point's: [d, d + span] and its copies a turn either way
+    // (the path turns by less than π each way; its limit is a fraction of a turn).
     let d = wrap(lo - theta);
     if om == 0.0 {
-        return d <= 0.0 && d + span >= 0.0 || d - TAU + span >= 0.0;
+        return (d <= 0.0 && d + span >= 0.0) || d - TAU + span >= 0.0;
     }
-    [d, d - TAU].into_iter().any(|d| {
+    [d + TAU, d, d - TAU].into_iter().any(|d| {
         let (s1, s2) = (d / om, (d + span) / om);
         a.max(s1.min(s2)) <= b.min(s1.max(s2))
     })
@@ -598,6 +599,8 @@ struct Limit {
 impl Limit {
     fn new(screw: Screw, limit: f64) -> Limit {
         let turn = screw.spin.abs() * limit;
+        // The windows of angles, the paths' boxes and the screws' cuts assume less.
+        debug_assert!(turn < PI, "a search limit of {turn} rad of turn");
         Limit {
             screw,
             limit,
@@ -766,7 +769,8 @@ fn screw_crossings(
     // g at ±limit from the limit's own cosine and sine (ω·limit = ±turn).
     let sin_end = lim.sin.copysign(om);
     let g_end = |sign: f64| u * lim.cos + sign * v * sin_end + sign * k * lim.limit + w;
-    // Where g' = 0: v cos x − u sin x = A cos(x + φ) = −k/ω, with x = ωs.
+    // Where g' = 0: v cos x − u sin x = A cos(x + φ) = −k/ω, with x = ωs: two per turn,
+    // so room for three turns (the lines `predict` asks turn by a fraction of one).
     let mut cuts = [f64::NAN; 8];
     let mut m_cuts = 0;
     if om != 0.0 && a > 0.0 && (k / (om * a)).abs() <= 1.0 {
