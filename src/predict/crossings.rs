@@ -1127,7 +1127,10 @@ impl<'a> Run<'a> {
     fn driver_vertex(&mut self, placed: &Placed, lim: &Limit, t: f64, best: &mut [f64; 2]) {
         let Placed { p, rho, theta } = placed;
         let (p, rho, theta) = (p, *rho, *theta);
-        if rho < ON_AXIS_MM {
+        if rho < ON_AXIS_MM && lim.rise == 0.0 {
+            // On the axis a turn does not move it. A slide does: its polar angle is then
+            // meaningless, but the only faces it can meet span the whole circle, which
+            // every window holds.
             return;
         }
         let bins = self.bins;
@@ -1311,6 +1314,20 @@ mod tests {
         // Sideways the plates are flush with nothing: the turn is free up to the cap.
         let f = free_along(&Still, &driver, &follower, 2, &[(Screw::TURN, 0.3)]).unwrap();
         assert_eq!([f[0].plus[0], f[0].minus[0]], [0.3, 0.3]);
+    }
+
+    /// Guards a vertex on the axis: a turn leaves it where it is, a slide does not. The
+    /// driver sphere's pole, on the axis 0.5 mm under the follower's plate, stops the
+    /// plate's slide down there, before the ring of vertices below the pole would.
+    #[test]
+    fn a_vertex_on_the_axis_stops_a_slide() {
+        let plate = cuboid([-5.0, -5.0, 2.0], [5.0, 5.0, 3.0]);
+        let ball = uv_sphere([0.0, 0.0, 0.0], 1.5, 24, 12);
+        let driver = Solid::new(&ball, "driver").unwrap();
+        let follower = Solid::new(&plate, "follower").unwrap();
+        let f = free_along(&Still, &driver, &follower, 2, &[(Screw::SLIDE, 3.0)]).unwrap();
+        assert!((f[0].minus[0] - 0.5).abs() < 1e-12, "{}", f[0].minus[0]);
+        assert_eq!(f[0].plus[0], 3.0);
     }
 
     /// Guards the helix–plane solution: a rise against a horizontal face (linear), a turn
