@@ -586,14 +586,13 @@ struct Limit {
     /// The largest turn and rise within the limit: |spin|·limit rad, |slide|·limit mm.
     turn: f64,
     rise: f64,
-    /// 1 − cos(turn) and sin(turn): how far the turning part of a plane's value can change
-    /// along the path.
-    one_minus_cos: f64,
+    /// cos(turn) and sin(turn): how far the turning part of a plane's value can change
+    /// along the path ([`Limit::turning_reach`]), and a screw's path at its ends (±limit)
+    /// without another sine or cosine.
+    cos: f64,
     sin: f64,
     /// tan(turn / 2): the largest root taken by a pure turn's quadratic.
     tau: f64,
-    /// cos(turn): a screw's path at its ends (±limit) needs no other sine or cosine.
-    cos: f64,
 }
 
 impl Limit {
@@ -606,10 +605,20 @@ impl Limit {
             limit,
             turn,
             rise: screw.slide.abs() * limit,
-            one_minus_cos: 1.0 - turn.cos(),
+            cos: turn.cos(),
             sin: turn.sin(),
             tau: (turn / 2.0).tan(),
-            cos: turn.cos(),
+        }
+    }
+
+    /// How far u cos β + v sin β can move from its value at β = 0 over the turns within
+    /// the limit: |u|(1 − cos) + |v| sin while they stay within a quarter turn, the whole
+    /// swing 2·|(u, v)| beyond.
+    fn turning_reach(&self, u: f64, v: f64) -> f64 {
+        if self.turn <= std::f64::consts::FRAC_PI_2 {
+            u.abs() * (1.0 - self.cos) + v.abs() * self.sin
+        } else {
+            2.0 * u.hypot(v)
         }
     }
 
@@ -674,7 +683,7 @@ fn turn_crossings(
     let n = &plane.n;
     let (u, v, w) = plane_terms(p, plane);
     let at_zero = u + w;
-    if at_zero.abs() > u.abs() * lim.one_minus_cos + v.abs() * lim.sin + 1e-12 {
+    if at_zero.abs() > lim.turning_reach(u, v) + 1e-12 {
         return;
     }
     // With τ = tan(β/2): (w − u) τ² + 2 v τ + (u + w) = 0.
@@ -734,14 +743,8 @@ fn screw_crossings(
         return;
     }
     let at_zero = u + w;
-    // Along the path the turning part changes by at most this (for turns within a quarter
-    // turn) and the rising part by |k| per unit.
-    let turning = if lim.turn <= std::f64::consts::FRAC_PI_2 {
-        u.abs() * lim.one_minus_cos + v.abs() * lim.sin
-    } else {
-        2.0 * u.hypot(v)
-    };
-    if at_zero.abs() > turning + k.abs() * lim.limit + 1e-12 {
+    // Along the path the rising part changes by |k| per unit.
+    if at_zero.abs() > lim.turning_reach(u, v) + k.abs() * lim.limit + 1e-12 {
         return;
     }
     // Closer: g(s) lies within ω²A·s²/2 of its tangent at 0 (|g''| ≤ ω²A, A = |(u, v)|),
