@@ -1,7 +1,7 @@
 //! The free motions of a follower about its joint axis (1R: turns; 1R1T: turns, slides and
 //! the screws between), from where each vertex's path crosses the other part's faces.
 //!
-//! Owns [`free_along`] (and [`free_turns`], its 1R case), the counterpart of
+//! Owns [`free_along`], the counterpart of
 //! [`play::free_along`](super::play::free_along) that `predict` uses whenever the follower
 //! moves about R's z axis. It answers the same question (how far the follower can move from
 //! its design pose along a screw about that axis, either way, before a vertex of one part
@@ -80,18 +80,6 @@ const RETRY_GROWTH: f64 = 4.0;
 /// Runs of consecutive times per thread: each run starts without carried bounds, so a few
 /// per thread balance the load at little cost.
 const RUNS_PER_THREAD: usize = 4;
-
-/// The free turns of the follower at `n` times per period, each capped at `cap` rad, or
-/// `None` when the follower's design motion is not about R's z axis (use the tracer).
-pub fn free_turns(
-    motion: &dyn PartMotion,
-    driver: &Solid,
-    follower: &Solid,
-    n: usize,
-    cap: f64,
-) -> Option<FreeTurns> {
-    free_along(motion, driver, follower, n, &[(Screw::TURN, cap)]).map(|mut lines| lines.remove(0))
-}
 
 /// The free motions of the follower along each of `lines` (a screw about R's z axis and
 /// its cap, in the screw's unit) at `n` times per period, one [`FreeTurns`] per line in
@@ -1243,6 +1231,19 @@ mod tests {
         Swing,
     };
 
+    /// [`free_along`] for a turn alone: the free turns at `n` times, each capped at `cap`
+    /// rad.
+    fn free_turns(
+        motion: &dyn PartMotion,
+        driver: &Solid,
+        follower: &Solid,
+        n: usize,
+        cap: f64,
+    ) -> Option<FreeTurns> {
+        free_along(motion, driver, follower, n, &[(Screw::TURN, cap)])
+            .map(|mut lines| lines.remove(0))
+    }
+
     fn bar_and_posts() -> (Solid, Solid) {
         let (posts, bar) = bar_between_posts();
         (
@@ -1477,7 +1478,7 @@ mod tests {
         let f = free_turns(&Still, &driver, &follower, 2, 0.3).unwrap();
         assert_eq!(f.plus, vec![0.3; 2]);
         assert_eq!(f.minus, vec![0.3; 2]);
-        let traced = crate::predict::play::free_turns(&Still, &driver, &follower, 2, 0.3);
+        let traced = crate::predict::play::tests::free_turns(&Still, &driver, &follower, 2, 0.3);
         assert!(
             traced.plus[0] < 1e-6,
             "the tracer stops at once: {}",

@@ -5,9 +5,9 @@
 //! allows: a turn about its axis, R's z axis, a slide along it, or both at once) and
 //! [`free_along`], which answers, for every sample time of a period and each sense of each
 //! given screw, the largest motion δ ≤ a cap from the design pose that leaves the two
-//! meshes apart ([`free_turns`] for a turn alone). Both ways are tested: every follower vertex against the driver's mesh and every
-//! driver vertex against the follower's, so an edge of either part that would cut into a
-//! face of the other is seen.
+//! meshes apart. Both ways are tested: every follower vertex against the driver's mesh
+//! and every driver vertex against the follower's, so an edge of either part that would
+//! cut into a face of the other is seen.
 //!
 //! A vertex is *sphere-traced* along its path: at δ its distance d to the other mesh is a
 //! ball it cannot leave before the motion advances d / r more (r how far the vertex moves
@@ -435,7 +435,7 @@ fn normal_cones(mesh: &Mesh) -> Vec<NormalCone> {
         .collect()
 }
 
-/// The parts' design motion, as [`free_turns`] needs it: poses of both frames in R (the
+/// The parts' design motion, as [`free_along`] needs it: poses of both frames in R (the
 /// follower's joint axis is R's z axis) and bounds on how fast a point of one part moves
 /// as seen from the other, and how far from the axis it can be.
 pub trait PartMotion: Sync {
@@ -545,20 +545,6 @@ struct Sweep {
     free: Vec<f64>,
     overlap: (f64, f64),
     queries: u64,
-}
-
-/// Free turns of the follower about R's z axis at `n` times per period, each capped at
-/// `cap` rad.
-pub fn free_turns(
-    motion: &dyn PartMotion,
-    driver: &Solid,
-    follower: &Solid,
-    n: usize,
-    cap: f64,
-) -> FreeTurns {
-    free_along(motion, driver, follower, n, &[(Screw::TURN, cap)])
-        .pop()
-        .expect("one motion in, one out")
 }
 
 /// How far the follower is free to move along each of `motions` (a [`Screw`] and the cap
@@ -865,6 +851,20 @@ fn trace(
 pub(crate) mod tests {
     use super::*;
     use crate::geometry::primitive_meshes::cuboid;
+
+    /// [`free_along`] for a turn alone: the free turns about R's z axis at `n` times per
+    /// period, each capped at `cap` rad.
+    pub(crate) fn free_turns(
+        motion: &dyn PartMotion,
+        driver: &Solid,
+        follower: &Solid,
+        n: usize,
+        cap: f64,
+    ) -> FreeTurns {
+        free_along(motion, driver, follower, n, &[(Screw::TURN, cap)])
+            .pop()
+            .expect("one motion in, one out")
+    }
 
     /// A fixed driver (identity pose) and a follower turning about z; speeds and reach
     /// from the boxes' sizes.
