@@ -1227,8 +1227,8 @@ mod tests {
     use crate::geometry::mesh::Mesh;
     use crate::geometry::primitive_meshes::{cuboid, uv_sphere};
     use crate::predict::play::tests::{
-        bar_between_posts, bar_between_posts_turns, joined, pin_by_a_bar, pin_by_a_bar_turn, Still,
-        Swing,
+        bar_between_plates, bar_between_posts, bar_between_posts_turns, joined, pin_by_a_bar,
+        pin_by_a_bar_turn, Still, Swing,
     };
 
     /// [`free_along`] for a turn alone: the free turns at `n` times, each capped at `cap`
@@ -1284,7 +1284,8 @@ mod tests {
 
     /// Guards slides and screws against closed forms: the bar between the posts (prisms
     /// along z) screws to the turn's own angles, each divided by the screw's turn per unit;
-    /// under a plate and over a floor it slides up and down by the gaps.
+    /// between two plates it slides and screws up and down by the gaps over the slide per
+    /// unit, exactly where the tracer's test allows its `HIT_MM`.
     #[test]
     fn a_bar_slides_and_screws_to_the_closed_forms() {
         let (driver, follower) = bar_and_posts();
@@ -1305,16 +1306,29 @@ mod tests {
             f[0].minus[0]
         );
 
-        let bar = cuboid([0.0, -0.5, -1.0], [20.0, 0.5, 1.0]);
-        let plates = joined(&[
-            cuboid([-30.0, -30.0, 1.5], [30.0, 30.0, 2.5]),
-            cuboid([-30.0, -30.0, -3.0], [30.0, 30.0, -2.0]),
-        ]);
+        let (plates, bar) = bar_between_plates();
         let driver = Solid::new(&plates, "driver").unwrap();
         let follower = Solid::new(&bar, "follower").unwrap();
-        let f = free_along(&Still, &driver, &follower, 2, &[(Screw::SLIDE, 3.0)]).unwrap();
+        let screw = Screw {
+            spin: 0.02,
+            slide: 0.8,
+        };
+        let f = free_along(
+            &Still,
+            &driver,
+            &follower,
+            2,
+            &[(Screw::SLIDE, 3.0), (screw, 3.0)],
+        )
+        .unwrap();
         assert!((f[0].plus[0] - 0.5).abs() < 1e-12, "{}", f[0].plus[0]);
-        assert!((f[0].minus[0] - 1.0).abs() < 1e-12, "{}", f[0].minus[0]);
+        assert!((f[0].minus[0] - 1.5).abs() < 1e-12, "{}", f[0].minus[0]);
+        assert!((f[1].plus[0] - 0.5 / 0.8).abs() < 1e-12, "{}", f[1].plus[0]);
+        assert!(
+            (f[1].minus[0] - 1.5 / 0.8).abs() < 1e-12,
+            "{}",
+            f[1].minus[0]
+        );
         // Sideways the plates are flush with nothing: the turn is free up to the cap.
         let f = free_along(&Still, &driver, &follower, 2, &[(Screw::TURN, 0.3)]).unwrap();
         assert_eq!([f[0].plus[0], f[0].minus[0]], [0.3, 0.3]);

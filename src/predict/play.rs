@@ -920,18 +920,26 @@ pub(crate) mod tests {
         assert_eq!(f.overlap_mm, 0.0);
     }
 
-    /// Guards the slide and the screw against closed forms: a bar (faces at z = ±1) between
-    /// two wide plates whose faces are at z = 1.5 and z = −2.5 slides 0.5 mm up and 1.5 mm
-    /// down; screwing (a turn of 0.02 rad and a slide of 0.8 mm per unit) it meets the same
-    /// faces after 0.5 / 0.8 units up and 1.5 / 0.8 down, since the plates cover every turn
-    /// (each within the trace's `HIT_MM`, which is HIT_MM / 0.8 units of the screw).
-    #[test]
-    fn a_bar_between_two_plates_slides_and_screws_to_the_closed_form() {
+    /// The thin bar of [`bar_between_posts`] between two wide plates whose faces are at
+    /// z = 1.5 and z = −2.5: (plates, bar). It slides 0.5 mm up and 1.5 mm down; along a
+    /// screw it meets the same faces after as many units as its slide per unit takes there,
+    /// since the plates cover every turn.
+    pub(crate) fn bar_between_plates() -> (Mesh, Mesh) {
         let bar = cuboid([0.0, -0.5, -1.0], [20.0, 0.5, 1.0]);
         let plates = joined(&[
             cuboid([-30.0, -30.0, 1.5], [30.0, 30.0, 3.0]),
             cuboid([-30.0, -30.0, -4.0], [30.0, 30.0, -2.5]),
         ]);
+        (plates, bar)
+    }
+
+    /// Guards the slide and the screw against closed forms ([`bar_between_plates`]): the
+    /// bar slides 0.5 mm up and 1.5 mm down; screwing (a turn of 0.02 rad and a slide of
+    /// 0.8 mm per unit) it meets the same faces after 0.5 / 0.8 units up and 1.5 / 0.8 down
+    /// (each within the trace's `HIT_MM`, which is HIT_MM / 0.8 units of the screw).
+    #[test]
+    fn a_bar_between_two_plates_slides_and_screws_to_the_closed_form() {
+        let (plates, bar) = bar_between_plates();
         let driver = Solid::new(&plates, "driver").unwrap();
         let follower = Solid::new(&bar, "follower").unwrap();
         let screw = Screw {
