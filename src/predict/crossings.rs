@@ -32,9 +32,16 @@
 //!   exact distance query decides, and a vertex inside is not counted (it would lock the
 //!   follower where the meshes already overlap) but reported as overlap, as the tracer does.
 //! - Only the driver's clusters near the follower are looked at, by the same carried lower
-//!   bounds the tracer uses (`Solid`'s coarse grid, the cluster's last distance and the
-//!   parts' speed bound), and within them only vertices and faces whose own bound leaves
-//!   them within reach of the search limit.
+//!   bounds the tracer uses (`Solid`'s distance grid, the cluster's last bound and the
+//!   parts' speed bound), and within them only vertices and faces whose own bounds leave
+//!   them within reach of the search limit: first their offset from the cluster's centre,
+//!   then the grid's bound at each vertex (a face's, from its corners' less its edges)
+//!   against the length of its own path. No mesh query is asked to choose them.
+//! - Each way has its own limit. At each time the elements that decided the last time's
+//!   free motions are looked at first (`Run::seeds`): what they allow now bounds each way
+//!   from above, and the whole pass then looks only within that bound, each way's polar
+//!   angles cut to its own. The pass still meets every element that could cross sooner,
+//!   so the free motions are the same as with one wide limit, to the last bit.
 //!
 //! Edge-against-edge contacts are not tested, as in the tracer.
 //!
@@ -566,11 +573,17 @@ fn starts(sorted_bins: impl Iterator<Item = usize>, bins: usize) -> Vec<u32> {
 }
 
 /// The search limit of one pass: the follower's motion `screw` by a parameter s with
-/// |s| ≤ `limit` (rad for a turn, mm for a slide, the screw's own unit otherwise).
+/// −`ways[1]` ≤ s ≤ `ways[0]` (rad for a turn, mm for a slide, the screw's own unit
+/// otherwise). The roots and bounds take the larger of the two both ways (`limit`); only
+/// the windows of polar angles are cut to each way's own.
 #[derive(Clone, Copy, Debug)]
 struct Limit {
     screw: Screw,
     limit: f64,
+    /// How far a follower point's polar angle can grow (`up`) and fall (`down`) within the
+    /// limits each way, rad.
+    up: f64,
+    down: f64,
     /// The largest turn and rise within the limit: |spin|·limit rad, |slide|·limit mm.
     turn: f64,
     rise: f64,
@@ -584,13 +597,22 @@ struct Limit {
 }
 
 impl Limit {
-    fn new(screw: Screw, limit: f64) -> Limit {
+    fn new(screw: Screw, ways: [f64; 2]) -> Limit {
+        let limit = ways[0].max(ways[1]);
         let turn = screw.spin.abs() * limit;
+        let [up, down] = if screw.spin >= 0.0 {
+            ways
+        } else {
+            [ways[1], ways[0]]
+        }
+        .map(|l| screw.spin.abs() * l);
         // The windows of angles, the paths' boxes and the screws' cuts assume less.
         debug_assert!(turn < PI, "a search limit of {turn} rad of turn");
         Limit {
             screw,
             limit,
+            up,
+            down,
             turn,
             rise: screw.slide.abs() * limit,
             cos: turn.cos(),
@@ -869,6 +891,8 @@ struct Firsts {
     first: [f64; 2],
     first_enters: [bool; 2],
     enter: [f64; 2],
+    /// The face (an index into the other part's triangles) of each way's `enter`.
+    by: [u32; 2],
 }
 
 impl Firsts {
@@ -876,9 +900,12 @@ impl Firsts {
         first: [f64::INFINITY; 2],
         first_enters: [true; 2],
         enter: [f64::INFINITY; 2],
+        by: [u32::MAX; 2],
     };
 
-    fn add(&mut self, tau: f64, enters_growing: bool) {
+    /// A crossing at `tau` of the face `by`, entering the face's part if the vertex's own
+    /// motion grows (`enters_growing`).
+    fn add(&mut self, tau: f64, enters_growing: bool, by: u32) {
         let mut side = |k: usize, mag: f64, enters: bool| {
             if mag < self.first[k] - TIE {
                 self.first[k] = mag;
@@ -888,6 +915,7 @@ impl Firsts {
             }
             if enters && mag < self.enter[k] {
                 self.enter[k] = mag;
+                self.by[k] = by;
             }
         };
         if tau >= 0.0 {
@@ -916,6 +944,34 @@ struct Placed {
     p: Point3<f64>,
     rho: f64,
     theta: f64,
+    /// A lower bound on its distance to the follower, mm (`Solid::lower_bound`).
+    far: f64,
+}
+
+/// A lower bound on the distance from the follower to the driver face with these corners:
+/// every point of a triangle lies within its farther edge from each corner.
+fn face_far(c: &[Placed; 3]) -> f64 {
+    (0..3)
+        .map(|k| {
+            let edge = |j: usize| (c[(k + j) % 3].p - c[k].p).norm();
+            c[k].far - edge(1).max(edge(2))
+        })
+        .fold(f64::NEG_INFINITY, f64::max)
+}
+
+/// The largest distance from the z axis of the corners.
+fn max_rho(c: &[Placed; 3]) -> f64 {
+    c[0].rho.max(c[1].rho).max(c[2].rho)
+}
+
+/// The element whose crossing decided a free motion one way.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Decisive {
+    /// A driver vertex (an index into the driver's vertices) against the follower's faces.
+    DriverVertex(u32),
+    /// A follower vertex against the driver face `face` (indices into the follower's
+    /// vertices and the driver's triangles).
+    FollowerVertex { vertex: u32, face: u32 },
 }
 
 /// One run of consecutive times, with what it carries from one to the next.
@@ -944,6 +1000,8 @@ struct Run<'a> {
     pass: u32,
     /// Free turns of the follower per time, [positive sense, negative sense], rad.
     free: Vec<[f64; 2]>,
+    /// The elements that decided the last time's free motions, each way.
+    decisive: [Option<Decisive>; 2],
     queries: u64,
     overlap: (f64, f64),
 }
@@ -983,40 +1041,142 @@ impl<'a> Run<'a> {
             placed: Vec::new(),
             pass: 0,
             free: Vec::new(),
+            decisive: [None; 2],
             queries: 0,
             overlap: (0.0, 0.0),
         }
     }
 
-    /// The free motions at time `t`: searched first within [`GROWTH`] times the larger of
-    /// the last time's plus [`FLOOR_OF_CAP`] of the cap (the whole cap at a run's first
-    /// time), then [`RETRY_GROWTH`] times wider while either reaches the limit, up to the
-    /// cap.
+    /// The free motions at time `t`. Each way is first bounded by the element that decided
+    /// it at the last time ([`Run::seeds`]): a free motion no larger than that element's
+    /// own at this time. Each way is then searched within that bound, or, where there is
+    /// none, within [`GROWTH`] times the larger of the last time's plus [`FLOOR_OF_CAP`] of
+    /// the cap (the whole cap at a run's first time), then [`RETRY_GROWTH`] times wider
+    /// while it reaches its limit, up to the cap.
     fn sample(&mut self, t: f64) {
         let to_f = self.motion.follower(t).inverse() * self.motion.driver(t);
-        let mut limit = match self.free.last() {
+        let guess = match self.free.last() {
             None => self.cap,
             Some(f) => (GROWTH * f[0].max(f[1]) + FLOOR_OF_CAP * self.cap).min(self.cap),
         };
+        let (seeds, by) = self.seeds(t, &to_f, guess);
+        let mut ways = [0, 1].map(|k| seeds[k].min(guess));
+        let bounded = [0, 1].map(|k| seeds[k] <= guess);
         loop {
-            let free = self.pass_at(t, &to_f, limit);
-            if (free[0] < limit && free[1] < limit) || limit >= self.cap {
+            let (free, decided) = self.pass_at(t, &to_f, ways, bounded, by);
+            let open = [0, 1].map(|k| decided[k].is_none() && ways[k] < self.cap);
+            if !open[0] && !open[1] {
                 self.free.push(free);
+                self.decisive = decided;
                 return;
             }
-            limit = (limit * RETRY_GROWTH).min(self.cap);
+            for k in 0..2 {
+                if open[k] {
+                    ways[k] = (ways[k] * RETRY_GROWTH).min(self.cap);
+                }
+            }
         }
     }
 
-    /// One pass at time `t` (driver → F by `to_f`) within `limit`: the free motions, each
-    /// at most `limit`.
-    fn pass_at(&mut self, t: f64, to_f: &Isometry3<f64>, limit: f64) -> [f64; 2] {
-        let lim = Limit::new(self.screw, limit);
+    /// The last time's deciding elements at time `t` (driver → F by `to_f`), each searched
+    /// within `guess` both ways: per way the least free motion they allow and the element
+    /// that allows it (infinite and `None` where none does). The true free motion is no
+    /// larger: the pass meets the same element and finds the same crossing. A driver
+    /// vertex is looked up as in a pass. A follower vertex meets the faces of the driver
+    /// cluster that holds the face it met (which has moved on), not all of the driver's,
+    /// so it counts only when an exact distance puts it outside the driver: with other
+    /// faces it might have left the driver first.
+    fn seeds(
+        &mut self,
+        t: f64,
+        to_f: &Isometry3<f64>,
+        guess: f64,
+    ) -> ([f64; 2], [Option<Decisive>; 2]) {
+        let mut seeds = [f64::INFINITY; 2];
+        let mut by = [None; 2];
+        let elements = self.decisive;
+        if elements.iter().all(Option::is_none) {
+            return (seeds, by);
+        }
+        let lim = Limit::new(self.screw, [guess; 2]);
+        self.pass += 1;
+        self.firsts.clear();
+        self.placed.clear();
+        for (k, element) in elements.iter().enumerate() {
+            let Some(element) = *element else { continue };
+            if k == 1 && elements[0] == Some(element) {
+                continue;
+            }
+            let free = match element {
+                Decisive::DriverVertex(vi) => {
+                    let p = self.place(vi as usize, to_f);
+                    self.driver_vertex(&p, &lim, t)
+                }
+                Decisive::FollowerVertex { vertex, face } => {
+                    // The face has moved on: the vertex meets its cluster's faces.
+                    let clusters = &self.driver.clusters;
+                    let ci = clusters.partition_point(|c| c.tri_end <= face as usize);
+                    let Some(c) = clusters.get(ci) else { continue };
+                    let p = self.follower.verts[vertex as usize];
+                    let mut firsts = Firsts::NONE;
+                    for ti in c.tri_start..c.tri_end {
+                        let corners = self.driver.tris[ti].map(|v| self.place(v as usize, to_f).p);
+                        if let Some(plane) = Plane::of(&corners) {
+                            crossings(&p, &plane, &corners, &lim, |tau, up| {
+                                firsts.add(tau, up, ti as u32)
+                            });
+                        }
+                    }
+                    if !firsts.enter.iter().any(|e| e.is_finite()) {
+                        continue;
+                    }
+                    let free = firsts.free(&lim);
+                    self.queries += 1;
+                    let at = to_f.inverse_transform_point(&p);
+                    if self.driver.signed(&at) < 0.0 {
+                        continue;
+                    }
+                    Some(free)
+                }
+            };
+            for (j, f) in free.into_iter().flatten().enumerate() {
+                if f < seeds[j] {
+                    seeds[j] = f;
+                    by[j] = Some(element);
+                }
+            }
+        }
+        (seeds, by)
+    }
+
+    /// One pass at time `t` (driver → F by `to_f`) within `ways` (the follower's motion's
+    /// limits each way): per way, the free motion (at most its limit) and the element that
+    /// decides it, `None` where none does within the limit. A way that is `bounded` starts
+    /// from its limit as a free motion already met, by the element `by`.
+    fn pass_at(
+        &mut self,
+        t: f64,
+        to_f: &Isometry3<f64>,
+        ways: [f64; 2],
+        bounded: [bool; 2],
+        by: [Option<Decisive>; 2],
+    ) -> ([f64; 2], [Option<Decisive>; 2]) {
+        let lim = Limit::new(self.screw, ways);
+        let limit = lim.limit;
         let screw = self.screw;
         self.pass += 1;
         self.firsts.clear();
         self.placed.clear();
-        let mut best = [limit; 2];
+        let mut best = ways;
+        let mut decided = [0, 1].map(|k| if bounded[k] { by[k] } else { None });
+        let mut improve = |free: [f64; 2], element: Decisive| {
+            for k in 0..2 {
+                if free[k] < best[k] {
+                    best[k] = free[k];
+                    decided[k] = Some(element);
+                }
+            }
+        };
         let driver = self.driver;
         for (ci, c) in driver.clusters.iter().enumerate() {
             let (d_last, t_last) = self.last[ci];
@@ -1028,18 +1188,10 @@ impl<'a> Run<'a> {
             // How far the cluster's points move per unit of the motion, at most.
             let lever = screw.lever(w.coords.xy().norm() + c.tri_radius);
             let within = c.tri_radius + lever * limit;
-            let mut d = self.follower.lower_bound(&w);
+            let d = self.follower.lower_bound(&w);
             if d > within {
                 self.last[ci] = (d, t);
                 continue;
-            }
-            self.queries += 1;
-            match self.follower.signed_within(&w, within) {
-                Some(exact) => d = exact.max(0.0),
-                None => {
-                    self.last[ci] = (within, t);
-                    continue;
-                }
             }
             self.last[ci] = (d, t);
             // Each vertex and face: its distance to the follower is at least the centre's
@@ -1049,13 +1201,22 @@ impl<'a> Run<'a> {
             for vi in c.start..c.end {
                 if near(driver.vert_offset[vi]) {
                     let p = self.place(vi, to_f);
-                    self.driver_vertex(&p, &lim, t, &mut best);
+                    // Its path is no shorter than the distance it must cover.
+                    if p.far > screw.lever(p.rho) * limit {
+                        continue;
+                    }
+                    if let Some(free) = self.driver_vertex(&p, &lim, t) {
+                        improve(free, Decisive::DriverVertex(vi as u32));
+                    }
                 }
             }
             for ti in c.tri_start..c.tri_end {
                 if near(driver.tri_offset[ti]) {
                     let corners = driver.tris[ti].map(|v| self.place(v as usize, to_f));
-                    self.driver_face(&corners, &lim);
+                    if face_far(&corners) > screw.lever(max_rho(&corners)) * limit {
+                        continue;
+                    }
+                    self.driver_face(&corners, &lim, ti as u32);
                 }
             }
         }
@@ -1066,11 +1227,21 @@ impl<'a> Run<'a> {
             let inside = || driver.signed(&to_f.inverse_transform_point(&p));
             // A follower vertex turns with the follower.
             if let Some(free) = self.allowed(&firsts, &lim, inside, t) {
-                best[0] = best[0].min(free[0]);
-                best[1] = best[1].min(free[1]);
+                for k in 0..2 {
+                    let vertex = id as u32;
+                    let mut one = [f64::INFINITY; 2];
+                    one[k] = free[k];
+                    improve(
+                        one,
+                        Decisive::FollowerVertex {
+                            vertex,
+                            face: firsts.by[k],
+                        },
+                    );
+                }
             }
         }
-        best
+        (best, decided)
     }
 
     /// Driver vertex `vi` placed in F by `to_f`, once per pass.
@@ -1084,6 +1255,7 @@ impl<'a> Run<'a> {
             p,
             rho: p.coords.xy().norm(),
             theta: p.y.atan2(p.x),
+            far: self.follower.lower_bound(&p),
         };
         *slot = (self.pass, self.placed.len() as u32);
         self.placed.push(placed);
@@ -1115,14 +1287,14 @@ impl<'a> Run<'a> {
     }
 
     /// A driver vertex placed in F against the follower's faces.
-    fn driver_vertex(&mut self, placed: &Placed, lim: &Limit, t: f64, best: &mut [f64; 2]) {
-        let Placed { p, rho, theta } = placed;
+    fn driver_vertex(&mut self, placed: &Placed, lim: &Limit, t: f64) -> Option<[f64; 2]> {
+        let Placed { p, rho, theta, .. } = placed;
         let (p, rho, theta) = (p, *rho, *theta);
         if rho < ON_AXIS_MM && lim.rise == 0.0 {
             // On the axis a turn does not move it. A slide does: its polar angle is then
             // meaningless, but the only faces it can meet span the whole circle, which
             // every window holds.
-            return;
+            return None;
         }
         let bins = self.bins;
         let follower = self.follower;
@@ -1130,7 +1302,8 @@ impl<'a> Run<'a> {
         let mut against = |bin: usize, z_lo: f64, z_hi: f64| {
             let span = bins.face_span[bin];
             let (rho32, z_lo32, z_hi32) = (rho as f32, z_lo as f32, z_hi as f32);
-            for e in bins.faces_on_arc(bin, theta - lim.turn - span, theta + lim.turn) {
+            // Seen from the follower the driver vertex turns the other way.
+            for e in bins.faces_on_arc(bin, theta - lim.up - span, theta + lim.down) {
                 if !e.holds(rho32, z_lo32, z_hi32) {
                     continue;
                 }
@@ -1152,13 +1325,13 @@ impl<'a> Run<'a> {
                     continue;
                 };
                 let c = follower.tris[id].map(|v| follower.verts[v as usize]);
-                crossings(p, plane, &c, lim, |key, up| firsts.add(key, up));
+                crossings(p, plane, &c, lim, |key, up| firsts.add(key, up, e.id));
             }
         };
         if lim.rise == 0.0 {
             match bins.bin(rho, p.z) {
                 Some(bin) => against(bin, p.z, p.z),
-                None => return,
+                None => return None,
             }
         } else {
             // A slide or screw moves the vertex along z too: every bin of its column within
@@ -1167,14 +1340,12 @@ impl<'a> Run<'a> {
             bins.for_column(rho, z_lo, z_hi, |bin| against(bin, z_lo, z_hi));
         }
         // The follower moving by +s moves a driver vertex, seen from it, by −s.
-        if let Some(free) = self.allowed(&firsts, lim, || follower.signed(p), t) {
-            best[0] = best[0].min(free[1]);
-            best[1] = best[1].min(free[0]);
-        }
+        self.allowed(&firsts, lim, || follower.signed(p), t)
+            .map(|free| [free[1], free[0]])
     }
 
     /// A driver face with corners placed in F against the follower's vertices.
-    fn driver_face(&mut self, corners: &[Placed; 3], lim: &Limit) {
+    fn driver_face(&mut self, corners: &[Placed; 3], lim: &Limit, face_id: u32) {
         let c = &corners.map(|k| k.p);
         let face = Footprint::with(c, corners.map(|k| k.rho), corners.map(|k| k.theta));
         // The bins the follower's vertices can come from: the face's grown by the rise.
@@ -1187,7 +1358,7 @@ impl<'a> Run<'a> {
         let pass = self.pass;
         let (seen, firsts, follower) = (&mut self.seen, &mut self.firsts, self.follower);
         bins.for_bins(&f, |bin| {
-            for e in bins.verts_on_arc(bin, f.lo - lim.turn, f.lo + f.span + lim.turn) {
+            for e in bins.verts_on_arc(bin, f.lo - lim.up, f.lo + f.span + lim.down) {
                 if !f.holds(e.rho, e.z) {
                     continue;
                 }
@@ -1214,7 +1385,7 @@ impl<'a> Run<'a> {
                         *slot = (pass, firsts.len() as u32);
                         firsts.push((id as u32, Firsts::NONE));
                     }
-                    firsts[slot.1 as usize].1.add(tau, up);
+                    firsts[slot.1 as usize].1.add(tau, up, face_id);
                 });
             }
         });
@@ -1280,6 +1451,53 @@ mod tests {
         assert_eq!(f.minus[0], cap);
         let want = pin_by_a_bar_turn();
         assert!((f.plus[0] - want).abs() < 1e-12, "{} vs {want}", f.plus[0]);
+    }
+
+    /// Guards each way's own window of polar angles: with a limit each way between the
+    /// closed-form free turns (the positive one about half the negative), a pass finds each
+    /// way's turn and the element that decides it, on the follower-vertex side (the bar's
+    /// corners against the posts) and on the driver-vertex side (a pin's tip against a
+    /// tooth); a way whose limit is short of its turn is left open at its limit. With the
+    /// windows swapped a way looks only as far as the other's limit and misses its contact.
+    #[test]
+    fn each_way_searches_within_its_own_limit() {
+        let pass = |driver: &Solid, follower: &Solid, ways: [f64; 2]| {
+            let bins = Bins::new(follower);
+            let mut run = Run::new(&Still, driver, follower, &bins, Screw::TURN, 0.5);
+            run.pass_at(0.0, &Isometry3::identity(), ways, [false; 2], [None; 2])
+        };
+        let (driver, follower) = bar_and_posts();
+        let [plus, minus] = bar_between_posts_turns();
+        assert!(plus < 0.6 * minus, "{plus} {minus}");
+        let (free, decided) = pass(&driver, &follower, [1.1 * plus, 1.1 * minus]);
+        assert!((free[0] - plus).abs() < 1e-12, "{}", free[0]);
+        assert!((free[1] - minus).abs() < 1e-12, "{}", free[1]);
+        for way in decided {
+            assert!(
+                matches!(way, Some(Decisive::FollowerVertex { .. })),
+                "{way:?}"
+            );
+        }
+        let (free, decided) = pass(&driver, &follower, [1.1 * plus, 0.9 * minus]);
+        assert!((free[0] - plus).abs() < 1e-12, "{}", free[0]);
+        assert_eq!((free[1], decided[1]), (0.9 * minus, None));
+
+        // A pin of the driver below a tooth of the follower, all of whose faces lie at
+        // larger polar angles than the pin's tip: turning the follower back brings the
+        // tooth's flat underside y = 1 down onto the tip's corner (20.1, 0.5), between the
+        // tooth's own corners, when 20.1 sin δ + 0.5 cos δ = 1.
+        let pin = cuboid([19.9, -8.0, -0.1], [20.1, 0.5, 0.1]);
+        let tooth = cuboid([15.0, 1.0, -5.0], [25.0, 3.0, 5.0]);
+        let driver = Solid::new(&pin, "driver").unwrap();
+        let follower = Solid::new(&tooth, "follower").unwrap();
+        let want = (1.0 / 20.1f64.hypot(0.5)).asin() - 0.5f64.atan2(20.1);
+        let (free, decided) = pass(&driver, &follower, [0.5 * want, 1.1 * want]);
+        assert!((free[1] - want).abs() < 1e-12, "{} vs {want}", free[1]);
+        assert!(
+            matches!(decided[1], Some(Decisive::DriverVertex(_))),
+            "{decided:?}"
+        );
+        assert_eq!((free[0], decided[0]), (0.5 * want, None));
     }
 
     /// Guards slides and screws against closed forms: the bar between the posts (prisms
@@ -1360,7 +1578,7 @@ mod tests {
                 &p,
                 &Plane::of(&c).unwrap(),
                 &c,
-                &Limit::new(screw, limit),
+                &Limit::new(screw, [limit; 2]),
                 |s, enters| hits.push((s, enters)),
             );
             hits
@@ -1441,7 +1659,7 @@ mod tests {
     #[test]
     fn a_circle_crosses_a_plane_where_its_sine_says() {
         let p = Point3::new(10.0, 0.0, 0.0);
-        let lim = Limit::new(Screw::TURN, 0.5);
+        let lim = Limit::new(Screw::TURN, [0.5; 2]);
         let above = [
             Point3::new(0.0, 3.0, -5.0),
             Point3::new(20.0, 3.0, -5.0),
@@ -1473,9 +1691,13 @@ mod tests {
         );
         // Beyond the limit, nothing.
         let mut hits = 0;
-        crossings(&p, &plane, &below, &Limit::new(Screw::TURN, 0.2), |_, _| {
-            hits += 1
-        });
+        crossings(
+            &p,
+            &plane,
+            &below,
+            &Limit::new(Screw::TURN, [0.2; 2]),
+            |_, _| hits += 1,
+        );
         assert_eq!(hits, 0);
     }
 
@@ -1591,7 +1813,7 @@ mod tests {
         screw: Screw,
         cap: f64,
     ) -> Vec<[f64; 2]> {
-        let lim = Limit::new(screw, cap);
+        let lim = Limit::new(screw, [cap; 2]);
         let faces = |s: &Solid, place: &dyn Fn(&Point3<f64>) -> Point3<f64>| {
             s.tris
                 .iter()
@@ -1604,7 +1826,7 @@ mod tests {
         let firsts = |p: &Point3<f64>, faces: &[(Plane, [Point3<f64>; 3])]| {
             let mut f = Firsts::NONE;
             for (plane, c) in faces {
-                crossings(p, plane, c, &lim, |tau, up| f.add(tau, up));
+                crossings(p, plane, c, &lim, |tau, up| f.add(tau, up, 0));
             }
             f
         };
