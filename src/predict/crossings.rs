@@ -109,7 +109,10 @@ pub fn free_along(
     }
     // Only the follower's distance grid is asked (where the driver's clusters are), so
     // the driver's is never made; the follower's is made beside its bins.
-    let (bins, ()) = rayon::join(|| Bins::new(follower), || follower.prepare_bounds());
+    let ((bins, edges), ()) = rayon::join(
+        || rayon::join(|| Bins::new(follower), || longest_edges(driver)),
+        || follower.prepare_bounds(),
+    );
     let runs = (rayon::current_num_threads() * RUNS_PER_THREAD).clamp(1, n.max(1));
     let per_run = n.div_ceil(runs);
     let along = |screw: Screw, cap: f64| {
@@ -118,7 +121,7 @@ pub fn free_along(
         let results: Vec<RunFigures> = (0..runs)
             .into_par_iter()
             .map(|k| {
-                let mut run = Run::new(motion, driver, follower, &bins, screw, cap);
+                let mut run = Run::new(motion, driver, follower, &bins, &edges, screw, cap);
                 for i in (k * per_run)..((k + 1) * per_run).min(n) {
                     run.sample(i as f64 / n as f64);
                 }
@@ -948,15 +951,26 @@ struct Placed {
     far: f64,
 }
 
-/// A lower bound on the distance from the follower to the driver face with these corners:
-/// every point of a triangle lies within its farther edge from each corner.
-fn face_far(c: &[Placed; 3]) -> f64 {
-    (0..3)
-        .map(|k| {
-            let edge = |j: usize| (c[(k + j) % 3].p - c[k].p).norm();
-            c[k].far - edge(1).max(edge(2))
+/// A lower bound on the distance from the follower to the driver face with these corners
+/// and this longest edge: every point of a triangle lies within its longest edge of each
+/// corner.
+fn face_far(c: &[Placed; 3], longest_edge: f32) -> f64 {
+    c[0].far.max(c[1].far).max(c[2].far) - f64::from(longest_edge)
+}
+
+/// Per triangle of `solid`, its longest edge, mm, rounded up to f32.
+fn longest_edges(solid: &Solid) -> Vec<f32> {
+    solid
+        .tris
+        .par_iter()
+        .map(|t| {
+            let c = t.map(|v| solid.verts[v as usize]);
+            let longest = (0..3)
+                .map(|k| (c[(k + 1) % 3] - c[k]).norm())
+                .fold(0.0, f64::max);
+            (longest + F32_SLACK_MM) as f32
         })
-        .fold(f64::NEG_INFINITY, f64::max)
+        .collect()
 }
 
 /// The largest distance from the z axis of the corners.
@@ -980,6 +994,8 @@ struct Run<'a> {
     driver: &'a Solid,
     follower: &'a Solid,
     bins: &'a Bins,
+    /// Per driver triangle, its longest edge ([`longest_edges`]).
+    edges: &'a [f32],
     /// The follower's motion and its cap, in the screw's unit.
     screw: Screw,
     cap: f64,
@@ -1012,6 +1028,7 @@ impl<'a> Run<'a> {
         driver: &'a Solid,
         follower: &'a Solid,
         bins: &'a Bins,
+        edges: &'a [f32],
         screw: Screw,
         cap: f64,
     ) -> Run<'a> {
@@ -1030,6 +1047,7 @@ impl<'a> Run<'a> {
             driver,
             follower,
             bins,
+            edges,
             screw,
             cap,
             speed,
@@ -1213,7 +1231,7 @@ impl<'a> Run<'a> {
             for ti in c.tri_start..c.tri_end {
                 if near(driver.tri_offset[ti]) {
                     let corners = driver.tris[ti].map(|v| self.place(v as usize, to_f));
-                    if face_far(&corners) > screw.lever(max_rho(&corners)) * limit {
+                    if face_far(&corners, self.edges[ti]) > screw.lever(max_rho(&corners)) * limit {
                         continue;
                     }
                     self.driver_face(&corners, &lim, ti as u32);
@@ -1463,7 +1481,8 @@ mod tests {
     fn each_way_searches_within_its_own_limit() {
         let pass = |driver: &Solid, follower: &Solid, ways: [f64; 2]| {
             let bins = Bins::new(follower);
-            let mut run = Run::new(&Still, driver, follower, &bins, Screw::TURN, 0.5);
+            let edges = longest_edges(driver);
+            let mut run = Run::new(&Still, driver, follower, &bins, &edges, Screw::TURN, 0.5);
             run.pass_at(0.0, &Isometry3::identity(), ways, [false; 2], [None; 2])
         };
         let (driver, follower) = bar_and_posts();
