@@ -1069,12 +1069,13 @@ impl<'a> Run<'a> {
     /// it at the last time ([`Run::seeds`]): a free motion no larger than that element's
     /// own at this time. Each way is then searched within that bound, or, where there is
     /// none, within [`GROWTH`] times the larger of the last time's plus [`FLOOR_OF_CAP`] of
-    /// the cap (the whole cap at a run's first time), then [`RETRY_GROWTH`] times wider
-    /// while it reaches its limit, up to the cap.
+    /// the cap (that floor alone at a run's first time), then [`RETRY_GROWTH`] times wider
+    /// while it reaches its limit, up to the cap. A pass costs about in proportion to its
+    /// limit, so a run's first time, from the floor, costs a fraction of one at the cap.
     fn sample(&mut self, t: f64) {
         let to_f = self.motion.follower(t).inverse() * self.motion.driver(t);
         let guess = match self.free.last() {
-            None => self.cap,
+            None => FLOOR_OF_CAP * self.cap,
             Some(f) => (GROWTH * f[0].max(f[1]) + FLOOR_OF_CAP * self.cap).min(self.cap),
         };
         let (seeds, by) = self.seeds(t, &to_f, guess);
