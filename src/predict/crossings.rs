@@ -45,10 +45,11 @@
 //!
 //! Edge-against-edge contacts are not tested, as in the tracer.
 //!
-//! On the demo's half-turn-2to1 parts (1 336 616 + 715 366 vertices, 1 440 driver angles)
-//! the turns take 6.3 s where the tracer took 22.7 s (`cargo bench --bench simulate`;
-//! docs/simulate.md, "Exact free turns"); on screw-bob's (1R1T, 1 523 040 + 660 284
-//! vertices) the four lines take 40 s where the tracer took 53 s.
+//! On half-turn-2to1's printable parts (1 327 228 + 685 584 vertices, 1 440 driver angles)
+//! the turns take 5.4 s (`cargo bench --bench simulate`; 7.1–8.1 s before the seeds and
+//! the per-point bounds, 22.7 s with the tracer); on screw-bob's (1R1T, 1 509 566 +
+//! 660 284 vertices) the four lines take 22.3 s (41 s before, 53 s with the tracer).
+//! docs/simulate.md, "Exact free turns" and "Seeded, each way its own".
 
 use std::f64::consts::{PI, TAU};
 
