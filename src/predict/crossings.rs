@@ -35,13 +35,15 @@
 //!   bounds the tracer uses (`Solid`'s distance grid, the cluster's last bound and the
 //!   parts' speed bound), and within them only vertices and faces whose own bounds leave
 //!   them within reach of the search limit: first their offset from the cluster's centre,
-//!   then the grid's bound at each vertex (a face's, from its corners' less its edges)
-//!   against the length of its own path. No mesh query is asked to choose them.
+//!   then the grid's bound at each vertex (a face's: its corners' largest less its longest
+//!   edge) against the length of its own path. No mesh query is asked to choose them.
 //! - Each way has its own limit. At each time the elements that decided the last time's
 //!   free motions are looked at first (`Run::seeds`): what they allow now bounds each way
 //!   from above, and the whole pass then looks only within that bound, each way's polar
 //!   angles cut to its own. The pass still meets every element that could cross sooner,
-//!   so the free motions are the same as with one wide limit, to the last bit.
+//!   so the free motions are the same as with one wide limit: to the last bit for a turn
+//!   or a slide, and to the rounding of a screw's root (its Newton's steps start from a
+//!   bracket cut at the limit).
 //!
 //! Edge-against-edge contacts are not tested, as in the tracer.
 //!
@@ -1209,11 +1211,10 @@ impl<'a> Run<'a> {
             let lever = screw.lever(w.coords.xy().norm() + c.tri_radius);
             let within = c.tri_radius + lever * limit;
             let d = self.follower.lower_bound(&w);
+            self.last[ci] = (d, t);
             if d > within {
-                self.last[ci] = (d, t);
                 continue;
             }
-            self.last[ci] = (d, t);
             // Each vertex and face: its distance to the follower is at least the centre's
             // less its offset from the centre, and the motion moves it at most `lever` per
             // unit.
