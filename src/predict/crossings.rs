@@ -1420,7 +1420,7 @@ mod tests {
     use crate::geometry::primitive_meshes::{cuboid, uv_sphere};
     use crate::predict::play::tests::{
         bar_between_plates, bar_between_posts, bar_between_posts_turns, joined, pin_by_a_bar,
-        pin_by_a_bar_turn, Still, Swing,
+        pin_by_a_bar_turn, Still, Swing, PLATE_LINES, PLATE_REACHES,
     };
 
     /// [`free_along`] for a turn alone: the free turns at `n` times, each capped at `cap`
@@ -1546,29 +1546,13 @@ mod tests {
             f[0].minus[0]
         );
 
-        let (plates, bar) = bar_between_plates();
-        let driver = Solid::new(&plates, "driver").unwrap();
-        let follower = Solid::new(&bar, "follower").unwrap();
-        let screw = Screw {
-            spin: 0.02,
-            slide: 0.8,
-        };
-        let f = free_along(
-            &Still,
-            &driver,
-            &follower,
-            2,
-            &[(Screw::SLIDE, 3.0), (screw, 3.0)],
-        )
-        .unwrap();
-        assert!((f[0].plus[0] - 0.5).abs() < 1e-12, "{}", f[0].plus[0]);
-        assert!((f[0].minus[0] - 1.5).abs() < 1e-12, "{}", f[0].minus[0]);
-        assert!((f[1].plus[0] - 0.5 / 0.8).abs() < 1e-12, "{}", f[1].plus[0]);
-        assert!(
-            (f[1].minus[0] - 1.5 / 0.8).abs() < 1e-12,
-            "{}",
-            f[1].minus[0]
-        );
+        let (driver, follower) = bar_between_plates();
+        let f = free_along(&Still, &driver, &follower, 2, &PLATE_LINES).unwrap();
+        for (line, [up, down]) in PLATE_REACHES.into_iter().enumerate() {
+            let (plus, minus) = (f[line].plus[0], f[line].minus[0]);
+            assert!((plus - up).abs() < 1e-12, "{plus}");
+            assert!((minus - down).abs() < 1e-12, "{minus}");
+        }
         // Sideways the plates are flush with nothing: the turn is free up to the cap.
         let f = free_along(&Still, &driver, &follower, 2, &[(Screw::TURN, 0.3)]).unwrap();
         assert_eq!([f[0].plus[0], f[0].minus[0]], [0.3, 0.3]);

@@ -921,51 +921,55 @@ pub(crate) mod tests {
     }
 
     /// The thin bar of [`bar_between_posts`] between two wide plates whose faces are at
-    /// z = 1.5 and z = −2.5: (plates, bar). It slides 0.5 mm up and 1.5 mm down; along a
-    /// screw it meets the same faces after as many units as its slide per unit takes there,
-    /// since the plates cover every turn.
-    pub(crate) fn bar_between_plates() -> (Mesh, Mesh) {
+    /// z = 1.5 and z = −2.5, as (driver, follower) solids: the plates and the bar.
+    pub(crate) fn bar_between_plates() -> (Solid, Solid) {
         let bar = cuboid([0.0, -0.5, -1.0], [20.0, 0.5, 1.0]);
         let plates = joined(&[
             cuboid([-30.0, -30.0, 1.5], [30.0, 30.0, 3.0]),
             cuboid([-30.0, -30.0, -4.0], [30.0, 30.0, -2.5]),
         ]);
-        (plates, bar)
+        (
+            Solid::new(&plates, "driver").unwrap(),
+            Solid::new(&bar, "follower").unwrap(),
+        )
     }
 
-    /// Guards the slide and the screw against closed forms ([`bar_between_plates`]): the
-    /// bar slides 0.5 mm up and 1.5 mm down; screwing (a turn of 0.02 rad and a slide of
-    /// 0.8 mm per unit) it meets the same faces after 0.5 / 0.8 units up and 1.5 / 0.8 down
-    /// (each within the trace's `HIT_MM`, which is HIT_MM / 0.8 units of the screw).
+    /// The lines [`bar_between_plates`] is moved along, each capped at 3 units: the slide,
+    /// and a screw of 0.02 rad and 0.8 mm per unit.
+    pub(crate) const PLATE_LINES: [(Screw, f64); 2] = [
+        (Screw::SLIDE, 3.0),
+        (
+            Screw {
+                spin: 0.02,
+                slide: 0.8,
+            },
+            3.0,
+        ),
+    ];
+
+    /// The closed-form reaches of [`bar_between_plates`] along [`PLATE_LINES`], each
+    /// [up, down]: the bar slides 0.5 mm up and 1.5 mm down; along the screw it meets the
+    /// same faces after as many units as its 0.8 mm per unit takes there, since the
+    /// plates cover every turn.
+    pub(crate) const PLATE_REACHES: [[f64; 2]; 2] = [[0.5, 1.5], [0.5 / 0.8, 1.5 / 0.8]];
+
+    /// Guards the slide and the screw against closed forms ([`bar_between_plates`] along
+    /// [`PLATE_LINES`] to [`PLATE_REACHES`]), each within the trace's `HIT_MM`, which is
+    /// HIT_MM / 0.8 units of the screw.
     #[test]
     fn a_bar_between_two_plates_slides_and_screws_to_the_closed_form() {
-        let (plates, bar) = bar_between_plates();
-        let driver = Solid::new(&plates, "driver").unwrap();
-        let follower = Solid::new(&bar, "follower").unwrap();
-        let screw = Screw {
-            spin: 0.02,
-            slide: 0.8,
-        };
-        let f = free_along(
-            &Still,
-            &driver,
-            &follower,
-            3,
-            &[(Screw::SLIDE, 3.0), (screw, 3.0)],
-        );
-        for i in 0..3 {
-            assert!((f[0].plus[i] - 0.5).abs() <= HIT_MM, "{}", f[0].plus[i]);
-            assert!((f[0].minus[i] - 1.5).abs() <= HIT_MM, "{}", f[0].minus[i]);
-            assert!(
-                (f[1].plus[i] - 0.5 / 0.8).abs() <= HIT_MM / 0.8,
-                "{}",
-                f[1].plus[i]
-            );
-            assert!(
-                (f[1].minus[i] - 1.5 / 0.8).abs() <= HIT_MM / 0.8,
-                "{}",
-                f[1].minus[i]
-            );
+        let (driver, follower) = bar_between_plates();
+        let f = free_along(&Still, &driver, &follower, 3, &PLATE_LINES);
+        for (line, ([up, down], tol)) in PLATE_REACHES
+            .into_iter()
+            .zip([HIT_MM, HIT_MM / 0.8])
+            .enumerate()
+        {
+            for i in 0..3 {
+                let (plus, minus) = (f[line].plus[i], f[line].minus[i]);
+                assert!((plus - up).abs() <= tol, "{plus}");
+                assert!((minus - down).abs() <= tol, "{minus}");
+            }
         }
         // A turn alone never meets the plates: the whole cap both ways.
         let t = free_turns(&Still, &driver, &follower, 3, 0.3);
