@@ -1102,12 +1102,12 @@ impl<'a> Run<'a> {
 
     /// The last time's deciding elements at time `t` (driver → F by `to_f`), each searched
     /// within `guess` both ways: per way the least free motion they allow and the element
-    /// that allows it (infinite and `None` where none does). The true free motion is no
-    /// larger: the pass meets the same element and finds the same crossing. A driver
-    /// vertex is looked up as in a pass. A follower vertex meets the faces of the driver
-    /// cluster that holds the face it met (which has moved on), not all of the driver's,
-    /// so it counts only when an exact distance puts it outside the driver: with other
-    /// faces it might have left the driver first.
+    /// that allows it (infinite and `None` where none does within `guess`). The true free
+    /// motion is no larger: the pass meets the same element and finds the same crossing.
+    /// A driver vertex is looked up as in a pass. A follower vertex meets the faces of the
+    /// driver cluster that holds the face it met (which has moved on), not all of the
+    /// driver's, so it counts only when an exact distance puts it outside the driver: with
+    /// other faces it might have left the driver first.
     fn seeds(
         &mut self,
         t: f64,
@@ -1161,8 +1161,10 @@ impl<'a> Run<'a> {
                     Some(free)
                 }
             };
+            // Beyond `guess` a way is not bounded (a way nothing enters shows the cap of
+            // its parameter, half a turn for a turn).
             for (j, f) in free.into_iter().flatten().enumerate() {
-                if f < seeds[j] {
+                if f <= guess && f < seeds[j] {
                     seeds[j] = f;
                     by[j] = Some(element);
                 }
@@ -1191,12 +1193,11 @@ impl<'a> Run<'a> {
         self.placed.clear();
         let mut best = ways;
         let mut decided = [0, 1].map(|k| if bounded[k] { by[k] } else { None });
-        let mut improve = |free: [f64; 2], element: Decisive| {
-            for k in 0..2 {
-                if free[k] < best[k] {
-                    best[k] = free[k];
-                    decided[k] = Some(element);
-                }
+        // Way `k`'s free motion is `free` if that is less, decided by `element`.
+        let mut improve = |k: usize, free: f64, element: Decisive| {
+            if free < best[k] {
+                best[k] = free;
+                decided[k] = Some(element);
             }
         };
         let driver = self.driver;
@@ -1227,7 +1228,9 @@ impl<'a> Run<'a> {
                         continue;
                     }
                     if let Some(free) = self.driver_vertex(&p, &lim, t) {
-                        improve(free, Decisive::DriverVertex(vi as u32));
+                        for (k, free) in free.into_iter().enumerate() {
+                            improve(k, free, Decisive::DriverVertex(vi as u32));
+                        }
                     }
                 }
             }
@@ -1248,17 +1251,9 @@ impl<'a> Run<'a> {
             let inside = || driver.signed(&to_f.inverse_transform_point(&p));
             // A follower vertex turns with the follower.
             if let Some(free) = self.allowed(&firsts, &lim, inside, t) {
-                for k in 0..2 {
-                    let vertex = id as u32;
-                    let mut one = [f64::INFINITY; 2];
-                    one[k] = free[k];
-                    improve(
-                        one,
-                        Decisive::FollowerVertex {
-                            vertex,
-                            face: firsts.by[k],
-                        },
-                    );
+                for (k, free) in free.into_iter().enumerate() {
+                    let (vertex, face) = (id as u32, firsts.by[k]);
+                    improve(k, free, Decisive::FollowerVertex { vertex, face });
                 }
             }
         }
