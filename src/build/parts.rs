@@ -56,6 +56,11 @@ use crate::synth::undercut::ESCAPE_REACH_MM as RAY_REACH_MM;
 /// sign. Measured on half-turn-2to1 at 0.4 mm: the driver's STL is byte for byte the one
 /// the earlier 3 cells gave, and the carve took 269 s against 288–363 s.
 const CARVE_CAP_CELLS: f64 = 2.0;
+/// The slope at or below which a rim's pieces count as mild for the carve
+/// ([`Sweep::split_by_twist`]): 1.2 keeps all but the sharpest stretches of the examples'
+/// rims in the mild part (half-turn-2to1: 1.00–1.14 for four rims, 1.52 and 2.84 at their
+/// sharpest for the other two, whose mild parts are then searched at 1.2 at most).
+const CARVE_MILD_SLOPE: f64 = 1.2;
 /// Lattice of the carve's certificates (`swept::Certificates`), mm: every grid point in a
 /// 1 mm cube starts from the search made at its centre.
 const CARVE_CERTIFICATE_CELL_MM: f64 = 1.0;
@@ -93,6 +98,10 @@ pub struct Design {
     /// Clearance from the whole follower and support (coarse), driver frame: a lower bound
     /// of the rims' swept distance, used to skip the exact carve far from the groove.
     pub driver_field: Arc<DistanceField>,
+    /// The rims as the carve sweeps them: each cut by how sharply it twists
+    /// ([`Sweep::split_by_twist`] at a slope of 1.2, `CARVE_MILD_SLOPE`), so that a short
+    /// sharp twist slows the search near it alone.
+    pub carve_rims: Vec<Sweep>,
     /// Cells per mm of the mesher (for the carve's cap).
     pub cell_mm: f64,
     /// Print clearance.
@@ -184,6 +193,10 @@ pub fn design(
     d_others_rule.extend(support_pieces.cover.iter().cloned());
     let d_others = connect::clearance(&kin, &d_others_rule, Frame::Driver, dgrid);
     let mut driver_field = d_rims.min(&d_others);
+    let carve_rims: Vec<Sweep> = rims
+        .iter()
+        .flat_map(|r| r.split_by_twist(CARVE_MILD_SLOPE))
+        .collect();
     // One field per band, so that the exact sweep is run only for the bands near a point.
     let band_fields: Vec<DistanceField> = band_covers
         .iter()
@@ -264,7 +277,7 @@ pub fn design(
     let band_pieces = carved_pieces(
         &kin,
         &bands,
-        &rims,
+        &carve_rims,
         &driver_field,
         opts.clearance_mm,
         &pairs,
@@ -382,6 +395,7 @@ pub fn design(
         band_clearance: web_clear,
         follower_field,
         driver_field,
+        carve_rims,
         cell_mm: opts.cell_mm,
         clearance: opts.clearance_mm,
         without_pair: opts.without_pair,
@@ -1242,7 +1256,7 @@ impl Design {
             material: self.driver_material(),
             design: self,
             certificates: self
-                .rims
+                .carve_rims
                 .iter()
                 .map(|_| Certificates::new(CARVE_CERTIFICATE_CELL_MM, self.carve_cap()))
                 .collect(),
@@ -1381,7 +1395,7 @@ impl Sdf for DriverSolid<'_> {
             // search stops at the first instant that shows it.
             let swept = SweptEach::new(
                 &self.design.kin,
-                &self.design.rims,
+                &self.design.carve_rims,
                 Frame::Follower,
                 Frame::Driver,
             )
