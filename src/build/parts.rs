@@ -835,8 +835,20 @@ impl BandClearance {
     /// that (found at the first band and instant that show it). A band's exact sweep runs
     /// only where its coarse field (a lower bound) does not already settle the question.
     pub fn below(&self, p: Vec3, need: f64, floor: f64) -> f64 {
+        self.below_via(p, need, floor, None)
+    }
+
+    /// [`BandClearance::below`], each band's search started from `certificates[k]` when
+    /// given (one lattice per band).
+    fn below_via(
+        &self,
+        p: Vec3,
+        need: f64,
+        floor: f64,
+        certificates: Option<&[Certificates]>,
+    ) -> f64 {
         let mut c = self.others.sample(p);
-        for (band, field) in self.bands.iter().zip(&self.band_fields) {
+        for (k, (band, field)) in self.bands.iter().zip(&self.band_fields).enumerate() {
             if c <= floor {
                 return floor;
             }
@@ -845,7 +857,7 @@ impl BandClearance {
             if coarse >= bound {
                 continue;
             }
-            let exact = ExactSweep {
+            let sweep = ExactSweep {
                 kin: &self.kin,
                 solid: band,
                 frame: Frame::Driver,
@@ -853,11 +865,46 @@ impl BandClearance {
                 cap: bound,
                 floor,
                 coarse: None,
-            }
-            .value(p);
+            };
+            let exact = match certificates {
+                Some(lattices) => lattices[k].value(&sweep, p),
+                None => sweep.value(p),
+            };
             c = c.min(exact);
         }
         c.max(floor)
+    }
+}
+
+/// A [`BandClearance`] whose searches start from certificates (`swept::Certificates`, one
+/// lattice per band), for the many nearby points of one meshing: the webs' feet and the
+/// rooted struts' points lie close together, and each search then reopens only what its
+/// lattice cell's certificate could not rule out. Values at or below `cap` are those of
+/// [`BandClearance::below`] within the sweep's search tolerance (0.1 mm).
+struct SharedClearance {
+    clear: Arc<BandClearance>,
+    certificates: Vec<Certificates>,
+}
+
+impl SharedClearance {
+    /// Certificates for searches capped at `cap` or below (`need`s above it are searched
+    /// on their own).
+    fn new(clear: Arc<BandClearance>, cap: f64) -> SharedClearance {
+        let certificates = clear
+            .bands
+            .iter()
+            .map(|_| Certificates::new(CARVE_CERTIFICATE_CELL_MM, cap))
+            .collect();
+        SharedClearance {
+            clear,
+            certificates,
+        }
+    }
+
+    /// As [`BandClearance::below`].
+    fn below(&self, p: Vec3, need: f64, floor: f64) -> f64 {
+        self.clear
+            .below_via(p, need, floor, Some(&self.certificates))
     }
 }
 
@@ -1194,21 +1241,27 @@ impl Design {
             })
         };
         let mut add: Vec<Box<dyn Sdf>> = self.rims.iter().cloned().map(boxed).map(shrunk).collect();
+        // Exact within CARVE_CAP_CELLS cells of the surface after the shrink.
+        let far = CARVE_CAP_CELLS * self.cell_mm + half;
+        // The largest `need` either trim asks for (the through cut's exceeds the margin's).
+        let clear = Arc::new(SharedClearance::new(
+            self.band_clearance.clone(),
+            WEB_THROUGH_CUT_MM.max(WEB_MARGIN_MM) + far,
+        ));
         // Core-rooted struts, trimmed clear of the driver's swept bands.
         let kept_clear = |solid: Arc<dyn Sdf>| -> Box<dyn Sdf> {
             shrunk(Box::new(KeptClear {
                 solid,
-                clear: self.band_clearance.clone(),
-                // Exact within CARVE_CAP_CELLS cells of the surface after the shrink.
-                far: CARVE_CAP_CELLS * self.cell_mm + half,
+                clear: clear.clone(),
+                far,
             }))
         };
         // Webs are cut through their whole thickness (`WebCut`), not shaved.
         add.extend(self.webs.iter().map(|w| -> Box<dyn Sdf> {
             shrunk(Box::new(WebCut {
                 web: w.clone(),
-                clear: self.band_clearance.clone(),
-                far: CARVE_CAP_CELLS * self.cell_mm + half,
+                clear: clear.clone(),
+                far,
             }))
         }));
         for s in &self.follower_struts {
@@ -1294,7 +1347,7 @@ struct KeptClear {
     /// The strut.
     solid: Arc<dyn Sdf>,
     /// Its clearance from the driver's swept bands (and the rest of the driver).
-    clear: Arc<BandClearance>,
+    clear: Arc<SharedClearance>,
     /// Beyond this, mm, a value needs no more than its sign and that it is this far: the
     /// mesher reads magnitudes only near the surface (as the driver's carve,
     /// [`CARVE_CAP_CELLS`] cells), and the union and difference the solid enters keep a
@@ -1336,7 +1389,7 @@ struct WebCut {
     /// The web.
     web: Arc<ThickTriangles>,
     /// Its clearance from the driver's swept bands (and the rest of the driver).
-    clear: Arc<BandClearance>,
+    clear: Arc<SharedClearance>,
     /// As [`KeptClear::far`].
     far: f64,
 }
@@ -1586,6 +1639,11 @@ mod tests {
         let (_, rims, clear) = half_turn_band_clearance();
         let clear = Arc::new(clear);
         let exact = |p: Vec3| clear.below(p, 10.0, f64::NEG_INFINITY);
+        // The trims search from certificates, as the follower's meshing does.
+        let shared = Arc::new(SharedClearance::new(
+            clear.clone(),
+            WEB_THROUGH_CUT_MM + 10.0,
+        ));
         let h = WEB_HALF_THICKNESS_MM;
         let offsets = [-0.95 * h, -0.5 * h, 0.0, 0.5 * h, 0.95 * h];
         let (mut kept, mut cut, mut films) = (0, 0, 0);
@@ -1594,12 +1652,12 @@ mod tests {
             let web = Arc::new(web);
             let through = WebCut {
                 web: web.clone(),
-                clear: clear.clone(),
+                clear: shared.clone(),
                 far: 10.0,
             };
             let shaved = KeptClear {
                 solid: web.clone(),
-                clear: clear.clone(),
+                clear: shared.clone(),
                 far: 10.0,
             };
             for (i, [a, b, c]) in tris.iter().enumerate().step_by(7) {
