@@ -1426,9 +1426,10 @@ impl Sdf for WebCut {
 pub struct DriverSolid<'a> {
     material: Union,
     design: &'a Design,
-    /// One lattice per rim: each rim is swept on its own, so that the search's bound on
-    /// how fast the distance changes is that rim's (`Sdf::lipschitz`: the rims of
-    /// half-turn-2to1 range from 1.004 to 2.84, and a union would take the largest).
+    /// One lattice per part of a rim (`Design::carve_rims`): each is swept on its own, so
+    /// that the search's bound on how fast the distance changes is that part's
+    /// (`Sdf::lipschitz`: the rims of half-turn-2to1 range from 1.004 to 2.84, their mild
+    /// parts stay at or below 1.2, and a union would take the largest).
     certificates: Vec<Certificates>,
 }
 
@@ -1442,7 +1443,7 @@ impl Sdf for DriverSolid<'_> {
         } else {
             // max(m, half − s) is m wherever s ≥ half − m: the search need only tell that,
             // and a lower cap rules out more of the period (outside the material, and
-            // just inside it, far more). Each rim's search is capped by the smallest
+            // just inside it, far more). Each part's search is capped by the smallest
             // distance found so far. Where s ≤ half − cap the point lies in the groove's
             // air at least the cap from its surface, a value that is capped as well: the
             // search stops at the first instant that shows it.
