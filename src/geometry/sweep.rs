@@ -807,30 +807,34 @@ mod tests {
         assert!((r.dist(-1.5, 0.0) + 2.5).abs() < 1e-12);
     }
 
+    /// `n` frames on the circle of radius `big` about z (in z = 0), the section's u axis
+    /// turned from the radial direction towards +z by `phi(a)` at polar angle a.
+    fn turning_circle(big: f64, n: usize, phi: impl Fn(f64) -> f64) -> Vec<Frame> {
+        (0..n)
+            .map(|i| {
+                let a = i as f64 / n as f64 * std::f64::consts::TAU;
+                let (radial, turn) = (Vec3::new(a.cos(), a.sin(), 0.0), phi(a));
+                Frame {
+                    o: radial * big,
+                    u: radial * turn.cos() + Vec3::z() * turn.sin(),
+                }
+            })
+            .collect()
+    }
+
     /// Guards [`Sdf::dist_continuous`] and [`Sdf::lipschitz`] of a sweep whose section
     /// turns about the loop at 0.5 rad per mm (a contact normal that twists, as on rim 5 of
     /// half-turn-2to1): over seeded random short moves in and around the solid, the value
     /// never changes by more than the bound times the move where it is exact (within
-    /// [`ELLIPSE_FAR`]; the exact sweeps prune time by it), and the bound is above 1.5 (a turning section moves its value faster than the
-    /// point moves; the untwisted loop's bound is 1).
+    /// [`ELLIPSE_FAR`]; the exact sweeps prune time by it), and the bound is above 1.5 (a
+    /// turning section moves its value faster than the point moves; the untwisted loop's
+    /// bound is 1).
     #[test]
     fn a_twisted_sweep_changes_no_faster_than_its_bound() {
         use rand::{Rng, SeedableRng};
-        let (big, n) = (50.0, 600);
+        let big = 50.0;
         // 0.5 rad per mm over the loop's 100π mm: 25 whole turns, so the loop closes.
-        let frames = |rate: f64| -> Vec<Frame> {
-            (0..n)
-                .map(|i| {
-                    let a = i as f64 / n as f64 * std::f64::consts::TAU;
-                    let phi = rate * big * a;
-                    let radial = Vec3::new(a.cos(), a.sin(), 0.0);
-                    Frame {
-                        o: radial * big,
-                        u: radial * phi.cos() + Vec3::z() * phi.sin(),
-                    }
-                })
-                .collect()
-        };
+        let frames = |rate: f64| turning_circle(big, 600, |a| rate * big * a);
         let twisted = Sweep::new(frames(0.5), Section::HalfEllipse { a: 3.0, b: 1.6 }).unwrap();
         let straight = Sweep::new(frames(0.0), Section::HalfEllipse { a: 3.0, b: 1.6 }).unwrap();
         assert!(twisted.lipschitz() > 1.5, "bound {}", twisted.lipschitz());
@@ -873,21 +877,13 @@ mod tests {
     #[test]
     fn a_loop_split_by_twist_is_its_parts_union() {
         use rand::{Rng, SeedableRng};
-        let (big, n) = (50.0, 600);
-        let frames = |turns: f64| -> Vec<Frame> {
-            (0..n)
-                .map(|i| {
-                    let a = i as f64 / n as f64 * std::f64::consts::TAU;
-                    // A smoothstep from 0 to `turns` whole turns over a ∈ [1, 1.3].
-                    let s = ((a - 1.0) / 0.3).clamp(0.0, 1.0);
-                    let phi = std::f64::consts::TAU * turns * s * s * (3.0 - 2.0 * s);
-                    let radial = Vec3::new(a.cos(), a.sin(), 0.0);
-                    Frame {
-                        o: radial * big,
-                        u: radial * phi.cos() + Vec3::z() * phi.sin(),
-                    }
-                })
-                .collect()
+        let big = 50.0;
+        let frames = |turns: f64| {
+            turning_circle(big, 600, |a| {
+                // A smoothstep from 0 to `turns` whole turns over a ∈ [1, 1.3].
+                let s = ((a - 1.0) / 0.3).clamp(0.0, 1.0);
+                std::f64::consts::TAU * turns * s * s * (3.0 - 2.0 * s)
+            })
         };
         let section = Section::HalfEllipse { a: 3.0, b: 1.6 };
         let flat = Sweep::new(frames(0.0), section).unwrap();
