@@ -266,6 +266,8 @@ struct Leaf {
     w: f64,
     /// Lower bound over the interval (pruned) or value at the centre (basin).
     f: f64,
+    /// A lower bound over the interval (for a pruned leaf, `f`).
+    lo: f64,
     basin: bool,
 }
 
@@ -429,7 +431,10 @@ impl<S: Sdf> ExactSweep<'_, S> {
         let basins = cert.leaves.iter().filter(|l| l.basin);
         let pruned = cert.leaves.iter().filter(|l| !l.basin);
         for l in basins.chain(pruned) {
-            if !l.basin && l.f - moved >= best.min(self.cap) {
+            // Nothing in the interval is below its bound less how far the value may have
+            // changed since the certificate's centre (a basin's too, whose centre value
+            // is what the search goes on from).
+            if l.lo - moved >= best.min(self.cap) {
                 continue;
             }
             let f = self.at(q, l.c, best.min(self.cap) + pace.over(l.c, l.w) * l.w);
@@ -518,6 +523,7 @@ impl<S: Sdf> ExactSweep<'_, S> {
                         c,
                         w,
                         f: lower,
+                        lo: lower,
                         basin: false,
                     });
                 }
@@ -530,6 +536,7 @@ impl<S: Sdf> ExactSweep<'_, S> {
                         c,
                         w,
                         f,
+                        lo: lower,
                         basin: true,
                     });
                 }
