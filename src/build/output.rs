@@ -217,19 +217,34 @@ pub fn write(
     let started = std::time::Instant::now();
     let mut files = Vec::new();
     progress("writing STL, 3MF and GLB");
-    for p in &built.parts {
-        let path = out.join(format!("{}.stl", p.name));
-        write_stl(&path, &p.mesh, p.name)?;
-        files.push(path);
-    }
+    let stls: Vec<PathBuf> = built
+        .parts
+        .iter()
+        .map(|p| out.join(format!("{}.stl", p.name)))
+        .collect();
     let package = out.join("mechanism.3mf");
-    let (bed_mm, bed_note) = write_package(&package, &built.parts)?;
-    files.push(package);
-    let scene = scene(&built.design.kin, &built.parts);
-    // One shading of each part serves the GLB and every picture.
-    let shaded = shade_scene(&scene);
     let glb = out.join("assembly.glb");
-    write_glb_shaded(&glb, &scene, &shaded)?;
+    // The printer's files and the viewer's are independent: written side by side (each
+    // is one thread's work: a zip stream, a shading per part, a file write).
+    let (printed, viewed) = rayon::join(
+        || -> Result<_, OutputError> {
+            for (p, path) in built.parts.iter().zip(&stls) {
+                write_stl(path, &p.mesh, p.name)?;
+            }
+            write_package(&package, &built.parts)
+        },
+        || -> Result<_, OutputError> {
+            let scene = scene(&built.design.kin, &built.parts);
+            // One shading of each part serves the GLB and every picture.
+            let shaded = shade_scene(&scene);
+            write_glb_shaded(&glb, &scene, &shaded)?;
+            Ok((scene, shaded))
+        },
+    );
+    let (bed_mm, bed_note) = printed?;
+    let (scene, shaded) = viewed?;
+    files.extend(stls);
+    files.push(package);
     files.push(glb);
 
     progress("rendering pictures");
