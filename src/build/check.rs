@@ -522,10 +522,11 @@ pub fn run(
     follower: &Mesh,
     support: &Mesh,
 ) -> CheckFigures {
-    let (qd, qf, qs) = (
-        Queryable::new(driver),
-        Queryable::new(follower),
-        Queryable::new(support),
+    // Side by side: most of a part's preparation (parry's hierarchy, the pseudo-normals,
+    // the parity columns) runs on one thread.
+    let (qd, (qf, qs)) = rayon::join(
+        || Queryable::new(driver),
+        || rayon::join(|| Queryable::new(follower), || Queryable::new(support)),
     );
     let penetrations = vec![
         penetration(
