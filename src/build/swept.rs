@@ -270,16 +270,14 @@ impl<'a, S: Sdf> SweptEach<'a, S> {
     }
 }
 
-/// One interval of time a branch and bound ended on: its centre and half width, and either
-/// a lower bound of the distance over it (pruned) or the value at its centre (a basin, to
-/// be refined).
+/// One interval of time a branch and bound ended on: its centre and half width, a lower
+/// bound of the distance over it, and whether it was pruned or kept as a basin (to be
+/// refined). The points a certificate serves evaluate its intervals again for themselves.
 #[derive(Clone, Copy, Debug)]
 struct Leaf {
     c: f64,
     w: f64,
-    /// Lower bound over the interval (pruned) or value at the centre (basin).
-    f: f64,
-    /// A lower bound over the interval (for a pruned leaf, `f`).
+    /// A lower bound over the interval.
     lo: f64,
     basin: bool,
 }
@@ -444,9 +442,8 @@ impl<S: Sdf> ExactSweep<'_, S> {
         let basins = cert.leaves.iter().filter(|l| l.basin);
         let pruned = cert.leaves.iter().filter(|l| !l.basin);
         for l in basins.chain(pruned) {
-            // Nothing in the interval is below its bound less how far the value may have
-            // changed since the certificate's centre (a basin's too, whose centre value
-            // is what the search goes on from).
+            // Nothing in the interval, basin or pruned, is below its bound less how far
+            // the value may have changed since the certificate's centre.
             if l.lo - moved >= best.min(self.cap) {
                 continue;
             }
@@ -475,7 +472,7 @@ impl<S: Sdf> ExactSweep<'_, S> {
             reach.max(EXACT_BASIN_TOL_MM),
             Some(&mut leaves),
         );
-        leaves.retain(|l| l.basin || l.f < cap);
+        leaves.retain(|l| l.basin || l.lo < cap);
         Certificate {
             p,
             reach,
@@ -541,7 +538,6 @@ impl<S: Sdf> ExactSweep<'_, S> {
                     l.push(Leaf {
                         c,
                         w,
-                        f: lower,
                         lo: lower,
                         basin: false,
                     });
@@ -554,7 +550,6 @@ impl<S: Sdf> ExactSweep<'_, S> {
                     l.push(Leaf {
                         c,
                         w,
-                        f,
                         lo: lower,
                         basin: true,
                     });
