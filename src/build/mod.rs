@@ -231,6 +231,9 @@ pub struct Built {
     /// check), worded for the user; empty when they are. The parts are still returned so
     /// they can be written and looked at.
     pub problems: Vec<String>,
+    /// The mechanism's [`Mechanism::digest`]: `build.json` records it, and `simulate`
+    /// refuses parts whose mechanism is not the one it is given.
+    pub mechanism_digest: String,
 }
 
 impl Built {
@@ -413,6 +416,7 @@ pub fn build(
         figures,
         timings,
         problems,
+        mechanism_digest: mech.digest(),
     })
 }
 

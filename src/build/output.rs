@@ -361,6 +361,7 @@ fn summary_json(summary: &Summary) -> serde_json::Value {
     json!({
         "format": BUILD_FORMAT,
         "mechanism": mechanism.display().to_string(),
+        "mechanism_digest": built.mechanism_digest,
         "class": kin.class().label(),
         "scale_mm": kin.scale_mm(),
         "dx_mm": kin.dx_mm(),

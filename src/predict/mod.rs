@@ -82,6 +82,23 @@ pub enum PredictError {
     /// A part's mesh is missing or unreadable.
     #[error("{0}. Build the parts first: mpc-rig build MECHANISM")]
     Stl(#[from] StlError),
+    /// The parts were built from another mechanism than the one given.
+    #[error(
+        "{}: these parts were built from another mechanism than the one given (build.json \
+         records the mechanism digest {}…, the mechanism's is {}…), perhaps one synthesized \
+         into the same folder since. Build them again: mpc-rig build MECHANISM",
+        parts.display(),
+        built_from.get(..12).unwrap_or(built_from),
+        this.get(..12).unwrap_or(this)
+    )]
+    OtherMechanism {
+        /// The parts' folder.
+        parts: PathBuf,
+        /// The digest `build.json` records.
+        built_from: String,
+        /// The mechanism's own.
+        this: String,
+    },
     /// `build.json` is missing or unreadable.
     #[error("{path}: {message}. Build the parts first: mpc-rig build MECHANISM")]
     Build {
@@ -118,6 +135,10 @@ pub struct BuiltParts {
     pub without_pair: Option<usize>,
     /// The build's check: which design contacts the parts keep.
     pub check: BuiltCheck,
+    /// [`Mechanism::digest`] of the mechanism the parts were built from (builds before
+    /// 2026-12-06 have none, and are taken on trust).
+    #[serde(default)]
+    pub mechanism_digest: Option<String>,
     /// Whether the build found the parts printable.
     #[serde(default)]
     pub printable: bool,
@@ -222,6 +243,23 @@ impl BuiltParts {
             } else {
                 t >= a - EDGE || t <= b + EDGE
             }
+        })
+    }
+
+    /// Whether these parts (in `dir`) were built from `mech`: an error when `build.json`
+    /// records another mechanism's digest.
+    pub fn built_from(&self, mech: &Mechanism, dir: &Path) -> Result<(), PredictError> {
+        let Some(built_from) = &self.mechanism_digest else {
+            return Ok(());
+        };
+        let this = mech.digest();
+        if *built_from == this {
+            return Ok(());
+        }
+        Err(PredictError::OtherMechanism {
+            parts: dir.to_path_buf(),
+            built_from: built_from.clone(),
+            this,
         })
     }
 
@@ -573,6 +611,7 @@ pub fn predict(
         });
     }
     let built = BuiltParts::load(parts_dir)?;
+    built.built_from(mech, parts_dir)?;
     let kin = Kinematics::new(mech, built.scale_mm)?;
     // Each part is read and prepared on its own thread: reading the STL and building
     // parry's BVH are serial inside. On the demo's parts `simulate` went from 55.6 to
@@ -733,6 +772,56 @@ pub fn predict(
 mod tests {
     use super::*;
     use nalgebra::Vector3;
+
+    /// Guards the refusal of stale parts: `build.json` recording another mechanism's
+    /// digest is an error that says so (whole text), its own digest or none (a build from
+    /// before digests) is accepted, and a mechanism changed in one figure has another
+    /// digest.
+    #[test]
+    fn parts_of_another_mechanism_are_refused() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data/mechanism/half-turn-2to1-printable/mechanism.json");
+        let mech = Mechanism::load(&path).unwrap();
+        let built_with = |digest: Option<String>| -> BuiltParts {
+            let mut built: BuiltParts = serde_json::from_str(
+                r#"{"scale_mm": 10, "clearance_mm": 0.2, "check": {"gaps": []}}"#,
+            )
+            .unwrap();
+            built.mechanism_digest = digest;
+            built
+        };
+        let dir = Path::new("out/parts");
+        built_with(None).built_from(&mech, dir).unwrap();
+        built_with(Some(mech.digest()))
+            .built_from(&mech, dir)
+            .unwrap();
+
+        let mut other = mech.clone();
+        other.driver_offset += 0.1;
+        assert_ne!(other.digest(), mech.digest());
+        // As `synth` writes it and `build` or `simulate` reads it back.
+        let saved: Mechanism =
+            serde_json::from_str(&serde_json::to_string_pretty(&mech).unwrap()).unwrap();
+        assert_eq!(
+            saved.digest(),
+            mech.digest(),
+            "a saved mechanism keeps its digest"
+        );
+        let err = built_with(Some(other.digest()))
+            .built_from(&mech, dir)
+            .unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            format!(
+                "out/parts: these parts were built from another mechanism than the one given \
+                 (build.json records the mechanism digest {}…, the mechanism's is {}…), \
+                 perhaps one synthesized into the same folder since. Build them again: \
+                 mpc-rig build MECHANISM",
+                &other.digest()[..12],
+                &mech.digest()[..12]
+            )
+        );
+    }
 
     /// Guards the one wording of drive-lost windows: bounds to the samples' 0.25° without
     /// trailing zeros, a window across 0° as it is, nothing for no window.

@@ -359,6 +359,19 @@ impl std::fmt::Display for CheckReport {
 }
 
 impl Mechanism {
+    /// A digest of the content: SHA-256 of its compact JSON, in hex. What is made from a
+    /// mechanism records it (the build's `build.json`), so that parts built from another
+    /// one (the folder's mechanism synthesized again since) are refused, not measured
+    /// against the wrong law.
+    pub fn digest(&self) -> String {
+        use sha2::{Digest, Sha256};
+        let bytes = serde_json::to_vec(self).expect("a mechanism always serializes");
+        Sha256::digest(&bytes)
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect()
+    }
+
     /// Write as pretty JSON.
     pub fn save(&self, path: &Path) -> Result<(), MechanismFileError> {
         let io = |source| MechanismFileError::Io {
