@@ -280,3 +280,73 @@ fn a_bench_refuses_a_prediction_of_another_class() {
     );
     assert!(stdout.is_empty(), "no device path printed");
 }
+
+/// Another 1R mechanism than [`TEST_MECHANISM`]: the demo's printable design.
+const OTHER_MECHANISM: &str = "tests/data/mechanism/half-turn-2to1-printable";
+
+/// Guards the refusal of what was made for another mechanism, each before anything is
+/// traced or served: parts whose `build.json` records another mechanism's digest (both
+/// digests named, the command that mends it), and a prediction given to a bench whose
+/// target is another mechanism (the same words, from the bench's side).
+#[test]
+fn parts_and_predictions_of_another_mechanism_are_refused() {
+    use mpc_rig::synth::mechanism::Mechanism;
+    let digest = |m: &str| Mechanism::load(std::path::Path::new(m)).unwrap().digest();
+    let (this, other) = (digest(TEST_MECHANISM), digest(OTHER_MECHANISM));
+    assert_ne!(this, other);
+    let dir = tempfile::tempdir().unwrap();
+    let parts = dir.path().join("parts");
+    blocks_that_never_meet(&parts);
+    let build_json = parts.join("build.json");
+    let mut build: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&build_json).unwrap()).unwrap();
+    build["mechanism_digest"] = other.clone().into();
+    std::fs::write(&build_json, build.to_string()).unwrap();
+    let out = dir.path().join("prediction");
+    let (parts_arg, out_arg) = (parts.to_str().unwrap(), out.to_str().unwrap());
+    let (_, stderr) = refused(&simulate_args(parts_arg, out_arg));
+    assert_eq!(
+        stderr,
+        format!(
+            "error: simulating the parts in {parts_arg}\n  caused by: {parts_arg}: these parts \
+             were built from another mechanism than the one given (build.json records the \
+             mechanism digest {}…, the mechanism's is {}…), perhaps one synthesized into the \
+             same folder since. Build them again: mpc-rig build MECHANISM\n",
+            &other[..12],
+            &this[..12]
+        )
+    );
+    assert!(!out.exists(), "nothing written");
+
+    // Built from this mechanism: predicted, and the prediction says for which.
+    build["mechanism_digest"] = this.clone().into();
+    std::fs::write(&build_json, build.to_string()).unwrap();
+    Command::cargo_bin("mpc-rig")
+        .unwrap()
+        .args(simulate_args(parts_arg, out_arg))
+        .assert()
+        .success();
+    let file = out.join("prediction.json");
+    let doc = written(&out, &["prediction.json"]);
+    assert_eq!(doc["prediction"]["mechanism_digest"], this.as_str());
+    let (stdout, stderr) = refused(&[
+        "sim-device",
+        "stepper",
+        "--mechanism",
+        OTHER_MECHANISM,
+        "--prediction",
+        file.to_str().unwrap(),
+    ]);
+    assert_eq!(
+        stderr,
+        format!(
+            "error: --prediction {f}: a prediction for another mechanism than {OTHER_MECHANISM} \
+             (its mechanism digest is {}…, this one's {}…). Predict this one: mpc-rig simulate \
+             {OTHER_MECHANISM}\n",
+            &this[..12],
+            &other[..12],
+            f = file.display()
+        )
+    );
+    assert!(stdout.is_empty(), "no device path printed");
+}

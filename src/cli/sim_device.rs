@@ -25,6 +25,7 @@ use crate::rig::sim::mixed;
 use crate::rig::sim::plant::PlantConfig;
 use crate::rig::sim::stepper::{self, Mechanics, SimStepperOptions};
 use crate::rig::target;
+use crate::synth::mechanism::Mechanism;
 
 /// Serve a simulated device on a pseudo-terminal.
 #[derive(Debug, Args)]
@@ -170,7 +171,7 @@ pub fn run(args: SimDeviceArgs) -> anyhow::Result<ExitCode> {
 fn run_mixed(a: SimMixedArgs) -> anyhow::Result<ExitCode> {
     let rig = RigConfig::load(&a.rig)?;
     let motion = load_target(&a.target, Some(&rig))?;
-    let plant = geometry_plant(&a.faults, &a.geometry, &motion)?;
+    let plant = geometry_plant(&a.faults, &a.geometry, &a.target, &motion)?;
     let sim = mixed::spawn(&rig, motion, plant).context("starting the simulated mixed bench")?;
     {
         let mut out = std::io::stdout().lock();
@@ -215,6 +216,7 @@ pub(super) fn plant_from(faults: &[String]) -> anyhow::Result<PlantConfig> {
 pub(super) fn geometry_plant(
     faults: &[String],
     geometry: &GeometryArgs,
+    target_args: &TargetArgs,
     motion: &Motion,
 ) -> anyhow::Result<PlantConfig> {
     let mut plant = plant_from(faults)?;
@@ -238,6 +240,25 @@ pub(super) fn geometry_plant(
                 motion.class()
             );
         }
+        // A prediction says which mechanism it was made for: another mechanism's target
+        // would move the follower by the wrong parts' play.
+        if let (Some(made_for), Some(mechanism)) =
+            (table.mechanism_digest(), &target_args.mechanism)
+        {
+            let (mech, _) = target::load_mechanism(mechanism)?;
+            let this = mech.digest();
+            if made_for != this {
+                anyhow::bail!(
+                    "--prediction {}: a prediction for another mechanism than {} (its mechanism \
+                     digest is {}…, this one's {}…). Predict this one: mpc-rig simulate {}",
+                    path.display(),
+                    mechanism.display(),
+                    Mechanism::short_digest(made_for),
+                    Mechanism::short_digest(&this),
+                    mechanism.display()
+                );
+            }
+        }
         plant.play = Some(std::sync::Arc::new(table));
     }
     Ok(plant)
@@ -246,7 +267,7 @@ pub(super) fn geometry_plant(
 fn run_stepper(a: SimStepperArgs) -> anyhow::Result<ExitCode> {
     let rig = a.rig.as_deref().map(RigConfig::load).transpose()?;
     let motion = load_target(&a.target, rig.as_ref())?;
-    let plant = geometry_plant(&a.faults, &a.geometry, &motion)?;
+    let plant = geometry_plant(&a.faults, &a.geometry, &a.target, &motion)?;
     let mechanics = match &rig {
         Some(r) => Mechanics::from_rig(r)?,
         None => Mechanics::default(),
@@ -305,7 +326,7 @@ pub(super) fn load_target(t: &TargetArgs, rig: Option<&RigConfig>) -> anyhow::Re
 
 fn run_dynamixel(a: SimDynamixelArgs) -> anyhow::Result<ExitCode> {
     let motion = load_target(&a.target, None)?;
-    let plant = geometry_plant(&a.faults, &a.geometry, &motion)?;
+    let plant = geometry_plant(&a.faults, &a.geometry, &a.target, &motion)?;
     let target = MotionTarget::new(motion)?;
     let mut opts = SimDynamixelOptions::new(Arc::new(target));
     opts.plant = plant;

@@ -88,8 +88,8 @@ pub enum PredictError {
          records the mechanism digest {}…, the mechanism's is {}…), perhaps one synthesized \
          into the same folder since. Build them again: mpc-rig build MECHANISM",
         parts.display(),
-        built_from.get(..12).unwrap_or(built_from),
-        this.get(..12).unwrap_or(this)
+        Mechanism::short_digest(built_from),
+        Mechanism::short_digest(this)
     )]
     OtherMechanism {
         /// The parts' folder.
@@ -370,6 +370,9 @@ pub struct WorstMm {
 pub struct Prediction {
     /// Mechanism class label.
     pub class: String,
+    /// [`Mechanism::digest`] of the mechanism predicted: the geometry plant refuses the
+    /// prediction for another mechanism's target.
+    pub mechanism_digest: String,
     /// Load model.
     pub load: String,
     /// Print clearance of the parts, mm.
@@ -750,6 +753,7 @@ pub fn predict(
     let kept_closure = ClosureAgreement::count(&kept.dist, &samples);
     Ok(Prediction {
         class: mech.class.label().to_string(),
+        mechanism_digest: mech.digest(),
         load: opts.load.label(),
         clearance_mm: built.clearance_mm,
         without_pair: built.without_pair,

@@ -52,6 +52,9 @@ struct Body {
     #[serde(default = "drag_label")]
     load: String,
     samples: Vec<Row>,
+    /// Absent in a prediction made before 2026-12-06.
+    #[serde(default)]
+    mechanism_digest: Option<String>,
 }
 
 fn drag_label() -> String {
@@ -80,8 +83,8 @@ struct Row {
     region_mm: Option<[f64; RAYS]>,
 }
 
-/// The rows of a prediction file, checked.
-fn read(path: &Path) -> Result<(Load, Vec<Row>), TableError> {
+/// The rows of a prediction file, checked, and the digest of its mechanism if it says.
+fn read(path: &Path) -> Result<(Load, Vec<Row>, Option<String>), TableError> {
     let text = std::fs::read_to_string(path).map_err(|error| TableError::Io {
         path: path.to_path_buf(),
         error,
@@ -90,7 +93,7 @@ fn read(path: &Path) -> Result<(Load, Vec<Row>), TableError> {
         path: path.to_path_buf(),
         message,
     };
-    let file: File = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
+    let mut file: File = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
     if file.format != PREDICTION_FORMAT {
         return Err(bad(format!(
             "format {:?}, expected {PREDICTION_FORMAT:?} (the output of mpc-rig simulate)",
@@ -114,7 +117,7 @@ fn read(path: &Path) -> Result<(Load, Vec<Row>), TableError> {
             file.prediction.load
         )));
     }
-    let rows = file.prediction.samples;
+    let rows = std::mem::take(&mut file.prediction.samples);
     let n = rows.len();
     if n == 0 {
         return Err(bad("no samples".to_string()));
@@ -147,7 +150,7 @@ fn read(path: &Path) -> Result<(Load, Vec<Row>), TableError> {
             }
         }
     }
-    Ok((load, rows))
+    Ok((load, rows, file.prediction.mechanism_digest))
 }
 
 /// Linear interpolation in a periodic table of n values at driver angles 2π·i/n.
@@ -179,7 +182,7 @@ pub struct PredictedDeviation {
 impl PredictedDeviation {
     /// Read `prediction.json` (as [`PlayTable::load`]).
     pub fn load(path: &Path) -> Result<PredictedDeviation, TableError> {
-        let (_, rows) = read(path)?;
+        let (_, rows, _) = read(path)?;
         let lost: Vec<bool> = rows.iter().map(|r| r.drive_lost).collect();
         let height = |f: fn(&Row) -> Option<f64>| -> Option<Vec<f64>> {
             rows.iter().map(|r| Some(f(r)? - r.target_mm?)).collect()
@@ -247,6 +250,8 @@ pub struct PlayTable {
     /// 1R1T: at driver angle 2π·i/n, the free region's rays, mm in the plane of
     /// [`super::SCREW_LEVER_MM`].
     regions: Option<Vec<[f64; RAYS]>>,
+    /// See [`PlayTable::mechanism_digest`].
+    mechanism_digest: Option<String>,
 }
 
 impl PlayTable {
@@ -262,6 +267,7 @@ impl PlayTable {
             minus,
             load,
             regions: None,
+            mechanism_digest: None,
         }
     }
 
@@ -299,15 +305,25 @@ impl PlayTable {
     /// Read `prediction.json` (format [`PREDICTION_FORMAT`], a 1R prediction with evenly
     /// spaced driver angles from 0).
     pub fn load(path: &Path) -> Result<PlayTable, TableError> {
-        let (load, rows) = read(path)?;
+        let (load, rows, digest) = read(path)?;
         let plus = rows.iter().map(|r| r.free_plus_deg.to_radians()).collect();
         let minus = rows.iter().map(|r| r.free_minus_deg.to_radians()).collect();
         // `read` checked that a 1R1T prediction has every region.
         let regions: Option<Vec<[f64; RAYS]>> = rows.iter().map(|r| r.region_mm).collect();
-        Ok(match regions {
+        let table = match regions {
             Some(regions) => PlayTable::with_regions(plus, minus, regions),
             None => PlayTable::new(plus, minus, load),
+        };
+        Ok(PlayTable {
+            mechanism_digest: digest,
+            ..table
         })
+    }
+
+    /// The [`Mechanism::digest`](crate::synth::mechanism::Mechanism::digest) of the
+    /// mechanism the prediction was made for, when its file says (since 2026-12-06).
+    pub fn mechanism_digest(&self) -> Option<&str> {
+        self.mechanism_digest.as_deref()
     }
 
     /// Free turns (plus, minus) at driver angle `phi` (rad, any real), linear between

@@ -372,6 +372,12 @@ impl Mechanism {
             .collect()
     }
 
+    /// The first 12 hex digits of a [`digest`](Self::digest), as messages quote it:
+    /// enough to tell two mechanisms apart at a glance.
+    pub fn short_digest(digest: &str) -> &str {
+        digest.get(..12).unwrap_or(digest)
+    }
+
     /// Write as pretty JSON.
     pub fn save(&self, path: &Path) -> Result<(), MechanismFileError> {
         let io = |source| MechanismFileError::Io {
