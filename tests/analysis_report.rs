@@ -155,3 +155,47 @@ fn a_run_without_a_complete_cycle_gets_no_error_figures() {
     );
     assert!(!md.contains("Rotation error after alignment"), "{md}");
 }
+
+/// Guards the comparison's refusal of a prediction made for another mechanism than the
+/// target (whole message, the report not written), and that a prediction for the target
+/// itself, or one that names no mechanism (made before digests), is compared.
+#[test]
+fn a_prediction_for_another_mechanism_is_refused() {
+    let mut law = piecewise_half_turn(2.0 / 3.0);
+    law.mechanism_digest = Some("a".repeat(64));
+    let run = SyntheticBench {
+        forward_cycles: 2.0,
+        rate_hz: 200.0,
+        ..Default::default()
+    }
+    .generate(&law);
+    let a = analyze(&run, &law, &AnalysisOptions::default()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let prediction = dir.path().join("prediction.json");
+    let write_prediction = |digest: Option<&str>| {
+        crate::analysis_sim_bench::uniform_prediction_for(&prediction, 0.5, digest)
+    };
+    let opts = ReportOptions {
+        prediction: Some(prediction.clone()),
+        ..Default::default()
+    };
+    let out = dir.path().join("report");
+    write_prediction(Some(&"b".repeat(64)));
+    let err = write_report(&out, &a, &run, &law, source(), &opts).unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        format!(
+            "invalid option --prediction: {}: a prediction for another mechanism than the \
+             target (its \
+             mechanism digest is bbbbbbbbbbbb…, the target's aaaaaaaaaaaa…). Predict the \
+             target: mpc-rig simulate MECHANISM",
+            prediction.display()
+        )
+    );
+    assert!(!out.join("report.md").exists(), "no report written");
+    for digest in [Some("a".repeat(64)), None] {
+        write_prediction(digest.as_deref());
+        let s = write_report(&out, &a, &run, &law, source(), &opts).unwrap();
+        assert!(s.prediction.is_some(), "compared with the prediction");
+    }
+}

@@ -60,6 +60,12 @@ fn plant_backlash_and_lag_are_recovered_from_a_simulated_session() {
 /// A `prediction.json` with the same free turn each way everywhere (`free` degrees) and
 /// the laws a drag gives with it: forward lags by `free`, reverse leads by `free`.
 fn uniform_prediction(path: &Path, free: f64) {
+    uniform_prediction_for(path, free, None);
+}
+
+/// [`uniform_prediction`] made for the mechanism of this digest, or for none said (a
+/// prediction from before digests).
+pub(crate) fn uniform_prediction_for(path: &Path, free: f64, digest: Option<&str>) {
     let n = 1440;
     let samples: Vec<serde_json::Value> = (0..n)
         .map(|i| {
@@ -76,9 +82,13 @@ fn uniform_prediction(path: &Path, free: f64) {
             })
         })
         .collect();
+    let mut body = serde_json::json!({"class": "1R", "samples": samples});
+    if let Some(d) = digest {
+        body["mechanism_digest"] = d.into();
+    }
     let doc = serde_json::json!({
         "format": mpc_rig::predict::output::PREDICTION_FORMAT,
-        "prediction": {"class": "1R", "samples": samples},
+        "prediction": body,
     });
     std::fs::write(path, doc.to_string()).unwrap();
 }

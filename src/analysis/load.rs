@@ -287,7 +287,10 @@ pub fn load_target(src: &TargetSource) -> Result<TargetLaw, AnalysisError> {
     match src {
         TargetSource::Mechanism(p) => {
             let (mechanism, motion) = crate::rig::target::load_mechanism(p).map_err(err)?;
-            Ok(TargetLaw::from_motion(&motion, mechanism.scale_mm))
+            Ok(TargetLaw {
+                mechanism_digest: Some(mechanism.digest()),
+                ..TargetLaw::from_motion(&motion, mechanism.scale_mm)
+            })
         }
         TargetSource::Motion(p) => {
             let motion = crate::rig::target::load_motion(p).map_err(err)?;

@@ -174,6 +174,10 @@ pub struct TargetLaw {
     /// The motion the tables were built from, when there is one (its charts are reused so
     /// the report draws the axis path on the same plot as `motion show`).
     pub motion: Option<crate::motion::Motion>,
+    /// The [`Mechanism::digest`](crate::synth::mechanism::Mechanism::digest) of the
+    /// mechanism the law was read from, when it was: a prediction made for another one is
+    /// refused.
+    pub mechanism_digest: Option<String>,
 }
 
 impl TargetLaw {
@@ -187,6 +191,7 @@ impl TargetLaw {
             rotation: None,
             key_poses: Vec::new(),
             motion: None,
+            mechanism_digest: None,
         }
     }
 
@@ -203,6 +208,7 @@ impl TargetLaw {
             rotation: None,
             key_poses: Vec::new(),
             motion: None,
+            mechanism_digest: None,
         }
     }
 
@@ -219,6 +225,7 @@ impl TargetLaw {
             rotation: Some(RotationTable::from_fn(TARGET_TABLE_SAMPLES, rotation)),
             key_poses,
             motion: None,
+            mechanism_digest: None,
         }
     }
 

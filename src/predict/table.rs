@@ -177,12 +177,14 @@ pub struct PredictedDeviation {
     /// 1R1T: the height's, mm (forward, reverse).
     heights: Option<(Vec<f64>, Vec<f64>)>,
     lost_windows_deg: Vec<[f64; 2]>,
+    /// See [`PlayTable::mechanism_digest`].
+    mechanism_digest: Option<String>,
 }
 
 impl PredictedDeviation {
     /// Read `prediction.json` (as [`PlayTable::load`]).
     pub fn load(path: &Path) -> Result<PredictedDeviation, TableError> {
-        let (_, rows, _) = read(path)?;
+        let (_, rows, mechanism_digest) = read(path)?;
         let lost: Vec<bool> = rows.iter().map(|r| r.drive_lost).collect();
         let height = |f: fn(&Row) -> Option<f64>| -> Option<Vec<f64>> {
             rows.iter().map(|r| Some(f(r)? - r.target_mm?)).collect()
@@ -193,7 +195,13 @@ impl PredictedDeviation {
             reverse: rows.iter().map(|r| r.reverse_deg - r.target_deg).collect(),
             heights,
             lost_windows_deg: super::lost_windows_deg(&lost),
+            mechanism_digest,
         })
+    }
+
+    /// As [`PlayTable::mechanism_digest`].
+    pub fn mechanism_digest(&self) -> Option<&str> {
+        self.mechanism_digest.as_deref()
     }
 
     /// The predicted − target of analysis channel `channel` at driver angle `phi_deg`:
