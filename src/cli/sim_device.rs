@@ -170,8 +170,9 @@ pub fn run(args: SimDeviceArgs) -> anyhow::Result<ExitCode> {
 
 fn run_mixed(a: SimMixedArgs) -> anyhow::Result<ExitCode> {
     let rig = RigConfig::load(&a.rig)?;
-    let motion = load_target(&a.target, Some(&rig))?;
-    let plant = geometry_plant(&a.faults, &a.geometry, &a.target, &motion)?;
+    let target = load_target(&a.target, Some(&rig))?;
+    let plant = geometry_plant(&a.faults, &a.geometry, &target)?;
+    let motion = target.motion;
     let sim = mixed::spawn(&rig, motion, plant).context("starting the simulated mixed bench")?;
     {
         let mut out = std::io::stdout().lock();
@@ -216,9 +217,9 @@ pub(super) fn plant_from(faults: &[String]) -> anyhow::Result<PlantConfig> {
 pub(super) fn geometry_plant(
     faults: &[String],
     geometry: &GeometryArgs,
-    target_args: &TargetArgs,
-    motion: &Motion,
+    target: &Target,
 ) -> anyhow::Result<PlantConfig> {
+    let motion = &target.motion;
     let mut plant = plant_from(faults)?;
     if let Some(path) = &geometry.prediction {
         use crate::motion::MotionClass;
@@ -242,11 +243,9 @@ pub(super) fn geometry_plant(
         }
         // A prediction says which mechanism it was made for: another mechanism's target
         // would move the follower by the wrong parts' play.
-        if let (Some(made_for), Some(mechanism)) =
-            (table.mechanism_digest(), &target_args.mechanism)
+        if let (Some(made_for), Some((mechanism, this))) =
+            (table.mechanism_digest(), &target.mechanism)
         {
-            let (mech, _) = target::load_mechanism(mechanism)?;
-            let this = mech.digest();
             if made_for != this {
                 anyhow::bail!(
                     "--prediction {}: a prediction for another mechanism than {} (its mechanism \
@@ -254,7 +253,7 @@ pub(super) fn geometry_plant(
                     path.display(),
                     mechanism.display(),
                     Mechanism::short_digest(made_for),
-                    Mechanism::short_digest(&this),
+                    Mechanism::short_digest(this),
                     mechanism.display()
                 );
             }
@@ -266,8 +265,9 @@ pub(super) fn geometry_plant(
 
 fn run_stepper(a: SimStepperArgs) -> anyhow::Result<ExitCode> {
     let rig = a.rig.as_deref().map(RigConfig::load).transpose()?;
-    let motion = load_target(&a.target, rig.as_ref())?;
-    let plant = geometry_plant(&a.faults, &a.geometry, &a.target, &motion)?;
+    let target = load_target(&a.target, rig.as_ref())?;
+    let plant = geometry_plant(&a.faults, &a.geometry, &target)?;
+    let motion = target.motion;
     let mechanics = match &rig {
         Some(r) => Mechanics::from_rig(r)?,
         None => Mechanics::default(),
@@ -312,21 +312,41 @@ fn run_stepper(a: SimStepperArgs) -> anyhow::Result<ExitCode> {
 /// The target law to serve: a mechanism only after the checks `synth --check` makes (a
 /// broken file must not become a simulated bench that someone then runs a motor against),
 /// and, when the bench comes from a rig file, one the rig's sensors can measure.
-pub(super) fn load_target(t: &TargetArgs, rig: Option<&RigConfig>) -> anyhow::Result<Motion> {
-    let motion = match (&t.mechanism, &t.motion) {
-        (Some(m), _) => target::load_mechanism(m)?.1,
-        (None, Some(f)) => target::load_motion(f)?,
+pub(super) fn load_target(t: &TargetArgs, rig: Option<&RigConfig>) -> anyhow::Result<Target> {
+    let loaded = match (&t.mechanism, &t.motion) {
+        (Some(m), _) => {
+            let (mech, motion) = target::load_mechanism(m)?;
+            Target {
+                motion,
+                mechanism: Some((m.clone(), mech.digest())),
+            }
+        }
+        (None, Some(f)) => Target {
+            motion: target::load_motion(f)?,
+            mechanism: None,
+        },
         (None, None) => anyhow::bail!("give --mechanism PATH or --motion FILE"),
     };
     if let Some(rig) = rig {
-        target::check_measurable(rig, motion.class())?;
+        target::check_measurable(rig, loaded.motion.class())?;
     }
-    Ok(motion)
+    Ok(loaded)
+}
+
+/// A bench's target as [`load_target`] read it.
+pub(super) struct Target {
+    /// The law the follower obeys.
+    pub motion: Motion,
+    /// For a mechanism: its path as given and its
+    /// [`digest`](crate::synth::mechanism::Mechanism::digest), which a prediction given to
+    /// the geometry plant must carry.
+    pub mechanism: Option<(PathBuf, String)>,
 }
 
 fn run_dynamixel(a: SimDynamixelArgs) -> anyhow::Result<ExitCode> {
-    let motion = load_target(&a.target, None)?;
-    let plant = geometry_plant(&a.faults, &a.geometry, &a.target, &motion)?;
+    let target = load_target(&a.target, None)?;
+    let plant = geometry_plant(&a.faults, &a.geometry, &target)?;
+    let motion = target.motion;
     let target = MotionTarget::new(motion)?;
     let mut opts = SimDynamixelOptions::new(Arc::new(target));
     opts.plant = plant;

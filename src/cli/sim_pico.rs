@@ -73,8 +73,9 @@ fn parse_flash_id(s: &str) -> Result<u64, String> {
 
 /// Run `sim-device pico`.
 pub fn run(a: SimPicoArgs) -> anyhow::Result<ExitCode> {
-    let motion = load_target(&a.target, None)?;
-    let plant = geometry_plant(&a.faults, &a.geometry, &a.target, &motion)?;
+    let target = load_target(&a.target, None)?;
+    let plant = geometry_plant(&a.faults, &a.geometry, &target)?;
+    let motion = target.motion;
     let mechanics = match &a.rig {
         Some(r) => Mechanics::from_rig(&RigConfig::load(r)?)?,
         None => Mechanics::default(),
