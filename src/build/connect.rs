@@ -49,6 +49,22 @@ pub fn clearance(
     swept_field(kin, obstacles, frame, grid)
 }
 
+/// Clearance field in `frame` from `body` alone over the period, on a grid of its own that
+/// covers where the body goes grown by `reach`: beyond that grid it says infinity, true of
+/// every value up to `reach` (the body's sweep is farther). Values below `reach` are
+/// bounded as [`clearance`]'s are. On the planning grid of the part it is seen from, one
+/// rim's field took as much memory as the whole part's, while a rim's sweep fills a band of
+/// heights of it.
+pub fn clearance_within(kin: &Kinematics, body: &Balls, frame: Frame, reach: f64) -> DistanceField {
+    let bounds = swept_bounds(kin, body, frame, BOUNDS_SAMPLES).inflate(reach + PLAN_VOXEL_MM);
+    swept_field(
+        kin,
+        std::slice::from_ref(body),
+        frame,
+        VoxelGrid::covering(bounds, PLAN_VOXEL_MM),
+    )
+}
+
 /// What is joined so far: a boolean per voxel.
 pub struct Joined {
     grid: VoxelGrid,

@@ -56,6 +56,20 @@ use crate::synth::undercut::ESCAPE_REACH_MM as RAY_REACH_MM;
 /// sign. Measured on half-turn-2to1 at 0.4 mm: the driver's STL is byte for byte the one
 /// the earlier 3 cells gave, and the carve took 269 s against 288–363 s.
 const CARVE_CAP_CELLS: f64 = 2.0;
+/// How far above the bridge the search for the carve's pieces of band looks, mm
+/// ([`carved_pieces`]): any value above the bridge would do, a tenth of a millimetre
+/// keeps the searches short.
+const PIECES_CAP_ABOVE_BRIDGE_MM: f64 = 0.1;
+
+/// The largest cap of the carve's searches, mm: the driver's
+/// ([`Design::carve_cap`]) and that of the pieces it leaves of each band
+/// ([`carved_pieces`]). Each rim's coarse field (`Design::carve_fields`) is made this far
+/// around the rim's sweep and no farther.
+fn carve_reach(cell_mm: f64, clearance: f64) -> f64 {
+    (CARVE_CAP_CELLS * cell_mm).max(segments::BRIDGE_MM + PIECES_CAP_ABOVE_BRIDGE_MM)
+        + 0.5 * clearance
+}
+
 /// The slope at or below which a rim's pieces count as mild for the carve
 /// ([`Sweep::split_by_twist`]): 1.2 keeps all but the sharpest stretches of the examples'
 /// rims in the mild part (half-turn-2to1: 1.00–1.14 for four rims, 1.52 and 2.84 at their
@@ -96,15 +110,15 @@ pub struct Design {
     /// Clearance from the driver's bands (exact where it matters), hub, column, struts and
     /// the support, follower frame: what the webs keep clear of.
     pub band_clearance: Arc<BandClearance>,
-    /// Clearance from the whole driver and support (coarse), follower frame.
-    pub follower_field: Arc<DistanceField>,
-    /// Clearance from the whole follower and support (coarse), driver frame: a lower bound
-    /// of the rims' swept distance, used to skip the exact carve far from the groove.
-    pub driver_field: Arc<DistanceField>,
     /// The rims as the carve sweeps them: each cut by how sharply it twists
     /// ([`Sweep::split_by_twist`] at a slope of 1.2, `CARVE_MILD_SLOPE`), so that a short
     /// sharp twist slows the search near it alone.
     pub carve_rims: Vec<Sweep>,
+    /// Per carve rim, a lower bound of its swept distance (driver frame) up to the carve's
+    /// largest cap ([`carve_reach`]): its own rim's coarse sweep, which lets the carve skip
+    /// every rim but the one whose groove a point is near (a field of the whole follower
+    /// bounds them all by the nearest).
+    pub carve_fields: Vec<Arc<DistanceField>>,
     /// Cells per mm of the mesher (for the carve's cap).
     pub cell_mm: f64,
     /// Print clearance.
@@ -196,10 +210,23 @@ pub fn design(
     d_others_rule.extend(support_pieces.cover.iter().cloned());
     let d_others = connect::clearance(&kin, &d_others_rule, Frame::Driver, dgrid);
     let mut driver_field = d_rims.min(&d_others);
-    let carve_rims: Vec<Sweep> = rims
+    let (carve_rims, carve_of): (Vec<Sweep>, Vec<usize>) = rims
         .iter()
-        .flat_map(|r| r.split_by_twist(CARVE_MILD_SLOPE))
+        .enumerate()
+        .flat_map(|(k, r)| {
+            r.split_by_twist(CARVE_MILD_SLOPE)
+                .into_iter()
+                .map(move |part| (part, k))
+        })
+        .unzip();
+    // Each rim's own sweep, so that near one groove the carve searches that rim alone.
+    let reach = carve_reach(opts.cell_mm, opts.clearance_mm);
+    let rim_fields: Vec<Arc<DistanceField>> = rim_covers
+        .iter()
+        .map(|c| Arc::new(connect::clearance_within(&kin, c, Frame::Driver, reach)))
         .collect();
+    let carve_fields: Vec<Arc<DistanceField>> =
+        carve_of.iter().map(|&k| rim_fields[k].clone()).collect();
     // One field per band, so that the exact sweep is run only for the bands near a point.
     let band_fields: Vec<DistanceField> = band_covers
         .iter()
@@ -281,7 +308,7 @@ pub fn design(
         &kin,
         &bands,
         &carve_rims,
-        &driver_field,
+        &carve_fields,
         opts.clearance_mm,
         &pairs,
         progress,
@@ -345,7 +372,6 @@ pub fn design(
             progress,
         )?;
         Ok(FollowerPlan {
-            field,
             web_clear,
             pieces,
             struts,
@@ -376,7 +402,6 @@ pub fn design(
         }
     };
     let FollowerPlan {
-        field: follower_field,
         web_clear,
         pieces: follower_pieces,
         struts: follower_struts,
@@ -396,9 +421,8 @@ pub fn design(
         driver_pieces,
         support_pieces,
         band_clearance: web_clear,
-        follower_field,
-        driver_field,
         carve_rims,
+        carve_fields,
         cell_mm: opts.cell_mm,
         clearance: opts.clearance_mm,
         without_pair: opts.without_pair,
@@ -407,7 +431,6 @@ pub fn design(
 
 /// The follower's plan around a given set of driver struts.
 struct FollowerPlan {
-    field: Arc<DistanceField>,
     web_clear: Arc<BandClearance>,
     pieces: Pieces,
     struts: Vec<ThickPolyline>,
@@ -636,7 +659,7 @@ fn carved_pieces(
     kin: &Kinematics,
     bands: &[Sweep],
     rims: &[Sweep],
-    field: &DistanceField,
+    fields: &[Arc<DistanceField>],
     clearance: f64,
     pairs: &[(usize, &crate::synth::mechanism::CurvePair)],
     progress: &dyn Fn(&str),
@@ -647,9 +670,9 @@ fn carved_pieces(
     // instant that removes the sample.
     let bridge = 0.5 * clearance + segments::BRIDGE_MM;
     let swept = SweptEach::new(kin, rims, Frame::Follower, Frame::Driver)
-        .with_coarse(field)
+        .with_coarse_each(fields)
         .with_floor(bridge - 1e-9);
-    let cap = bridge + 0.1;
+    let cap = bridge + PIECES_CAP_ABOVE_BRIDGE_MM;
     let carve = |p: Vec3| swept.value(p, cap) - 0.5 * clearance;
     bands
         .iter()
@@ -851,15 +874,25 @@ impl BandClearance {
         certificates: Option<&[Certificates]>,
     ) -> f64 {
         let mut c = self.others.sample(p);
-        for (k, (band, field)) in self.bands.iter().zip(&self.band_fields).enumerate() {
+        // Nearest band by its bound first (ties in the bands' order, so the order depends
+        // on `p` alone): its value caps the searches of the others, and once a band's bound
+        // is not below the value so far, no later one's is.
+        let mut order: Vec<(f64, usize)> = self
+            .band_fields
+            .iter()
+            .enumerate()
+            .map(|(k, f)| (f.sample(p), k))
+            .collect();
+        order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        for (coarse, k) in order {
             if c <= floor {
                 return floor;
             }
             let bound = need.min(c);
-            let coarse = field.sample(p);
             if coarse >= bound {
-                continue;
+                break;
             }
+            let band = &self.bands[k];
             let sweep = ExactSweep {
                 kin: &self.kin,
                 solid: band,
@@ -1322,7 +1355,9 @@ impl Design {
     /// The largest swept distance of the rims the carve computes exactly, mm: beyond it the
     /// driver's value is more than [`CARVE_CAP_CELLS`] cells outside the groove.
     fn carve_cap(&self) -> f64 {
-        CARVE_CAP_CELLS * self.cell_mm + 0.5 * self.clearance
+        let cap = CARVE_CAP_CELLS * self.cell_mm + 0.5 * self.clearance;
+        debug_assert!(cap <= carve_reach(self.cell_mm, self.clearance));
+        cap
     }
 
     /// The support (reference frame).
@@ -1456,7 +1491,7 @@ impl Sdf for DriverSolid<'_> {
                 Frame::Follower,
                 Frame::Driver,
             )
-            .with_coarse(&self.design.driver_field)
+            .with_coarse_each(&self.design.carve_fields)
             .with_certificates(&self.certificates)
             .with_floor(half - cap)
             .value(p, cap.min(half - m));
