@@ -6,17 +6,18 @@
 //! (reaching to the mitre planes that bisect the turns, so that no wedge opens between
 //! segments), found through a bounding-volume hierarchy over the segments. A sweep can be
 //! cut into parts by how sharply its section twists ([`Sweep::split_by_twist`]), each
-//! part with its own bound on how fast its value changes. The section
+//! part with its own bound on how fast its value changes. A half ellipse's distance is
+//! read from a table made once per ellipse ([`EllipseTable`]), its exact value
+//! ([`ellipse_distance`]) costing a bisection. The section
 //! lies in the plane normal to the loop; its coordinates are (u, v) along the frame's `u`
 //! and `v = t × u`. It does not know what the curves mean (contact curves are `build`'s).
 
+use std::sync::{Arc, Mutex, OnceLock};
+
+use rayon::prelude::*;
+
 use super::mesh::Aabb;
 use super::sdf::{arr, Sdf, Vec3};
-
-/// Newton-type iterations of the closest point on an ellipse; three already reach 1e-9 of
-/// the semi-axes for the aspect ratios used here (checked in the tests against a dense
-/// polygon).
-const ELLIPSE_ITERATIONS: usize = 4;
 
 /// A 2-D cross-section in (u, v) coordinates, mm.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -45,8 +46,8 @@ pub enum Section {
 
 /// Farther than this (in the ellipse's units) beyond the circle around the ellipse, its
 /// distance is replaced by the distance to that circle, a lower bound: callers need exact
-/// values near surfaces and bounds elsewhere, and the closest-point iteration dominated the
-/// cost of far queries.
+/// values near surfaces and bounds elsewhere, and the closest point's search dominated the
+/// cost of far queries (and [`EllipseTable`] covers no more than this reach).
 pub const ELLIPSE_FAR: f64 = 2.0;
 
 /// √(a² + b²) for the mm-sized values here (`f64::hypot` guards against overflow at a cost
@@ -58,39 +59,167 @@ pub fn norm2(a: f64, b: f64) -> f64 {
 
 /// Signed distance from (x, y) to the ellipse with semi-axes a, b centred at the origin:
 /// exact within [`ELLIPSE_FAR`] of the ellipse's enclosing circle, a lower bound beyond.
+///
+/// The closest point (q₀, q₁) of a point (p₀, p₁) in the first quadrant, a ≥ b, is
+/// qᵢ = eᵢ² pᵢ / (t + eᵢ²) for the one t that puts it on the ellipse (the normal through
+/// it passes through p); with s = t / b², r = a² / b², zᵢ = pᵢ / eᵢ, that is the root of
+/// (r z₀ / (s + r))² + (z₁ / (s + 1))² = 1, which falls monotonically in s and is
+/// bracketed by s = z₁ − 1 and s = |(r z₀, z₁)| − 1, so bisection (in s + 1) finds it however near
+/// the point is to the centre of curvature (Eberly's formulation; the iteration on the
+/// evolute used before stopped up to 1.7·10⁻⁴ mm off near the major axis). A point on the
+/// major axis has its closest point in closed form. Each value costs about a hundred
+/// steps: [`EllipseTable`] serves the sweeps.
 pub fn ellipse_distance(x: f64, y: f64, a: f64, b: f64) -> f64 {
-    let (px, py) = (x.abs(), y.abs());
-    let (r, m) = (norm2(px, py), a.max(b));
+    let r = norm2(x, y);
+    let m = a.max(b);
     if r > m + ELLIPSE_FAR {
         return r - m;
     }
-    let inside = (px / a).powi(2) + (py / b).powi(2) < 1.0;
-    // Closest point by iterating on the direction (cos, sin) of the parameter: the
-    // evolute construction (the point's distance to the centre of curvature matches the
-    // radius of curvature), which converges from (1/√2, 1/√2) in a few steps.
-    let (mut tx, mut ty) = (
-        std::f64::consts::FRAC_1_SQRT_2,
-        std::f64::consts::FRAC_1_SQRT_2,
-    );
-    for _ in 0..ELLIPSE_ITERATIONS {
-        let (ex, ey) = (
-            (a * a - b * b) * tx.powi(3) / a,
-            (b * b - a * a) * ty.powi(3) / b,
-        );
-        let (rx, ry) = (a * tx - ex, b * ty - ey);
-        let (qx, qy) = (px - ex, py - ey);
-        let (r, q) = (norm2(rx, ry), norm2(qx, qy).max(1e-300));
-        tx = ((qx * r / q + ex) / a).clamp(0.0, 1.0);
-        ty = ((qy * r / q + ey) / b).clamp(0.0, 1.0);
-        let l = norm2(tx, ty).max(1e-300);
-        tx /= l;
-        ty /= l;
+    exact_ellipse_distance(x, y, a, b)
+}
+
+/// [`ellipse_distance`] without the bound far away.
+fn exact_ellipse_distance(x: f64, y: f64, a: f64, b: f64) -> f64 {
+    if a < b {
+        return exact_ellipse_distance(y, x, b, a);
     }
-    let d = norm2(px - a * tx, py - b * ty);
-    if inside {
+    let (p0, p1) = (x.abs(), y.abs());
+    let (z0, z1) = (p0 / a, p1 / b);
+    let g = z0 * z0 + z1 * z1 - 1.0;
+    let (q0, q1) = if g == 0.0 {
+        (p0, p1)
+    } else if p1 > 0.0 {
+        // In w = s + 1, which keeps its precision where the root nears s = −1 (a point near
+        // the major axis: q₁ = p₁ / w).
+        let ratio = (a / b) * (a / b);
+        let f = |w: f64| (ratio * z0 / (w - 1.0 + ratio)).powi(2) + (z1 / w).powi(2) - 1.0;
+        let (mut lo, mut hi) = (z1, norm2(ratio * z0, z1));
+        // At most as many halvings as an f64 has bits of exponent and mantissa.
+        for _ in 0..ELLIPSE_BISECTIONS {
+            let mid = 0.5 * (lo + hi);
+            if mid <= lo || mid >= hi {
+                break;
+            }
+            if f(mid) > 0.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let w = 0.5 * (lo + hi);
+        (ratio * p0 / (w - 1.0 + ratio), p1 / w)
+    } else {
+        // On the major axis: the closest point leaves it when p is nearer the centre than
+        // the centre of curvature of the vertex.
+        let c = a * a - b * b;
+        if p0 * a < c {
+            let q0 = a * a * p0 / c;
+            (q0, b * (1.0 - (q0 / a).powi(2)).max(0.0).sqrt())
+        } else {
+            (a, 0.0)
+        }
+    };
+    let d = norm2(p0 - q0, p1 - q1);
+    if g < 0.0 {
         -d
     } else {
         d
+    }
+}
+
+/// Halvings of [`ellipse_distance`]'s bracket at most: 1 100 covers every f64 between the
+/// two ends (the loop stops when the middle equals an end, after 60–100 in practice).
+const ELLIPSE_BISECTIONS: usize = 1100;
+
+/// Cell of an [`EllipseTable`], in the ellipse's units (mm for the parts). 0.01: the table
+/// of the rims' 3 × 1.6 mm section is 500 × 500 values (1 MB of f32, held in a core's
+/// cache), bilinear interpolation stays within 4·10⁻⁵ mm of the exact distance within
+/// 0.5 mm of the ellipse (the curvature there is at most a/b² = 1.2 per mm, an error of
+/// h²κ/8), and a value took 10 ns against 150 ns for the four steps of the evolute
+/// iteration used before, which made a quarter of the carve's time (measured on 2·10⁶
+/// random points around the section; a 0.005 table, 4 MB, took 37 ns).
+pub const ELLIPSE_TABLE_CELL: f64 = 0.01;
+
+/// [`ellipse_distance`] tabulated on a lattice of [`ELLIPSE_TABLE_CELL`] over the
+/// quadrant (the ellipse is symmetric) out to [`ELLIPSE_FAR`] beyond its enclosing circle,
+/// and interpolated bilinearly; beyond, the same lower bound. Made once per ellipse
+/// ([`EllipseTable::shared`]).
+#[derive(Debug)]
+pub struct EllipseTable {
+    a: f64,
+    b: f64,
+    /// Values per row and rows.
+    n: usize,
+    values: Vec<f32>,
+}
+
+impl EllipseTable {
+    /// The table of the ellipse with semi-axes a, b, made when first asked for and shared
+    /// by every sweep of that section after.
+    pub fn shared(a: f64, b: f64) -> Arc<EllipseTable> {
+        static TABLES: OnceLock<Mutex<Vec<Arc<EllipseTable>>>> = OnceLock::new();
+        let mut tables = TABLES
+            .get_or_init(Default::default)
+            .lock()
+            .expect("no panics under the lock");
+        let same =
+            |t: &&Arc<EllipseTable>| t.a.to_bits() == a.to_bits() && t.b.to_bits() == b.to_bits();
+        if let Some(t) = tables.iter().find(same) {
+            return t.clone();
+        }
+        let t = Arc::new(EllipseTable::new(a, b));
+        tables.push(t.clone());
+        t
+    }
+
+    fn new(a: f64, b: f64) -> EllipseTable {
+        // Two cells beyond the reach, so that every point within it has a whole cell.
+        let reach = a.max(b) + ELLIPSE_FAR;
+        let n = (reach / ELLIPSE_TABLE_CELL).ceil() as usize + 2;
+        let mut values = vec![0.0f32; n * n];
+        values.par_chunks_mut(n).enumerate().for_each(|(j, row)| {
+            let y = j as f64 * ELLIPSE_TABLE_CELL;
+            for (i, v) in row.iter_mut().enumerate() {
+                // Exact at every corner, also those just beyond the reach whose cells
+                // straddle it.
+                *v = exact_ellipse_distance(i as f64 * ELLIPSE_TABLE_CELL, y, a, b) as f32;
+            }
+        });
+        EllipseTable { a, b, n, values }
+    }
+
+    /// The signed distance at (x, y) ([`ellipse_distance`] within the error above).
+    #[inline]
+    pub fn dist(&self, x: f64, y: f64) -> f64 {
+        let (px, py) = (x.abs(), y.abs());
+        let (r, m) = (norm2(px, py), self.a.max(self.b));
+        if r > m + ELLIPSE_FAR {
+            return r - m;
+        }
+        let (fx, fy) = (px / ELLIPSE_TABLE_CELL, py / ELLIPSE_TABLE_CELL);
+        // Within the reach, so both below n − 2.
+        let (i, j) = (fx as usize, fy as usize);
+        let (sx, sy) = (fx - i as f64, fy - j as f64);
+        let k = j * self.n + i;
+        let v = |k: usize| f64::from(self.values[k]);
+        let low = v(k) + (v(k + 1) - v(k)) * sx;
+        let high = v(k + self.n) + (v(k + self.n + 1) - v(k + self.n)) * sx;
+        low + (high - low) * sy
+    }
+}
+
+/// The distance of [`Section::HalfEllipse`] at (u, v) through `ellipse`, the signed
+/// distance to its whole ellipse about that ellipse's centre.
+fn half_ellipse_dist(u: f64, v: f64, a: f64, b: f64, ellipse: impl Fn(f64, f64) -> f64) -> f64 {
+    let e = ellipse(u + a, v);
+    let cut = -(u + a);
+    if e > 0.0 && cut > 0.0 {
+        // Behind the flat side and outside the ellipse: nearest is the flat side's segment
+        // |v| ≤ b at u = −a.
+        let dv = (v.abs() - b).max(0.0);
+        norm2(cut, dv)
+    } else {
+        e.max(cut)
     }
 }
 
@@ -99,16 +228,7 @@ impl Section {
     pub fn dist(&self, u: f64, v: f64) -> f64 {
         match *self {
             Section::HalfEllipse { a, b } => {
-                let e = ellipse_distance(u + a, v, a, b);
-                let cut = -(u + a);
-                if e > 0.0 && cut > 0.0 {
-                    // Behind the flat side and outside the ellipse: nearest is the flat
-                    // side's segment |v| ≤ b at u = −a.
-                    let dv = (v.abs() - b).max(0.0);
-                    norm2(cut, dv)
-                } else {
-                    e.max(cut)
-                }
+                half_ellipse_dist(u, v, a, b, |x, y| ellipse_distance(x, y, a, b))
             }
             Section::RoundedRect {
                 u_min,
@@ -323,6 +443,8 @@ pub struct Sweep {
     /// Per segment, what [`Sweep::segment_dist`] needs of its frames, computed once.
     segs: Vec<Segment>,
     section: Section,
+    /// A half ellipse's table ([`EllipseTable`]), which the pieces' distances read.
+    ellipse: Option<Arc<EllipseTable>>,
     /// The segments that make this solid, in leaf order: all of them, or the part of the
     /// loop [`Sweep::split_by_twist`] gave it. Leaf g of `bvh` holds entries
     /// g·[`SEGMENTS_PER_LEAF`] onwards.
@@ -517,11 +639,16 @@ impl Sweep {
             .collect();
         let bvh = Bvh::new(&leaf_boxes);
         let lipschitz = ids.iter().map(|&i| slopes[i]).fold(1.0, f64::max);
+        let ellipse = match section {
+            Section::HalfEllipse { a, b } => Some(EllipseTable::shared(a, b)),
+            Section::RoundedRect { .. } => None,
+        };
         Sweep {
             frames,
             ends,
             segs,
             section,
+            ellipse,
             ids,
             bvh,
             boxes,
@@ -558,6 +685,16 @@ impl Sweep {
                 )
             })
             .collect()
+    }
+
+    /// The section's distance at (u, v): a half ellipse's through its table.
+    fn section_dist(&self, u: f64, v: f64) -> f64 {
+        match (&self.ellipse, self.section) {
+            (Some(table), Section::HalfEllipse { a, b }) => {
+                half_ellipse_dist(u, v, a, b, |x, y| table.dist(x, y))
+            }
+            _ => self.section.dist(u, v),
+        }
     }
 
     /// The frames.
@@ -630,7 +767,7 @@ impl Sweep {
         // sweep's value is the least over all its pieces whatever the walk skipped, far out
         // as near: with the smaller, the far values depended on which pieces were visited
         // (grouping segments into leaves moved a strut of demo's driver).
-        let sigma = match self.section.dist(du, dv) {
+        let sigma = match self.section_dist(du, dv) {
             sigma if sigma > 0.0 => sigma.max(bound),
             sigma => sigma,
         };
@@ -783,6 +920,55 @@ mod tests {
                 assert_eq!(d < 0.0, (x / a).powi(2) + (y / b).powi(2) < 1.0);
             }
         }
+    }
+
+    /// Guards the sweeps' ellipse: the table stays within 6·10⁻⁵ of the exact distance
+    /// within half a unit of the rims' ellipse (what the mesher and the carve read; more
+    /// on sharper ellipses, as their curvature says) and within
+    /// 10⁻³ anywhere in its reach (near the segment between the centres of curvature, where
+    /// the distance has a crease that bilinear interpolation rounds), for flat and round
+    /// ellipses either way up, and gives the same lower bound beyond its reach. And the
+    /// exact distance is exact where the evolute iteration used before was not: on the
+    /// major axis inside, where its four steps stopped up to 1.7·10⁻⁴ off.
+    #[test]
+    fn the_ellipse_table_matches_the_exact_distance() {
+        for &(a, b) in &[(3.0, 1.6), (1.0, 1.0), (5.0, 0.5), (0.8, 2.0)] {
+            let table = EllipseTable::shared(a, b);
+            assert!(
+                Arc::ptr_eq(&table, &EllipseTable::shared(a, b)),
+                "made once"
+            );
+            let (mut near, mut anywhere) = (0.0f64, 0.0f64);
+            for i in 0..60_000 {
+                let (x, y) = (
+                    (i as f64 * 0.618_034).fract() * 2.0 - 1.0,
+                    (i as f64 * 0.414_214).fract() * 2.0 - 1.0,
+                );
+                let reach = a.max(b) + ELLIPSE_FAR + 1.0;
+                let (x, y) = (x * reach, y * reach);
+                let (got, exact) = (table.dist(x, y), ellipse_distance(x, y, a, b));
+                if norm2(x, y) > a.max(b) + ELLIPSE_FAR {
+                    assert_eq!(got, exact, "beyond the reach at ({x}, {y})");
+                    continue;
+                }
+                if exact.abs() < 0.5 {
+                    near = near.max((got - exact).abs());
+                }
+                anywhere = anywhere.max((got - exact).abs());
+            }
+            // Bilinear interpolation errs by up to h²κ/8 where the distance bends at κ per
+            // unit: four times that at the sharpest vertex (a/b²), and 5·10⁻⁵ at least.
+            let sharpest = a.max(b) / (a.min(b) * a.min(b));
+            let tol = (0.5 * ELLIPSE_TABLE_CELL * ELLIPSE_TABLE_CELL * sharpest).max(5e-5);
+            assert!(near < tol, "a {a} b {b}: {near} within 0.5 of the ellipse");
+            assert!(anywhere < 1e-3, "a {a} b {b}: {anywhere} in the reach");
+        }
+        // On the major axis inside: the closest points are off the axis, at x = a²p/(a²−b²).
+        let (a, b, p) = (3.0, 1.6, 2.0);
+        let q = a * a * p / (a * a - b * b);
+        let want = -norm2(q - p, b * (1.0 - (q / a) * (q / a)).sqrt());
+        assert!((ellipse_distance(p, 0.0, a, b) - want).abs() < 1e-12);
+        assert!((ellipse_distance(p, 1e-9, a, b) - want).abs() < 1e-8);
     }
 
     /// The half ellipse's apex is on its surface with the flat side behind it, and the
