@@ -34,7 +34,7 @@ use super::kinematics::{Frame, Kinematics};
 use super::layout::{cover_cylinder, Layout, Pieces};
 use super::segments::{self, Segment};
 use super::shapes;
-use super::swept::{Balls, Certificates, ExactSweep, SweptEach};
+use super::swept::{nearest_first, Balls, Certificates, ExactSweep, SweptEach};
 use super::{BuildError, BuildOptions};
 
 /// A strut's root lies this far inside the piece it leaves from (behind the rim's flat
@@ -115,7 +115,7 @@ pub struct Design {
     /// sharp twist slows the search near it alone.
     pub carve_rims: Vec<Sweep>,
     /// Per carve rim, a lower bound of its swept distance (driver frame) up to the carve's
-    /// largest cap ([`carve_reach`]): its own rim's coarse sweep, which lets the carve skip
+    /// largest cap (`carve_reach`): its own rim's coarse sweep, which lets the carve skip
     /// every rim but the one whose groove a point is near (a field of the whole follower
     /// bounds them all by the nearest).
     pub carve_fields: Vec<Arc<DistanceField>>,
@@ -874,17 +874,9 @@ impl BandClearance {
         certificates: Option<&[Certificates]>,
     ) -> f64 {
         let mut c = self.others.sample(p);
-        // Nearest band by its bound first (ties in the bands' order, so the order depends
-        // on `p` alone): its value caps the searches of the others, and once a band's bound
-        // is not below the value so far, no later one's is.
-        let mut order: Vec<(f64, usize)> = self
-            .band_fields
-            .iter()
-            .enumerate()
-            .map(|(k, f)| (f.sample(p), k))
-            .collect();
-        order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        for (coarse, k) in order {
+        // Nearest band by its bound first: its value caps the searches of the others, and
+        // once a band's bound is not below the value so far, no later one's is.
+        for (coarse, k) in nearest_first(&self.band_fields, p) {
             if c <= floor {
                 return floor;
             }

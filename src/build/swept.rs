@@ -20,6 +20,7 @@
 //!
 //! It does not decide what is swept against what (`build::parts` does).
 
+use std::borrow::Borrow;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
@@ -286,15 +287,7 @@ impl<'a, S: Sdf> SweptEach<'a, S> {
                 }
             }
             Some(fields) => {
-                // Nearest by its bound first, ties in the solids' order: the order, and so
-                // the value, depends on `p` alone.
-                let mut order: Vec<(f64, usize)> = fields
-                    .iter()
-                    .enumerate()
-                    .map(|(k, f)| (f.sample(p), k))
-                    .collect();
-                order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-                for (bound, k) in order {
+                for (bound, k) in nearest_first(fields, p) {
                     if best <= self.floor || bound >= best {
                         // Sorted: no later solid's bound is lower.
                         break;
@@ -305,6 +298,20 @@ impl<'a, S: Sdf> SweptEach<'a, S> {
         }
         best.max(self.floor)
     }
+}
+
+/// The indices of `fields` with their values at `p`, lowest value first, ties in index
+/// order (so the order depends on `p` alone): the order in which [`SweptEach`] and the
+/// webs' band clearance search their solids, each field a lower bound of one solid's
+/// swept distance, so that the nearest's value caps the others' searches.
+pub fn nearest_first<F: Borrow<DistanceField>>(fields: &[F], p: Vec3) -> Vec<(f64, usize)> {
+    let mut order: Vec<(f64, usize)> = fields
+        .iter()
+        .enumerate()
+        .map(|(k, f)| (f.borrow().sample(p), k))
+        .collect();
+    order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    order
 }
 
 /// One interval of time a branch and bound ended on: its centre and half width, a lower
@@ -751,6 +758,7 @@ mod tests {
     use super::*;
     use crate::build::tests::half_turn;
     use crate::geometry::sdf::Sphere;
+    use crate::synth::mechanism::Mechanism;
 
     /// How close the exact sweep must come to a brute-force minimum over 200 000 instants,
     /// mm: the brute force itself is off by up to (fastest point speed ≈ 2 000 mm per
@@ -959,6 +967,55 @@ mod tests {
         }
     }
 
+    /// Each rim of `mech` (at 10 mm per model unit), counting its evaluations.
+    fn counted_rims(mech: &Mechanism) -> Vec<Counted<crate::geometry::sweep::Sweep>> {
+        mech.curve_pairs
+            .iter()
+            .map(|cp| Counted {
+                inner: crate::build::shapes::rim(cp, 10.0).unwrap(),
+                asked: Default::default(),
+            })
+            .collect()
+    }
+
+    /// The evaluations of `rims` so far.
+    fn asked<S: Sdf>(rims: &[Counted<S>]) -> usize {
+        rims.iter()
+            .map(|r| r.asked.load(std::sync::atomic::Ordering::Relaxed))
+            .sum()
+    }
+
+    /// One lattice of 1 mm certificates per rim, for sweeps capped at `cap`.
+    fn lattices_for<S>(rims: &[S], cap: f64) -> Vec<Certificates> {
+        (0..rims.len())
+            .map(|_| Certificates::new(1.0, cap))
+            .collect()
+    }
+
+    /// `n` points near the driver's contact curves (at 10 mm per model unit): every
+    /// `stride`-th sample of each pair in turn, moved by up to `reach` mm along a direction
+    /// whose components turn at the rates `turn`.
+    fn near_contacts(
+        mech: &Mechanism,
+        n: usize,
+        stride: usize,
+        turn: [f64; 3],
+        reach: f64,
+    ) -> Vec<Vec3> {
+        (0..n)
+            .map(|i| {
+                let c1s = &mech.curve_pairs[i % mech.curve_pairs.len()].samples.c1;
+                let c1 = c1s[(i * stride) % c1s.len()];
+                let off = Vec3::new(
+                    (i as f64 * turn[0]).sin(),
+                    (i as f64 * turn[1]).cos(),
+                    (i as f64 * turn[2]).sin(),
+                ) * reach;
+                Vec3::new(c1[0], c1[1], c1[2]) * 10.0 + off
+            })
+            .collect()
+    }
+
     /// Guards the carve's floor ([`SweptEach::with_floor`]): through certificates, as the
     /// carve asks, every value above the floor is exactly the one without it, every value at
     /// or below it is reported as the floor, and the points deep in the rims' sweep cost
@@ -966,37 +1023,10 @@ mod tests {
     #[test]
     fn a_floor_ends_the_search_and_changes_no_value_above_it() {
         let (mech, kin) = half_turn();
-        let rims: Vec<Counted<crate::geometry::sweep::Sweep>> = mech
-            .curve_pairs
-            .iter()
-            .map(|cp| Counted {
-                inner: crate::build::shapes::rim(cp, 10.0).unwrap(),
-                asked: Default::default(),
-            })
-            .collect();
-        let asked = |rims: &[Counted<_>]| {
-            rims.iter()
-                .map(|r| r.asked.load(std::sync::atomic::Ordering::Relaxed))
-                .sum::<usize>()
-        };
+        let rims = counted_rims(&mech);
         let (cap, floor) = (0.9, -0.7);
-        let points: Vec<Vec3> = (0..300)
-            .map(|i| {
-                let c1s = &mech.curve_pairs[i % mech.curve_pairs.len()].samples.c1;
-                let c1 = c1s[(i * 31) % c1s.len()];
-                let off = Vec3::new(
-                    (i as f64 * 1.1).sin(),
-                    (i as f64 * 0.6).cos(),
-                    (i as f64 * 2.7).sin(),
-                ) * 2.0;
-                Vec3::new(c1[0], c1[1], c1[2]) * 10.0 + off
-            })
-            .collect();
-        let lattices = || {
-            (0..rims.len())
-                .map(|_| Certificates::new(1.0, cap))
-                .collect::<Vec<_>>()
-        };
+        let points = near_contacts(&mech, 300, 31, [1.1, 0.6, 2.7], 2.0);
+        let lattices = || lattices_for(&rims, cap);
         let (whole_lattices, floored_lattices) = (lattices(), lattices());
         let whole = || SweptEach::new(&kin, &rims, Frame::Follower, Frame::Driver);
         let floored = || whole().with_floor(floor);
@@ -1052,19 +1082,7 @@ mod tests {
     #[test]
     fn each_rim_s_own_field_spares_the_far_rims_and_changes_no_value() {
         let (mech, kin) = half_turn();
-        let rims: Vec<Counted<crate::geometry::sweep::Sweep>> = mech
-            .curve_pairs
-            .iter()
-            .map(|cp| Counted {
-                inner: crate::build::shapes::rim(cp, 10.0).unwrap(),
-                asked: Default::default(),
-            })
-            .collect();
-        let asked = |rims: &[Counted<_>]| {
-            rims.iter()
-                .map(|r| r.asked.load(std::sync::atomic::Ordering::Relaxed))
-                .sum::<usize>()
-        };
+        let rims = counted_rims(&mech);
         let cap = 0.9;
         let fields: Vec<Arc<DistanceField>> = rims
             .iter()
@@ -1078,23 +1096,8 @@ mod tests {
                 ))
             })
             .collect();
-        let points: Vec<Vec3> = (0..240)
-            .map(|i| {
-                let c1s = &mech.curve_pairs[i % mech.curve_pairs.len()].samples.c1;
-                let c1 = c1s[(i * 37) % c1s.len()];
-                let off = Vec3::new(
-                    (i as f64 * 1.7).sin(),
-                    (i as f64 * 0.9).cos(),
-                    (i as f64 * 2.3).sin(),
-                ) * 1.5;
-                Vec3::new(c1[0], c1[1], c1[2]) * 10.0 + off
-            })
-            .collect();
-        let lattices = || {
-            (0..rims.len())
-                .map(|_| Certificates::new(1.0, cap))
-                .collect::<Vec<_>>()
-        };
+        let points = near_contacts(&mech, 240, 37, [1.7, 0.9, 2.3], 1.5);
+        let lattices = || lattices_for(&rims, cap);
         let run = |each: bool| {
             let lattices = lattices();
             let sweep = SweptEach::new(&kin, &rims, Frame::Follower, Frame::Driver)
