@@ -663,7 +663,6 @@ fn culprits(
                                 cap: 0.0,
                                 // Only whether it is this deep matters.
                                 floor: -GAP_TOL_MM,
-                                coarse: None,
                             }
                             .value(p)
                                 <= -GAP_TOL_MM

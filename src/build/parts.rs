@@ -892,7 +892,6 @@ impl BandClearance {
                 target: Frame::Follower,
                 cap: bound,
                 floor,
-                coarse: None,
             };
             let exact = match certificates {
                 Some(lattices) => lattices[k].value(&sweep, p),

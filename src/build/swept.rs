@@ -189,8 +189,6 @@ pub struct ExactSweep<'a, S: Sdf> {
     /// (`f64::NEG_INFINITY`: never): a caller that only needs to know that the point is this
     /// deep inside the swept volume is spared the search for the exact minimum.
     pub floor: f64,
-    /// A lower bound of the same swept distance (the coarse field), to skip far points.
-    pub coarse: Option<&'a DistanceField>,
 }
 
 /// Several solids of one frame swept through another: the smallest of their swept
@@ -202,7 +200,6 @@ pub struct SweptEach<'a, S: Sdf> {
     solids: &'a [S],
     frame: Frame,
     target: Frame,
-    coarse: Option<&'a DistanceField>,
     /// Per solid, a lower bound of its own swept distance ([`SweptEach::with_coarse_each`]).
     coarse_each: Option<&'a [Arc<DistanceField>]>,
     certificates: Option<&'a [Certificates]>,
@@ -217,18 +214,10 @@ impl<'a, S: Sdf> SweptEach<'a, S> {
             solids,
             frame,
             target,
-            coarse: None,
             coarse_each: None,
             certificates: None,
             floor: f64::NEG_INFINITY,
         }
-    }
-
-    /// Skip the points this lower bound of the same swept distance puts at or beyond the
-    /// cap ([`ExactSweep::coarse`]).
-    pub fn with_coarse(mut self, coarse: &'a DistanceField) -> Self {
-        self.coarse = Some(coarse);
-        self
     }
 
     /// Skip each solid where its own lower bound (`coarse[k]` bounds the swept distance of
@@ -269,7 +258,6 @@ impl<'a, S: Sdf> SweptEach<'a, S> {
                 target: self.target,
                 cap: best,
                 floor: self.floor,
-                coarse: self.coarse,
             };
             match self.certificates {
                 Some(lattices) => lattices[k].value(&sweep, p),
@@ -371,9 +359,6 @@ impl Certificates {
     /// `sweep`'s value at `p`, through the certificate of `p`'s cell. Use one lattice per
     /// solid and motion; a sweep capped above the lattice's cap is searched on its own.
     pub fn value<S: Sdf>(&self, sweep: &ExactSweep<'_, S>, p: Vec3) -> f64 {
-        if sweep.capped(p) {
-            return sweep.cap;
-        }
         if sweep.cap > self.cap {
             return sweep.value(p);
         }
@@ -447,16 +432,8 @@ impl<S: Sdf> ExactSweep<'_, S> {
         }
     }
 
-    /// The coarse field's verdict: `p` is at or beyond the cap.
-    fn capped(&self, p: Vec3) -> bool {
-        self.coarse.is_some_and(|c| c.sample(p) >= self.cap)
-    }
-
     /// min over t of the solid's distance at `p`, or `cap` if it is not below `cap`.
     pub fn value(&self, p: Vec3) -> f64 {
-        if self.capped(p) {
-            return self.cap;
-        }
         self.search(
             p,
             self.start(p, self.cap, self.floor),
@@ -469,9 +446,7 @@ impl<S: Sdf> ExactSweep<'_, S> {
 
     /// The [`ExactSweep::value`] at `q`, starting from the certificate of a point within its
     /// reach: only the intervals the certificate cannot rule out at `q` are searched.
-    /// Equal to [`ExactSweep::value`] within the search's tolerance. The caller has asked
-    /// the coarse field already ([`Certificates::value`] does, before it looks for a
-    /// certificate).
+    /// Equal to [`ExactSweep::value`] within the search's tolerance.
     fn value_near(&self, q: Vec3, cert: &Certificate) -> f64 {
         let d = (q - cert.p).norm();
         if d > cert.reach || cert.cap < self.cap {
@@ -503,8 +478,8 @@ impl<S: Sdf> ExactSweep<'_, S> {
     }
 
     /// The search at `p` with every leaf kept that may matter within `reach` of it to a
-    /// sweep capped at `cap_for` or below, for [`ExactSweep::value_near`]. The coarse field
-    /// is not consulted (it speaks for `p` alone), nor this sweep's own cap.
+    /// sweep capped at `cap_for` or below, for [`ExactSweep::value_near`]. This sweep's own
+    /// cap is not consulted.
     fn certificate(&self, p: Vec3, reach: f64, cap_for: f64) -> Certificate {
         let cap = cap_for + self.solid.lipschitz() * reach;
         let mut leaves = Vec::new();
@@ -775,7 +750,6 @@ mod tests {
             target: Frame::Driver,
             cap,
             floor: f64::NEG_INFINITY,
-            coarse: None,
         }
     }
 
