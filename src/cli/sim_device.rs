@@ -243,10 +243,10 @@ pub(super) fn geometry_plant(
         }
         // A prediction says which mechanism it was made for: another mechanism's target
         // would move the follower by the wrong parts' play.
-        if let (Some(made_for), Some((mechanism, this))) =
-            (table.mechanism_digest(), &target.mechanism)
-        {
-            if made_for != this {
+        if let Some((mechanism, digest)) = &target.mechanism {
+            if let Some((made_for, this)) =
+                Mechanism::other_than(table.mechanism_digest(), Some(digest))
+            {
                 anyhow::bail!(
                     "--prediction {}: a prediction for another mechanism than {} (its mechanism \
                      digest is {}…, this one's {}…). Predict this one: mpc-rig simulate {}",

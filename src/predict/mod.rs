@@ -249,13 +249,13 @@ impl BuiltParts {
     /// Whether these parts (in `dir`) were built from the mechanism of digest `this`
     /// ([`Mechanism::digest`]): an error when `build.json` records another.
     pub fn built_from(&self, this: &str, dir: &Path) -> Result<(), PredictError> {
-        match &self.mechanism_digest {
-            Some(built_from) if built_from != this => Err(PredictError::OtherMechanism {
+        match Mechanism::other_than(self.mechanism_digest.as_deref(), Some(this)) {
+            Some((built_from, this)) => Err(PredictError::OtherMechanism {
                 parts: dir.to_path_buf(),
-                built_from: built_from.clone(),
+                built_from: built_from.to_string(),
                 this: this.to_string(),
             }),
-            _ => Ok(()),
+            None => Ok(()),
         }
     }
 

@@ -372,6 +372,21 @@ impl Mechanism {
             .collect()
     }
 
+    /// The two digests, `(recorded, this)`, when a file made for the mechanism of digest
+    /// `recorded` (parts, a prediction) is used with the mechanism of digest `this` and
+    /// they differ: the caller refuses the file. `None` when they agree, or when either is
+    /// unknown: files made before digests (2026-12-06) are trusted, and a motion target
+    /// has none.
+    pub fn other_than<'a>(
+        recorded: Option<&'a str>,
+        this: Option<&'a str>,
+    ) -> Option<(&'a str, &'a str)> {
+        match (recorded, this) {
+            (Some(recorded), Some(this)) if recorded != this => Some((recorded, this)),
+            _ => None,
+        }
+    }
+
     /// The first 12 hex digits of a [`digest`](Self::digest), as messages quote it:
     /// enough to tell two mechanisms apart at a glance.
     pub fn short_digest(digest: &str) -> &str {

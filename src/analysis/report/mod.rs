@@ -1161,23 +1161,22 @@ pub fn write_report(
                 message: e.to_string(),
             }
         })?;
-        if let (Some(made_for), Some(target)) =
-            (predicted.mechanism_digest(), &law.mechanism_digest)
-        {
-            if made_for != target {
-                use crate::synth::mechanism::Mechanism;
-                return Err(AnalysisError::BadOption {
-                    option: "--prediction".into(),
-                    message: format!(
-                        "{}: a prediction for another mechanism than the target (its \
-                         mechanism digest is {}…, the target's {}…). Predict the target: \
-                         mpc-rig simulate MECHANISM",
-                        path.display(),
-                        Mechanism::short_digest(made_for),
-                        Mechanism::short_digest(target)
-                    ),
-                });
-            }
+        use crate::synth::mechanism::Mechanism;
+        if let Some((made_for, target)) = Mechanism::other_than(
+            predicted.mechanism_digest(),
+            law.mechanism_digest.as_deref(),
+        ) {
+            return Err(AnalysisError::BadOption {
+                option: "--prediction".into(),
+                message: format!(
+                    "{}: a prediction for another mechanism than the target (its \
+                     mechanism digest is {}…, the target's {}…). Predict the target: \
+                     mpc-rig simulate MECHANISM",
+                    path.display(),
+                    Mechanism::short_digest(made_for),
+                    Mechanism::short_digest(target)
+                ),
+            });
         }
         s.prediction = super::prediction::compare(a, run, &predicted, path.clone());
         predicted_deviation = Some(predicted);
