@@ -141,7 +141,8 @@ const EXACT_START_INTERVALS: usize = 32;
 /// Branch and bound stops splitting an interval once the distance cannot vary by more than
 /// this across it, mm; neighbouring such intervals are merged into runs and each run's
 /// minimum is refined by Brent's method. The minimum is always in some basin and each
-/// basin's centre is within this of its own minimum, so the value is never more than this
+/// basin holds a value found within this of its own minimum (at its centre or its nearer
+/// end, whichever the search knows), so the value is never more than this
 /// above the true one, however many local minima a run holds. 0.1 mm, the check's gap
 /// tolerance: at 1.5 mm (before 2026-12-03) the runs were wide enough to hold several
 /// local minima and 3 % of the grid points near the groove came out more than 0.01 mm
@@ -452,7 +453,7 @@ impl<S: Sdf> ExactSweep<'_, S> {
         if d > cert.reach || cert.cap < self.cap {
             return self.value(q);
         }
-        let mut open: Vec<(f64, f64, f64)> = Vec::with_capacity(cert.leaves.len());
+        let mut open: Vec<Open> = Vec::with_capacity(cert.leaves.len());
         let mut best = f64::INFINITY;
         let pace = self.pace(q);
         let moved = self.solid.lipschitz() * d;
@@ -468,7 +469,7 @@ impl<S: Sdf> ExactSweep<'_, S> {
             }
             let f = self.at(q, l.c, best.min(self.cap) + pace.over(l.c, l.w) * l.w);
             best = best.min(f);
-            open.push((l.c, l.w, f));
+            open.push(Open::Centre { c: l.c, w: l.w, f });
             if best <= self.floor {
                 return best;
             }
@@ -500,34 +501,56 @@ impl<S: Sdf> ExactSweep<'_, S> {
         }
     }
 
-    /// The starting intervals (centre, half width, value at the centre).
-    /// Values at or above `cap` plus the interval's reach need not be exact. Ends early,
-    /// after the first value at or below `floor`.
-    fn start(&self, p: Vec3, cap: f64, floor: f64) -> Vec<(f64, f64, f64)> {
-        let w0 = 0.5 / EXACT_START_INTERVALS as f64;
+    /// The starting intervals, [`EXACT_START_INTERVALS`] of them end to end over the
+    /// period, with the values at their ends. An end's value at or above `cap` plus the
+    /// reach of the intervals beside it need not be exact: an interval both of whose ends
+    /// are that high is pruned. Ends early, after the first value at or below `floor`.
+    fn start(&self, p: Vec3, cap: f64, floor: f64) -> Vec<Open> {
+        let n = EXACT_START_INTERVALS;
+        let w0 = 0.5 / n as f64;
         let pace = self.pace(p);
-        let mut open = Vec::with_capacity(EXACT_START_INTERVALS);
-        for i in 0..EXACT_START_INTERVALS {
-            let c = (2 * i + 1) as f64 * w0;
-            let f = self.at(p, c, cap + pace.over(c, w0) * w0);
-            open.push((c, w0, f));
+        let mut ends = Vec::with_capacity(n);
+        for i in 0..n {
+            let t = i as f64 / n as f64;
+            let f = self.at(p, t, cap + pace.over(t, 2.0 * w0) * w0);
+            ends.push(f);
             if f <= floor {
-                break;
+                return vec![Open::Ends {
+                    a: t,
+                    b: t,
+                    fa: f,
+                    fb: f,
+                }];
             }
         }
-        open
+        // The period closes: the last interval ends at 1, the instant 0 again.
+        (0..n)
+            .map(|i| Open::Ends {
+                a: i as f64 / n as f64,
+                b: (i + 1) as f64 / n as f64,
+                fa: ends[i],
+                fb: ends[(i + 1) % n],
+            })
+            .collect()
     }
 
-    /// Branch and bound over `open` (intervals with the value at their centre), pruning
-    /// against `cap` and the best value so far (less [`SEARCH_SLACK_MM`] at a point),
-    /// then a local refinement of each run of basins. Records the leaves when asked (a
-    /// certificate, which must be whole: the floor and the slack are then not used).
+    /// Branch and bound over `open` (intervals with values known at their centre or ends),
+    /// pruning against `cap` and the best value so far (less [`SEARCH_SLACK_MM`] at a
+    /// point), then a local refinement of each run of basins. Records the leaves when asked
+    /// (a certificate, which must be whole: the floor and the slack are then not used).
     /// Returns the smallest value found (not capped), or the first found at or below the
     /// floor.
+    ///
+    /// An interval is split at its middle, so its children share the parent's ends and a
+    /// split costs one value (an interval known at its centre costs its two ends once).
+    /// Over [a, b] with values fa, fb at the ends and the value changing by at most v per
+    /// period, nothing is below (fa + fb)/2 − v(b − a)/2; near a minimum, where the
+    /// distance is flat, that bound is higher than the centre's f(c) − v(b − a)/2 by
+    /// about the curvature there times the square of the half width.
     fn search(
         &self,
         p: Vec3,
-        mut open: Vec<(f64, f64, f64)>,
+        mut open: Vec<Open>,
         cap: f64,
         basin_tol: f64,
         mut leaves: Option<&mut Vec<Leaf>>,
@@ -538,7 +561,7 @@ impl<S: Sdf> ExactSweep<'_, S> {
         } else {
             self.floor
         };
-        let mut best = open.iter().map(|o| o.2).fold(f64::INFINITY, f64::min);
+        let mut best = open.iter().map(Open::least).fold(f64::INFINITY, f64::min);
         if best <= floor {
             return best;
         }
@@ -547,11 +570,28 @@ impl<S: Sdf> ExactSweep<'_, S> {
         } else {
             SEARCH_SLACK_MM
         };
+        // Every value found, for the refinement of the runs ([`Sample`]), and the ends of
+        // intervals split from their centres, which neighbours share.
+        let mut samples: Vec<Sample> = Vec::new();
+        if leaves.is_none() {
+            for o in &open {
+                match *o {
+                    Open::Centre { c, w, f } => {
+                        samples.push(Sample::new(c, f, best.min(cap) + pace.over(c, w) * w))
+                    }
+                    // The starting ends were asked below their own limits (`start`),
+                    // which are not kept: refinement uses none of them.
+                    Open::Ends { .. } => {}
+                }
+            }
+        }
+        let mut shared: Vec<Sample> = Vec::new();
         // (centre, half width, lower bound over the interval).
         let mut basins: Vec<(f64, f64, f64)> = Vec::new();
-        while let Some((c, w, f)) = open.pop() {
+        while let Some(o) = open.pop() {
+            let (c, w) = o.centre_width();
             let v = pace.over(c, w);
-            let lower = f - v * w;
+            let lower = o.lower(v * w);
             if lower >= best.min(cap) - slack {
                 if let Some(l) = leaves.as_deref_mut() {
                     l.push(Leaf {
@@ -575,14 +615,63 @@ impl<S: Sdf> ExactSweep<'_, S> {
                 }
                 continue;
             }
+            // The children's half width, and how fast the value changes over each.
             let h = 0.5 * w;
-            for cc in [c - h, c + h] {
-                // A value at or above this is pruned when popped, whatever it is exactly
-                // (and cannot lower `best` below the cap): the solid need not find it.
-                let limit = best.min(cap) + pace.over(cc, h) * h;
-                let fc = self.at(p, cc, limit);
-                best = best.min(fc);
-                open.push((cc, h, fc));
+            let (vl, vr) = (pace.over(c - h, h), pace.over(c + h, h));
+            // A value at or above a child's limit prunes that child when popped, whatever it
+            // is exactly (and cannot lower `best` below the cap): the solid need not find
+            // it. Over [x, y] with f(x) known, f(y) ≥ 2(B + v·h) − f(x) prunes.
+            let floor_of = best.min(cap);
+            let pruning = |v: f64, known: f64| (2.0 * (floor_of + v * h) - known).max(floor_of);
+            match o {
+                Open::Centre { f, .. } => {
+                    let mut end = |t: f64, limit: f64| {
+                        if let Some(s) = shared.iter().find(|s| s.t == t && s.serves(limit)) {
+                            return s.f;
+                        }
+                        let fe = self.at(p, t, limit);
+                        let s = Sample::new(t, fe, limit);
+                        shared.retain(|s| s.t != t);
+                        shared.push(s);
+                        samples.push(s);
+                        fe
+                    };
+                    let fa = end(c - w, pruning(vl, f));
+                    let fb = end(c + w, pruning(vr, f));
+                    best = best.min(fa).min(fb);
+                    open.push(Open::Ends {
+                        a: c - w,
+                        b: c,
+                        fa,
+                        fb: f,
+                    });
+                    open.push(Open::Ends {
+                        a: c,
+                        b: c + w,
+                        fa: f,
+                        fb,
+                    });
+                }
+                Open::Ends { a, b, fa, fb } => {
+                    let limit = pruning(vl, fa).max(pruning(vr, fb));
+                    let fc = self.at(p, c, limit);
+                    if leaves.is_none() {
+                        samples.push(Sample::new(c, fc, limit));
+                    }
+                    best = best.min(fc);
+                    open.push(Open::Ends {
+                        a,
+                        b: c,
+                        fa,
+                        fb: fc,
+                    });
+                    open.push(Open::Ends {
+                        a: c,
+                        b,
+                        fa: fc,
+                        fb,
+                    });
+                }
             }
             if best <= floor {
                 return best;
@@ -595,8 +684,8 @@ impl<S: Sdf> ExactSweep<'_, S> {
         // Merge touching basins into runs, then find each run's minimum over the run
         // widened by one interval on each side. A basin whose lower bound is not below the
         // best found since it was kept holds nothing that matters: left out, so that every
-        // basin refined holds values within two tolerances above the best (its centre
-        // value is within one of its lower bound, and its values within one of that).
+        // basin refined holds values within two tolerances above the best (its nearer
+        // end's value is within one of its lower bound, and its values within one of that).
         basins.retain(|b| b.2 < best.min(cap) - slack);
         basins.sort_by(|a, b| a.0.total_cmp(&b.0));
         // (start, end, lowest lower bound).
@@ -610,6 +699,7 @@ impl<S: Sdf> ExactSweep<'_, S> {
                 _ => runs.push((c - w, c + w, lower)),
             }
         }
+        samples.sort_by(|a, b| a.t.total_cmp(&b.t));
         for (lo, hi, lower) in runs {
             if lower >= best.min(cap) - slack {
                 // An earlier run's refinement found a value this one cannot beat.
@@ -622,12 +712,126 @@ impl<S: Sdf> ExactSweep<'_, S> {
             // beyond the run may see values at the limit, above every value inside.
             let limit = best.min(cap) + RUN_EXACT_ABOVE_BEST * basin_tol;
             let exact = |t| self.at(p, t, limit);
-            best = best.min(minimize(exact, lo - pad, hi + pad, floor));
+            let seed = Seed::within(&samples, lo - pad, hi + pad);
+            best = best.min(minimize(exact, seed, floor));
             if best <= floor {
                 return best;
             }
         }
         best
+    }
+}
+
+/// An interval of time the branch and bound holds open, with the values known of it.
+#[derive(Clone, Copy, Debug)]
+enum Open {
+    /// Its centre and half width, and the value at the centre (a certificate's leaf,
+    /// asked again at a point it serves).
+    Centre { c: f64, w: f64, f: f64 },
+    /// Its ends, and the values there.
+    Ends { a: f64, b: f64, fa: f64, fb: f64 },
+}
+
+impl Open {
+    /// Centre and half width.
+    fn centre_width(&self) -> (f64, f64) {
+        match *self {
+            Open::Centre { c, w, .. } => (c, w),
+            Open::Ends { a, b, .. } => (0.5 * (a + b), 0.5 * (b - a)),
+        }
+    }
+
+    /// A lower bound over the interval, where the value changes by at most `reach` over
+    /// half its width.
+    fn lower(&self, reach: f64) -> f64 {
+        match *self {
+            Open::Centre { f, .. } => f - reach,
+            Open::Ends { fa, fb, .. } => 0.5 * (fa + fb) - reach,
+        }
+    }
+
+    /// The least value known of it.
+    fn least(&self) -> f64 {
+        match *self {
+            Open::Centre { f, .. } => f,
+            Open::Ends { fa, fb, .. } => fa.min(fb),
+        }
+    }
+}
+
+/// A value a search found: at `t`, `f`, asked exact below `limit` (at or above it, `f` is
+/// only a lower bound of the value, at or above the limit).
+#[derive(Clone, Copy, Debug)]
+struct Sample {
+    t: f64,
+    f: f64,
+    limit: f64,
+}
+
+impl Sample {
+    fn new(t: f64, f: f64, limit: f64) -> Sample {
+        Sample { t, f, limit }
+    }
+
+    /// Whether `f` is the exact value.
+    fn exact(&self) -> bool {
+        self.f < self.limit
+    }
+
+    /// Whether it answers a request exact below `limit`: exact, or known to be at or above
+    /// that limit.
+    fn serves(&self, limit: f64) -> bool {
+        self.exact() || self.limit >= limit
+    }
+}
+
+/// Where Brent's method starts on a run ([`minimize`]): its bracket, the least exact value
+/// found in it (if any) and the nearest exact values on each side of that one.
+struct Seed {
+    a: f64,
+    b: f64,
+    x: Option<(f64, f64)>,
+    left: Option<(f64, f64)>,
+    right: Option<(f64, f64)>,
+}
+
+impl Seed {
+    /// The seed of [lo, hi] from `samples` (sorted by time): the least exact value inside,
+    /// bracketed by the nearest values on each side that are not below it (a value is
+    /// never above the exact one, so the exact one is not below it either), or by the ends
+    /// of [lo, hi].
+    fn within(samples: &[Sample], lo: f64, hi: f64) -> Seed {
+        let inside = |s: &&Sample| s.t > lo && s.t < hi;
+        let best = samples
+            .iter()
+            .filter(inside)
+            .filter(|s| s.exact())
+            .min_by(|a, b| a.f.total_cmp(&b.f));
+        let Some(x) = best else {
+            return Seed {
+                a: lo,
+                b: hi,
+                x: None,
+                left: None,
+                right: None,
+            };
+        };
+        let left = samples
+            .iter()
+            .filter(inside)
+            .rfind(|s| s.t < x.t && s.f >= x.f);
+        let right = samples
+            .iter()
+            .filter(inside)
+            .find(|s| s.t > x.t && s.f >= x.f);
+        let known = |s: Option<&Sample>| s.filter(|s| s.exact()).map(|s| (s.t, s.f));
+        Seed {
+            a: left.map_or(lo, |s| s.t),
+            b: right.map_or(hi, |s| s.t),
+            x: Some((x.t, x.f)),
+            left: known(left),
+            right: known(right),
+        }
     }
 }
 
@@ -637,14 +841,30 @@ impl<S: Sdf> ExactSweep<'_, S> {
 /// value at or below `floor` is found (then that value). Exact for a unimodal `f`; on a
 /// run with several minima it may stop in one that is not the lowest, which the caller's
 /// basin tolerance bounds.
-fn minimize(f: impl Fn(f64) -> f64, mut a: f64, mut b: f64, floor: f64) -> f64 {
+fn minimize(f: impl Fn(f64) -> f64, seed: Seed, floor: f64) -> f64 {
     const GOLD: f64 = 0.381_966_011_250_105_1; // (3 − √5) / 2
-    let mut x = a + GOLD * (b - a);
-    let (mut w, mut v) = (x, x);
-    let mut fx = f(x);
-    let (mut fw, mut fv) = (fx, fx);
-    // The step before last, and the last.
-    let (mut e, mut d): (f64, f64) = (0.0, 0.0);
+    let (mut a, mut b) = (seed.a, seed.b);
+    let (mut x, mut fx) = match seed.x {
+        Some(known) => known,
+        None => {
+            let x = a + GOLD * (b - a);
+            (x, f(x))
+        }
+    };
+    // The next best point and the one before it: the seed's neighbours, through which the
+    // first step's parabola passes, or the point itself.
+    let (mut w, mut fw) = seed.left.unwrap_or((x, fx));
+    let (mut v, mut fv) = seed.right.unwrap_or((x, fx));
+    if fv < fw {
+        (w, fw, v, fv) = (v, fv, w, fw);
+    }
+    // The step before last, and the last: with known neighbours the first step may be
+    // parabolic (a step shorter than half the bracket).
+    let (mut e, mut d): (f64, f64) = if seed.left.is_some() && seed.right.is_some() {
+        (b - a, 0.0)
+    } else {
+        (0.0, 0.0)
+    };
     loop {
         let m = 0.5 * (a + b);
         let tol = 0.5 * EXACT_TIME_TOL;
@@ -1127,5 +1347,94 @@ mod tests {
         b.reverse();
         assert!(a.iter().any(|&v| v < 2.0), "no point near the groove");
         assert_eq!(a, b);
+    }
+
+    /// Guards what Brent's method may start from ([`Seed::within`]): only an exact value
+    /// (a lower bound asked past its limit could lie below the true minimum, and the carve
+    /// would then cut deeper than the rims reach), bracketed by the nearest values not
+    /// below it.
+    #[test]
+    fn a_run_is_seeded_by_exact_values_only() {
+        let samples = [
+            Sample::new(0.10, 0.5, 1.0),
+            // Asked exact below 0.3 only: the value is somewhere at or above it.
+            Sample::new(0.20, 0.3, 0.3),
+            Sample::new(0.30, 0.7, 1.0),
+            Sample::new(0.45, 0.2, 1.0),
+        ];
+        let seed = Seed::within(&samples, 0.0, 0.4);
+        assert_eq!(seed.x, Some((0.10, 0.5)));
+        assert_eq!((seed.a, seed.left), (0.0, None));
+        assert_eq!((seed.b, seed.right), (0.30, Some((0.30, 0.7))));
+        let none = Seed::within(&samples[1..2], 0.0, 0.4);
+        assert_eq!((none.a, none.b, none.x), (0.0, 0.4, None));
+    }
+
+    /// Guards the seeded refinement ([`minimize`]): from a value and its two neighbours it
+    /// finds a smooth minimum as exactly as from scratch over the same bracket, and in
+    /// fewer values.
+    #[test]
+    fn a_seeded_refinement_finds_the_minimum_in_fewer_values() {
+        let t0 = 0.313_7;
+        let asked = std::cell::Cell::new(0);
+        let f = |t: f64| {
+            asked.set(asked.get() + 1);
+            1.0 + 40.0 * (t - t0).powi(2) + 3.0 * (t - t0).powi(3)
+        };
+        let scratch = minimize(
+            f,
+            Seed {
+                a: 0.25,
+                b: 0.35,
+                x: None,
+                left: None,
+                right: None,
+            },
+            f64::NEG_INFINITY,
+        );
+        let from_scratch = asked.replace(0);
+        let known = |t: f64| (t, 1.0 + 40.0 * (t - t0).powi(2) + 3.0 * (t - t0).powi(3));
+        let seeded = minimize(
+            f,
+            Seed {
+                a: 0.25,
+                b: 0.35,
+                x: Some(known(0.30)),
+                left: Some(known(0.25)),
+                right: Some(known(0.35)),
+            },
+            f64::NEG_INFINITY,
+        );
+        let from_seed = asked.get();
+        assert!((scratch - 1.0).abs() < 1e-9 && (seeded - 1.0).abs() < 1e-9);
+        assert!(
+            from_seed < from_scratch,
+            "{from_seed} values seeded, {from_scratch} from scratch"
+        );
+    }
+
+    /// Guards what the carve's points cost: through certificates, as the carve asks (each
+    /// point here in a lattice cell of its own, so with its certificate's cost, and every
+    /// rim searched), points near the contact curves ask the rims for fewer than 450 values
+    /// each on average. Splitting intervals at their centres (two new values per split,
+    /// bounded by the centre's value alone) and refining runs from scratch took 551 here
+    /// (2026-12-07); intervals split at shared ends and runs refined from the values found
+    /// take 348.
+    #[test]
+    fn a_point_near_a_groove_costs_few_values() {
+        let (mech, kin) = half_turn();
+        let rims = counted_rims(&mech);
+        let cap = 0.9;
+        let points = near_contacts(&mech, 400, 23, [1.3, 0.5, 2.1], 0.8);
+        let lattices = lattices_for(&rims, cap);
+        let sweep = SweptEach::new(&kin, &rims, Frame::Follower, Frame::Driver)
+            .with_certificates(&lattices);
+        let below = points
+            .iter()
+            .filter(|&&p| sweep.value(p, cap) < cap)
+            .count();
+        let per_point = asked(&rims) as f64 / points.len() as f64;
+        assert!(below >= 200, "only {below} points below the cap");
+        assert!(per_point < 450.0, "{per_point:.1} values per point");
     }
 }
