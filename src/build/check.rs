@@ -28,6 +28,8 @@
 //! from 183 to 50 s, a tenth of the vertex tests, with the same figures (also on a
 //! follower grown 1 % so that it penetrates). It does not build anything.
 
+use std::sync::atomic::{AtomicU32, Ordering};
+
 use nalgebra::{Isometry3, Point3};
 use rayon::prelude::*;
 
@@ -245,7 +247,11 @@ pub fn windows(flags: &[bool]) -> Vec<[f64; 2]> {
 /// voxel centre's distance to the nearest voxel holding a vertex, and, where the occupancy
 /// is not 0, a lower bound of the signed distance at the centres of a finer grid: exact
 /// within [`FINE_EXACT_WITHIN_MM`] of the surface, from the coarse voxel's centre farther
-/// out (NaN where there is none, and inside, where a bound proves nothing).
+/// out (NaN where there is none, and inside, where a bound proves nothing). The signed
+/// distances of both grids are computed when a vertex first asks for them: the other
+/// part's vertices come near the surface along the contact strips only, and computing
+/// every centre within reach of the whole surface up front took most of the check's
+/// preparation.
 struct Queryable {
     tri: MeshQuery,
     /// The mesh's bounding box.
@@ -259,8 +265,28 @@ struct Queryable {
     /// a voxel's half diagonal (the vertex in its voxel) plus the longest edge (a surface
     /// point to a vertex of its triangle), mm.
     to_vertex_slack: f64,
+    /// Per coarse voxel, [`Queryable::coarse_at`] as f32 bits, or [`NOT_YET`].
+    coarse: Vec<AtomicU32>,
     fine: VoxelGrid,
-    lower: Vec<f32>,
+    /// Per fine voxel, [`Queryable::lower_at`] as f32 bits, or [`NOT_YET`].
+    lower: Vec<AtomicU32>,
+}
+
+/// A grid value of [`Queryable`] not computed yet: a NaN no computed value has (those
+/// store the one NaN of `f32::NAN`).
+const NOT_YET: u32 = u32::MAX;
+
+/// The value `cell` holds, or `make`'s, stored for the next caller. Two threads may both
+/// make it; the value depends on the cell alone, so both store the same bits.
+fn known_or(cell: &AtomicU32, make: impl FnOnce() -> f32) -> f64 {
+    let bits = cell.load(Ordering::Relaxed);
+    if bits != NOT_YET {
+        return f32::from_bits(bits) as f64;
+    }
+    let v = make();
+    let v = if v.is_nan() { f32::NAN } else { v };
+    cell.store(v.to_bits(), Ordering::Relaxed);
+    v as f64
 }
 
 impl Queryable {
@@ -334,43 +360,8 @@ impl Queryable {
                 }
             }
         }
-        // Signed distances at the coarse centres that may matter; far from the surface
-        // they bound the fine centres in their voxel, near it the fine centres are queried.
-        // Deep inside by the parity (its centre farther from the surface than any fine
-        // centre in it is from the centre) they are not queried: the fine centres there
-        // are inside, and an inside value proves nothing outside (were the parity wrong,
-        // the vertices there would only be queried).
-        let coarse: Vec<f32> = (0..grid.len())
-            .into_par_iter()
-            .map(|i| {
-                let c = grid.center(grid.unflat(i));
-                let deep = to_vertex[i] as f64 > to_vertex_slack + half_diagonal;
-                match occ[i] {
-                    0 => f32::NAN,
-                    2 if deep => f32::NEG_INFINITY,
-                    _ => tri.signed([c.x, c.y, c.z]) as f32,
-                }
-            })
-            .collect();
         let fine = VoxelGrid::covering(b, FINE_VOXEL_MM);
-        let lower: Vec<f32> = (0..fine.len())
-            .into_par_iter()
-            .map(|i| {
-                let c = fine.center(fine.unflat(i));
-                let Some(v) = grid.voxel_of(c) else {
-                    return f32::NAN;
-                };
-                let (at_coarse, off) = (coarse[grid.index(v)] as f64, (c - grid.center(v)).norm());
-                if at_coarse - off > FINE_EXACT_WITHIN_MM {
-                    (at_coarse - off) as f32
-                } else if at_coarse.is_nan() || at_coarse + off < 0.0 {
-                    // No value, or inside: nothing to prove outside with.
-                    f32::NAN
-                } else {
-                    tri.signed([c.x, c.y, c.z]) as f32
-                }
-            })
-            .collect();
+        let unknown = |n: usize| (0..n).map(|_| AtomicU32::new(NOT_YET)).collect();
         Queryable {
             tri,
             bounds: m.aabb(),
@@ -378,9 +369,54 @@ impl Queryable {
             occ,
             to_vertex,
             to_vertex_slack,
+            coarse: unknown(grid.len()),
             fine,
-            lower,
+            lower: unknown(fine.len()),
         }
+    }
+
+    /// The value of coarse voxel `i`, computed when first asked: the signed distance at its
+    /// centre where it may matter. Far from the surface it bounds the fine centres in the
+    /// voxel, near it the fine centres are queried. Deep inside by the parity (its centre
+    /// farther from the surface than any fine centre in it is from the centre) it is not
+    /// queried: the fine centres there are inside, and an inside value proves nothing
+    /// outside (were the parity wrong, the vertices there would only be queried). NaN far
+    /// outside.
+    fn coarse_at(&self, i: usize) -> f64 {
+        known_or(&self.coarse[i], || {
+            let half_diagonal = 0.5 * 3f64.sqrt() * self.grid.h;
+            let deep = self.to_vertex[i] as f64 > self.to_vertex_slack + half_diagonal;
+            match self.occ[i] {
+                0 => f32::NAN,
+                2 if deep => f32::NEG_INFINITY,
+                _ => {
+                    let c = self.grid.center(self.grid.unflat(i));
+                    self.signed(c) as f32
+                }
+            }
+        })
+    }
+
+    /// The bound at fine voxel `i`'s centre, computed when first asked: from its coarse
+    /// voxel's value where that is more than [`FINE_EXACT_WITHIN_MM`] outside it, NaN where
+    /// there is no value or the coarse centre is inside (nothing to prove outside with),
+    /// else the signed distance at the fine centre.
+    fn lower_at(&self, i: usize) -> f64 {
+        known_or(&self.lower[i], || {
+            let c = self.fine.center(self.fine.unflat(i));
+            let Some(v) = self.grid.voxel_of(c) else {
+                return f32::NAN;
+            };
+            let at_coarse = self.coarse_at(self.grid.index(v));
+            let off = (c - self.grid.center(v)).norm();
+            if at_coarse - off > FINE_EXACT_WITHIN_MM {
+                (at_coarse - off) as f32
+            } else if at_coarse.is_nan() || at_coarse + off < 0.0 {
+                f32::NAN
+            } else {
+                self.signed(c) as f32
+            }
+        })
     }
 
     /// Where `p` is outside, a lower bound of its distance to the surface (0 when none is
@@ -406,9 +442,8 @@ impl Queryable {
     /// compares false).
     fn proved_room(&self, p: Vec3) -> Option<f64> {
         let f = self.fine.voxel_of(p)?;
-        let room = self.lower[self.fine.index(f)] as f64
-            - FINE_ROUNDING_MM
-            - (p - self.fine.center(f)).norm();
+        let room =
+            self.lower_at(self.fine.index(f)) - FINE_ROUNDING_MM - (p - self.fine.center(f)).norm();
         (room > 0.0).then_some(room)
     }
 
@@ -773,6 +808,31 @@ mod tests {
         assert!(inside > 4_000, "{inside} points inside");
         assert!(skipped > 5_000, "{skipped} points skipped the query");
         assert!(far_room > 2_500, "{far_room} far points with room");
+    }
+
+    /// Guards when the grids' distances are computed: preparing a part computes none, a
+    /// point near the surface computes its fine centre and that centre's coarse one, and a
+    /// second point in the same fine voxel computes nothing more (the check's vertices come
+    /// near a part along the contact strips only).
+    #[test]
+    fn the_grids_compute_only_what_points_ask() {
+        use crate::geometry::primitive_meshes::torus;
+        let q = Queryable::new(&torus([1.0, -2.0, 0.5], 20.0, 4.0, 96, 32));
+        let computed = |grid: &[AtomicU32]| {
+            grid.iter()
+                .filter(|c| c.load(Ordering::Relaxed) != NOT_YET)
+                .count()
+        };
+        assert_eq!((computed(&q.coarse), computed(&q.lower)), (0, 0));
+        // 0.3 mm outside the tube, on its outer equator.
+        let p = Vec3::new(1.0 + 24.3, -2.0, 0.5);
+        let first = q.room(p);
+        assert!(first > 0.0 && first <= 0.3 + 1e-9, "room {first}");
+        assert_eq!((computed(&q.coarse), computed(&q.lower)), (1, 1));
+        let f = q.fine.voxel_of(p).unwrap();
+        let same_voxel = q.fine.center(f) + (p - q.fine.center(f)) * 0.5;
+        q.room(same_voxel);
+        assert_eq!((computed(&q.coarse), computed(&q.lower)), (1, 1));
     }
 
     /// Guards the check's skipping of instants: a ball in the follower's frame that passes
