@@ -858,10 +858,10 @@ fn minimize(f: impl Fn(f64) -> f64, seed: Seed, floor: f64) -> f64 {
     if fv < fw {
         (w, fw, v, fv) = (v, fv, w, fw);
     }
-    // The step before last, and the last: with known neighbours the first step may be
-    // parabolic (a step shorter than half the bracket).
+    // The step before last, and the last: with known neighbours the first two steps may
+    // be parabolic (each shorter than half the bracket), as if golden steps had led there.
     let (mut e, mut d): (f64, f64) = if seed.left.is_some() && seed.right.is_some() {
-        (b - a, 0.0)
+        (b - a, b - a)
     } else {
         (0.0, 0.0)
     };
