@@ -570,22 +570,19 @@ impl<S: Sdf> ExactSweep<'_, S> {
         } else {
             SEARCH_SLACK_MM
         };
-        // Every value found, for the refinement of the runs ([`Sample`]), and the ends of
-        // intervals split from their centres, which neighbours share.
+        // Every value found ([`Sample`]): what the runs' refinement starts from, and where
+        // an interval split from its centre finds an end its neighbour already asked.
         let mut samples: Vec<Sample> = Vec::new();
-        if leaves.is_none() {
-            for o in &open {
-                match *o {
-                    Open::Centre { c, w, f } => {
-                        samples.push(Sample::new(c, f, best.min(cap) + pace.over(c, w) * w))
-                    }
-                    // The starting ends were asked below their own limits (`start`),
-                    // which are not kept: refinement uses none of them.
-                    Open::Ends { .. } => {}
+        for o in &open {
+            match *o {
+                Open::Centre { c, w, f } => {
+                    samples.push(Sample::new(c, f, best.min(cap) + pace.over(c, w) * w))
                 }
+                // The starting ends were asked below their own limits (`start`), which
+                // are not kept: refinement uses none of them.
+                Open::Ends { .. } => {}
             }
         }
-        let mut shared: Vec<Sample> = Vec::new();
         // (centre, half width, lower bound over the interval).
         let mut basins: Vec<(f64, f64, f64)> = Vec::new();
         while let Some(o) = open.pop() {
@@ -625,15 +622,14 @@ impl<S: Sdf> ExactSweep<'_, S> {
             let pruning = |v: f64, known: f64| (2.0 * (floor_of + v * h) - known).max(floor_of);
             match o {
                 Open::Centre { f, .. } => {
+                    // A leaf's end is no other value's instant (the values inside the leaves
+                    // lie strictly within them), so one found there is a neighbour's end.
                     let mut end = |t: f64, limit: f64| {
-                        if let Some(s) = shared.iter().find(|s| s.t == t && s.serves(limit)) {
+                        if let Some(s) = samples.iter().rfind(|s| s.t == t && s.serves(limit)) {
                             return s.f;
                         }
                         let fe = self.at(p, t, limit);
-                        let s = Sample::new(t, fe, limit);
-                        shared.retain(|s| s.t != t);
-                        shared.push(s);
-                        samples.push(s);
+                        samples.push(Sample::new(t, fe, limit));
                         fe
                     };
                     let fa = end(c - w, pruning(vl, f));
@@ -655,9 +651,7 @@ impl<S: Sdf> ExactSweep<'_, S> {
                 Open::Ends { a, b, fa, fb } => {
                     let limit = pruning(vl, fa).max(pruning(vr, fb));
                     let fc = self.at(p, c, limit);
-                    if leaves.is_none() {
-                        samples.push(Sample::new(c, fc, limit));
-                    }
+                    samples.push(Sample::new(c, fc, limit));
                     best = best.min(fc);
                     open.push(Open::Ends {
                         a,
@@ -681,8 +675,9 @@ impl<S: Sdf> ExactSweep<'_, S> {
             // A certificate: the points it serves refine for themselves.
             return best;
         }
-        // Merge touching basins into runs, then find each run's minimum over the run
-        // widened by one interval on each side. A basin whose lower bound is not below the
+        // Merge touching basins into runs, then refine each run's minimum, from the least
+        // exact value found in it, within the run widened a little on each side (`pad`;
+        // see [`Seed::within`]). A basin whose lower bound is not below the
         // best found since it was kept holds nothing that matters: left out, so that every
         // basin refined holds values within two tolerances above the best (its nearer
         // end's value is within one of its lower bound, and its values within one of that).
