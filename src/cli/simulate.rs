@@ -124,7 +124,7 @@ pub fn run(args: SimulateArgs) -> anyhow::Result<ExitCode> {
     }
     if p.overlap_mm > 0.0 {
         println!(
-            "the meshes overlap by up to {:.3} mm at the design pose (driver {:.2}°); those vertices do not stop the follower",
+            "the meshes overlap by up to {:.3} mm at the design pose (driver {:.2}°) where vertices would stop the follower; those vertices do not count",
             p.overlap_mm, p.overlap_driver_deg
         );
     }

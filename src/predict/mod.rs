@@ -384,7 +384,9 @@ pub struct Prediction {
     /// Driver-angle windows `[from, to]` (degrees) where the drive is lost.
     pub drive_lost_windows: Vec<[f64; 2]>,
     /// Deepest overlap of the parts at the design pose, mm (their meshes' interference),
-    /// and where: such vertices are left out of the free-turn test.
+    /// and where, among the vertices that would otherwise stop the follower: such vertices
+    /// are left out of the free-turn test. Since 2026-12-07 an overlap no vertex would stop
+    /// the follower at is not measured (the build's check measures interference).
     pub overlap_mm: f64,
     /// Where the overlap is, driver degrees.
     pub overlap_driver_deg: f64,

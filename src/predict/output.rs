@@ -263,7 +263,7 @@ fn markdown(p: &Prediction, mechanism: &Path, parts: &Path) -> String {
         "| figure | value | at driver |\n|---|---|---|\n\
          | worst play{} | {:.3}° | {:.2}° |\n\
          | worst deviation from the target | {:.3}° | {:.2}° |\n\
-         | deepest overlap of the meshes at the design pose | {:.3} mm | {:.2}° |\n\n",
+         | deepest overlap of the meshes at the design pose, where it would stop the follower | {:.3} mm | {:.2}° |\n\n",
         if p.slide.is_some() {
             " of the turn"
         } else {

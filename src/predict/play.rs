@@ -522,7 +522,9 @@ pub struct FreeTurns {
     pub minus: Vec<f64>,
     /// Deepest vertex of one part inside the other at the design pose, mm, over the
     /// period (0 when they never overlap), and its time. Such vertices do not stop the
-    /// follower: they would lock it where the meshes already overlap.
+    /// follower: they would lock it where the meshes already overlap. The exact
+    /// crossings ([`crossings`](super::crossings)) look only at the vertices that would
+    /// otherwise stop it.
     pub overlap_mm: f64,
     /// Time of `overlap_mm`.
     pub overlap_t: f64,
