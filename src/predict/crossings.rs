@@ -55,10 +55,11 @@
 //! Edge-against-edge contacts are not tested, as in the tracer.
 //!
 //! On half-turn-2to1's printable parts (1 327 228 + 685 584 vertices, 1 440 driver angles)
-//! the turns take 5.4 s (`cargo bench --bench simulate`; 7.1–8.1 s before the seeds and
-//! the per-point bounds, 22.7 s with the tracer); on screw-bob's (1R1T, 1 509 566 +
-//! 660 284 vertices) the four lines take 22.3 s (41 s before, 53 s with the tracer).
-//! docs/simulate.md, "Exact free turns" and "Seeded, each way its own".
+//! the turns take 5.1–6.0 s (`mpc-rig simulate`; 5.5–6.3 s before the faces' ways, 7.1–8.1 s
+//! before the seeds and the per-point bounds, 22.7 s with the tracer); on screw-bob's
+//! (1R1T, 1 509 566 + 660 284 vertices) the four lines take 22–25 s (41 s before, 53 s
+//! with the tracer). docs/simulate.md, "Exact free turns", "Seeded, each way its own" and
+//! "A driver face looked up only from the ways it can be entered".
 
 use std::f64::consts::{PI, TAU};
 
