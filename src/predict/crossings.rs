@@ -222,8 +222,8 @@ impl Footprint {
 /// Whether a point at polar angle `theta` and height `z`, moved by the limit's screw by
 /// some s in `ab` (within ±limit), can come within the box of polar angles from `lo` to
 /// `lo + span` (`angles`) and heights from `z_lo` to `z_hi` (`heights`); its distance from
-/// the axis does not change. Along the path both grow in proportion to s, so each gives an interval of s.
-/// The callers have widened the box for rounding.
+/// the axis does not change. Along the path both grow in proportion to s, so each gives an
+/// interval of s. The callers have widened the box for rounding.
 fn path_meets(
     theta: f64,
     z: f64,
