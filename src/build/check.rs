@@ -29,8 +29,6 @@
 //! from 183 to 50 s, a tenth of the vertex tests, with the same figures (also on a
 //! follower grown 1 % so that it penetrates). It does not build anything.
 
-use std::sync::atomic::{AtomicU32, Ordering};
-
 use nalgebra::{Isometry3, Point3};
 use rayon::prelude::*;
 
@@ -38,7 +36,7 @@ use crate::geometry::mesh::{Aabb, Mesh};
 use crate::geometry::query::MeshQuery;
 use crate::geometry::sdf::Vec3;
 use crate::geometry::thickness::{wall_thickness, WallThickness};
-use crate::geometry::voxel::{distance_transform, VoxelGrid};
+use crate::geometry::voxel::{distance_transform, OnceValues, VoxelGrid};
 use crate::synth::mechanism::Mechanism;
 
 use super::dims::SLIVER_MM;
@@ -266,28 +264,11 @@ struct Queryable {
     /// a voxel's half diagonal (the vertex in its voxel) plus the longest edge (a surface
     /// point to a vertex of its triangle), mm.
     to_vertex_slack: f64,
-    /// Per coarse voxel, [`Queryable::coarse_at`] as f32 bits, or [`NOT_YET`].
-    coarse: Vec<AtomicU32>,
+    /// Per coarse voxel, [`Queryable::coarse_at`].
+    coarse: OnceValues,
     fine: VoxelGrid,
-    /// Per fine voxel, [`Queryable::lower_at`] as f32 bits, or [`NOT_YET`].
-    lower: Vec<AtomicU32>,
-}
-
-/// A grid value of [`Queryable`] not computed yet: a NaN no computed value has (those
-/// store the one NaN of `f32::NAN`).
-const NOT_YET: u32 = u32::MAX;
-
-/// The value `cell` holds, or `make`'s, stored for the next caller. Two threads may both
-/// make it; the value depends on the cell alone, so both store the same bits.
-fn known_or(cell: &AtomicU32, make: impl FnOnce() -> f32) -> f64 {
-    let bits = cell.load(Ordering::Relaxed);
-    if bits != NOT_YET {
-        return f32::from_bits(bits) as f64;
-    }
-    let v = make();
-    let v = if v.is_nan() { f32::NAN } else { v };
-    cell.store(v.to_bits(), Ordering::Relaxed);
-    v as f64
+    /// Per fine voxel, [`Queryable::lower_at`].
+    lower: OnceValues,
 }
 
 impl Queryable {
@@ -362,7 +343,6 @@ impl Queryable {
             }
         }
         let fine = VoxelGrid::covering(b, FINE_VOXEL_MM);
-        let unknown = |n: usize| (0..n).map(|_| AtomicU32::new(NOT_YET)).collect();
         Queryable {
             tri,
             bounds: m.aabb(),
@@ -370,9 +350,9 @@ impl Queryable {
             occ,
             to_vertex,
             to_vertex_slack,
-            coarse: unknown(grid.len()),
+            coarse: OnceValues::new(grid.len()),
+            lower: OnceValues::new(fine.len()),
             fine,
-            lower: unknown(fine.len()),
         }
     }
 
@@ -384,7 +364,7 @@ impl Queryable {
     /// outside (were the parity wrong, the vertices there would only be queried). NaN far
     /// outside.
     fn coarse_at(&self, i: usize) -> f64 {
-        known_or(&self.coarse[i], || {
+        let v = self.coarse.get_or(i, || {
             let half_diagonal = 0.5 * 3f64.sqrt() * self.grid.h;
             let deep = self.to_vertex[i] as f64 > self.to_vertex_slack + half_diagonal;
             match self.occ[i] {
@@ -395,7 +375,8 @@ impl Queryable {
                     self.signed(c) as f32
                 }
             }
-        })
+        });
+        f64::from(v)
     }
 
     /// The bound at fine voxel `i`'s centre, computed when first asked: from its coarse
@@ -403,7 +384,7 @@ impl Queryable {
     /// there is no value or the coarse centre is inside (nothing to prove outside with),
     /// else the signed distance at the fine centre.
     fn lower_at(&self, i: usize) -> f64 {
-        known_or(&self.lower[i], || {
+        let v = self.lower.get_or(i, || {
             let c = self.fine.center(self.fine.unflat(i));
             let Some(v) = self.grid.voxel_of(c) else {
                 return f32::NAN;
@@ -417,7 +398,8 @@ impl Queryable {
             } else {
                 self.signed(c) as f32
             }
-        })
+        });
+        f64::from(v)
     }
 
     /// Where `p` is outside, a lower bound of its distance to the surface (0 when none is
@@ -819,11 +801,7 @@ mod tests {
     fn the_grids_compute_only_what_points_ask() {
         use crate::geometry::primitive_meshes::torus;
         let q = Queryable::new(&torus([1.0, -2.0, 0.5], 20.0, 4.0, 96, 32));
-        let computed = |grid: &[AtomicU32]| {
-            grid.iter()
-                .filter(|c| c.load(Ordering::Relaxed) != NOT_YET)
-                .count()
-        };
+        let computed = |grid: &OnceValues| grid.computed();
         assert_eq!((computed(&q.coarse), computed(&q.lower)), (0, 0));
         // 0.3 mm outside the tube, on its outer equator.
         let p = Vec3::new(1.0 + 24.3, -2.0, 0.5);

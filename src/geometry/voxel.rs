@@ -5,16 +5,59 @@
 //! from every voxel centre to the nearest marked one, by the separable lower-envelope
 //! method of Felzenszwalb and Huttenlocher, linear in the voxel count) and
 //! [`shortest_path`] (A* over 26-connected voxels whose clearance is large enough, then
-//! shortened to the fewest straight segments that keep it). It does not know what the
-//! marks or obstacles are (`build` sweeps parts into grids).
+//! shortened to the fewest straight segments that keep it), and [`OnceValues`] (one f32 per
+//! voxel computed the first time it is asked). It does not know what the marks or
+//! obstacles are (`build` sweeps parts into grids).
 
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
+use std::sync::atomic::{AtomicU32, Ordering as AtomicOrdering};
 
 use rayon::prelude::*;
 
 use super::mesh::Aabb;
 use super::sdf::Vec3;
+
+/// One f32 per cell, computed the first time a caller asks and kept: for values that cost a
+/// mesh query each where most cells are never asked (the check's and the prediction's
+/// distances near a part, asked along the contact strips only). Threads may race on a
+/// cell; its value depends on the cell alone, so both store the same bits.
+pub struct OnceValues {
+    cells: Vec<AtomicU32>,
+}
+
+/// A cell of [`OnceValues`] not computed yet: a NaN no kept value has (those keep the one
+/// NaN of `f32::NAN`).
+const NOT_YET: u32 = u32::MAX;
+
+impl OnceValues {
+    /// `len` cells, none computed.
+    pub fn new(len: usize) -> OnceValues {
+        OnceValues {
+            cells: (0..len).map(|_| AtomicU32::new(NOT_YET)).collect(),
+        }
+    }
+
+    /// The value of cell `i`: `make`'s, the first time.
+    pub fn get_or(&self, i: usize, make: impl FnOnce() -> f32) -> f32 {
+        let bits = self.cells[i].load(AtomicOrdering::Relaxed);
+        if bits != NOT_YET {
+            return f32::from_bits(bits);
+        }
+        let v = make();
+        let v = if v.is_nan() { f32::NAN } else { v };
+        self.cells[i].store(v.to_bits(), AtomicOrdering::Relaxed);
+        v
+    }
+
+    /// How many cells have been computed.
+    pub fn computed(&self) -> usize {
+        self.cells
+            .iter()
+            .filter(|c| c.load(AtomicOrdering::Relaxed) != NOT_YET)
+            .count()
+    }
+}
 
 /// A lattice of voxel centres: `origin` is the centre of voxel (0, 0, 0).
 #[derive(Clone, Copy, Debug, PartialEq)]

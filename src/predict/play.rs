@@ -43,7 +43,7 @@
 //! outside), the same queries the build's check uses. The module does not know the target
 //! law, the load or the files; it does not look at the support.
 
-use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::OnceLock;
 
 use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
@@ -52,7 +52,7 @@ use rayon::prelude::*;
 use crate::geometry::mesh::{Aabb, Mesh};
 use crate::geometry::query::MeshQuery;
 use crate::geometry::sdf::Vec3;
-use crate::geometry::voxel::{distance_transform, VoxelGrid};
+use crate::geometry::voxel::{distance_transform, OnceValues, VoxelGrid};
 
 /// A vertex this near the other part's surface touches it, mm. 0.002 mm: a hundredth of
 /// the default clearance and far below the meshes' own error (≈ 0.05 mm), so the turn it
@@ -163,9 +163,9 @@ struct Bounds {
     grid: VoxelGrid,
     /// Distance from each voxel centre to the nearest voxel the surface passes through.
     coarse: Vec<f32>,
-    /// The exact distance from each voxel centre to the surface, as f32 bits, computed the
-    /// first time a point near the surface asks ([`UNKNOWN`] until then).
-    exact: Vec<AtomicU32>,
+    /// The exact distance from each voxel centre to the surface, computed the first time a
+    /// point near the surface asks.
+    exact: OnceValues,
 }
 
 impl Bounds {
@@ -192,7 +192,7 @@ impl Bounds {
             }
         }
         let coarse = distance_transform(&grid, &marks);
-        let exact = (0..grid.len()).map(|_| AtomicU32::new(UNKNOWN)).collect();
+        let exact = OnceValues::new(grid.len());
         Bounds {
             grid,
             coarse,
@@ -204,8 +204,6 @@ impl Bounds {
 /// Subtracted from a stored centre distance for its rounding to f32, mm: an f32 near
 /// 300 mm is within 2e-5 mm of the f64 it came from.
 pub(crate) const F32_SLACK_MM: f64 = 1e-4;
-/// An entry of `Bounds::exact` not computed yet (a NaN no distance has).
-const UNKNOWN: u32 = u32::MAX;
 /// Below this coarse bound a point asks its voxel centre's exact distance, mm. 2 mm: the
 /// bound is compared with free arcs (r × free turn, up to about 1.5 mm at the examples'
 /// levers and plays) and with `FAR_MM`; above 2 mm the coarse bound already decides, and
@@ -354,16 +352,10 @@ impl Solid {
         }
         let c = grid.center(v);
         let centre = Point3::new(c.x, c.y, c.z);
-        let known = exact[i].load(Ordering::Relaxed);
-        let at_centre = if known == UNKNOWN {
-            // Racing threads store the same value.
-            let d = self.signed(&centre).abs() as f32;
-            exact[i].store(d.to_bits(), Ordering::Relaxed);
+        let at_centre = exact.get_or(i, || {
             self.centres.fetch_add(1, Ordering::Relaxed);
-            d
-        } else {
-            f32::from_bits(known)
-        };
+            self.signed(&centre).abs() as f32
+        });
         (f64::from(at_centre) - (p - centre).norm() - F32_SLACK_MM)
             .max(coarse)
             .max(0.0)
