@@ -673,8 +673,9 @@ impl Limit {
     /// along the normal is linear in q, so its least and largest over the triangle are at
     /// the corners: a face whose every corner moves out along its normal as s grows is
     /// entered only as s falls, and the other way round. On the examples' parts all but
-    /// 0.4 % of the driver faces near the follower are entered one way only.
-    fn entering(&self, c: &[Point3<f64>; 3], n: &Vector3<f64>) -> Option<[f64; 2]> {
+    /// 0.4 % of the driver faces near the follower are entered one way only. `far` is the
+    /// corners' largest distance from the axis.
+    fn entering(&self, c: &[Point3<f64>; 3], n: &Vector3<f64>, far: f64) -> Option<[f64; 2]> {
         let (om, sg) = (self.screw.spin, self.screw.slide);
         let along = c.map(|q| om * (n.y * q.x - n.x * q.y) + n.z * sg);
         let lo = along[0].min(along[1]).min(along[2]);
@@ -682,10 +683,6 @@ impl Limit {
         // The crossing's point may lie a hair outside the triangle (`EDGE_SLACK`): a
         // slack relative to the fastest a corner moves keeps a face that is nearly
         // parallel to the motion both ways.
-        let far = c
-            .map(|q| q.coords.xy().norm())
-            .into_iter()
-            .fold(0.0, f64::max);
         let slack = DIRECTION_SLACK * (om.abs() * (far + 1.0) + sg.abs());
         let growing = lo < slack;
         let falling = hi > -slack;
@@ -1440,11 +1437,12 @@ impl<'a> Run<'a> {
         let Some(plane) = Plane::of(c) else {
             return;
         };
-        let Some(ab @ [a, b]) = lim.entering(c, &plane.n) else {
+        let rho = max_rho(corners);
+        let Some(ab @ [a, b]) = lim.entering(c, &plane.n, rho) else {
             return;
         };
         let (om, sg) = (lim.screw.spin, lim.screw.slide);
-        if far > lim.screw.lever(max_rho(corners)) * (-a).max(b) {
+        if far > lim.screw.lever(rho) * (-a).max(b) {
             return;
         }
         let face = Footprint::with(c, corners.map(|k| k.rho), corners.map(|k| k.theta));
@@ -1843,22 +1841,27 @@ mod tests {
         let ways = [0.2, 0.3];
         let turn = Limit::new(Screw::TURN, ways);
         let tri = |c: [[f64; 3]; 3]| c.map(|[x, y, z]| Point3::new(x, y, z));
+        // With the corners' largest distance from the axis, as a pass has it.
+        let entering = |lim: &Limit, c: &[Point3<f64>; 3], n: Vector3<f64>| {
+            let far = c.iter().map(|q| q.coords.xy().norm()).fold(0.0, f64::max);
+            lim.entering(c, &n, far)
+        };
         // The plane x = 10 facing −x above the x axis: turning it (counter-clockwise)
         // moves its points out along −x, so points enter it only as the turn falls.
         let above = tri([[10.0, 1.0, 0.0], [10.0, 2.0, 0.0], [10.0, 1.5, 1.0]]);
-        assert_eq!(turn.entering(&above, &-Vector3::x()), Some([-0.3, 0.0]));
-        assert_eq!(turn.entering(&above, &Vector3::x()), Some([0.0, 0.2]));
+        assert_eq!(entering(&turn, &above, -Vector3::x()), Some([-0.3, 0.0]));
+        assert_eq!(entering(&turn, &above, Vector3::x()), Some([0.0, 0.2]));
         // Across the x axis its points move both ways along the normal.
         let across = tri([[10.0, -1.0, 0.0], [10.0, 1.0, 0.0], [10.0, 0.0, 1.0]]);
-        assert_eq!(turn.entering(&across, &-Vector3::x()), Some([-0.3, 0.2]));
+        assert_eq!(entering(&turn, &across, -Vector3::x()), Some([-0.3, 0.2]));
         // A horizontal face: a turn slides in its plane, a slide crosses it one way.
         let flat = tri([[10.0, 0.0, 0.0], [11.0, 0.0, 0.0], [10.0, 1.0, 0.0]]);
-        assert_eq!(turn.entering(&flat, &Vector3::z()), Some([-0.3, 0.2]));
+        assert_eq!(entering(&turn, &flat, Vector3::z()), Some([-0.3, 0.2]));
         let slide = Limit::new(Screw::SLIDE, ways);
-        assert_eq!(slide.entering(&flat, &Vector3::z()), Some([-0.3, 0.0]));
-        assert_eq!(slide.entering(&flat, &-Vector3::z()), Some([0.0, 0.2]));
+        assert_eq!(entering(&slide, &flat, Vector3::z()), Some([-0.3, 0.0]));
+        assert_eq!(entering(&slide, &flat, -Vector3::z()), Some([0.0, 0.2]));
         // A slide along a vertical face.
-        assert_eq!(slide.entering(&above, &-Vector3::x()), Some([-0.3, 0.2]));
+        assert_eq!(entering(&slide, &above, -Vector3::x()), Some([-0.3, 0.2]));
     }
 
     /// Guards the memory the 1R path saves: the driver's distance grid (the largest thing
