@@ -796,10 +796,12 @@ impl Seed {
     /// never above the exact one, so the exact one is not below it either), or by the ends
     /// of [lo, hi].
     fn within(samples: &[Sample], lo: f64, hi: f64) -> Seed {
-        let inside = |s: &&Sample| s.t > lo && s.t < hi;
-        let best = samples
+        // The samples strictly inside, found once in the sorted list.
+        let from = samples.partition_point(|s| s.t <= lo);
+        let to = from + samples[from..].partition_point(|s| s.t < hi);
+        let inside = &samples[from..to];
+        let best = inside
             .iter()
-            .filter(inside)
             .filter(|s| s.exact())
             .min_by(|a, b| a.f.total_cmp(&b.f));
         let Some(x) = best else {
@@ -811,14 +813,8 @@ impl Seed {
                 right: None,
             };
         };
-        let left = samples
-            .iter()
-            .filter(inside)
-            .rfind(|s| s.t < x.t && s.f >= x.f);
-        let right = samples
-            .iter()
-            .filter(inside)
-            .find(|s| s.t > x.t && s.f >= x.f);
+        let left = inside.iter().rfind(|s| s.t < x.t && s.f >= x.f);
+        let right = inside.iter().find(|s| s.t > x.t && s.f >= x.f);
         let known = |s: Option<&Sample>| s.filter(|s| s.exact()).map(|s| (s.t, s.f));
         Seed {
             a: left.map_or(lo, |s| s.t),
