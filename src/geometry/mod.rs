@@ -7,6 +7,7 @@
 //! | [`scene`] | parts with poses over one period, for animation and renders |
 //! | [`sdf`] | implicit solids (signed distance bounds), primitives, CSG |
 //! | [`sweep`] | sections swept along closed curves, the segment BVH |
+//! | [`cell_lists`] | which boxed items may lie near a point: per-cell lists, nearest bound first |
 //! | [`voxel`] | voxel grids, exact distance transforms, shortest free paths |
 //! | [`mesher`] | implicit solid → closed 2-manifold mesh (marching tetrahedra, sparse blocks) |
 //! | [`query`] | signed point–mesh distance (parry3d-f64, pseudo-normals), rays leaving a mesh |
@@ -19,6 +20,7 @@
 //! It does not know what a mechanism is: turning `mechanism.json` into parts is `build`'s
 //! job; this module gives it shapes, meshes and files.
 
+pub mod cell_lists;
 pub mod io;
 pub mod mesh;
 pub mod mesher;
