@@ -87,28 +87,37 @@ pub struct Kinematics {
 }
 
 /// How fast the points of one frame move in another over any interval of time: a point p
-/// moves no faster than `spin`·|p| + `drift`, each the largest over the interval's bins.
+/// moves no faster than spin·|p| + drift, each the largest over the interval's bins (the
+/// pairs of `bins`, spin first).
 #[derive(Clone, Debug, Default)]
 struct IntervalSpeed {
-    spin: BinMax,
-    drift: BinMax,
+    bins: BinMax,
 }
 
-/// The largest of per-bin values over any run of bins of one period (a sparse table: level
-/// k holds the maxima of the runs of 2ᵏ bins that do not wrap).
+/// The largest of per-bin pairs of values over any run of bins of one period, each of the
+/// two on its own (a sparse table: level k holds the maxima of the runs of 2ᵏ bins that do
+/// not wrap). The two are kept side by side so that a query finds its bins once and reads
+/// one place per end: the carve asks for both at every interval it bounds, and perf put a
+/// tenth of the driver stage here when they were two tables (the index worked out twice,
+/// with libm's `floor`, `ceil` and `fmod`).
 #[derive(Clone, Debug, Default)]
 struct BinMax {
-    levels: Vec<Vec<f64>>,
+    levels: Vec<Vec<[f64; 2]>>,
+}
+
+/// Each of two pairs' values, the larger.
+fn pair_max(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
+    [a[0].max(b[0]), a[1].max(b[1])]
 }
 
 impl BinMax {
-    fn new(bins: Vec<f64>) -> BinMax {
+    fn new(bins: Vec<[f64; 2]>) -> BinMax {
         let mut levels = vec![bins];
         let mut run = 1;
         while 2 * run <= levels[0].len() {
             let prev = levels.last().expect("level 0 is there");
-            let next: Vec<f64> = (0..prev.len() - run)
-                .map(|i| prev[i].max(prev[i + run]))
+            let next: Vec<[f64; 2]> = (0..prev.len() - run)
+                .map(|i| pair_max(prev[i], prev[i + run]))
                 .collect();
             levels.push(next);
             run *= 2;
@@ -116,28 +125,48 @@ impl BinMax {
         BinMax { levels }
     }
 
-    /// The largest value of bins `lo..=hi` (0 ≤ lo ≤ hi < bins).
-    fn run(&self, lo: usize, hi: usize) -> f64 {
+    /// The largest values of bins `lo..=hi` (0 ≤ lo ≤ hi < bins).
+    fn run(&self, lo: usize, hi: usize) -> [f64; 2] {
         let k = (hi - lo + 1).ilog2() as usize;
-        self.levels[k][lo].max(self.levels[k][hi + 1 - (1 << k)])
+        pair_max(self.levels[k][lo], self.levels[k][hi + 1 - (1 << k)])
     }
 
-    /// The largest value of the bins that meet [t0, t1] (fractions of a period, any reals;
-    /// the period wraps).
-    fn over(&self, t0: f64, t1: f64) -> f64 {
+    /// The largest values of the bins that meet [t0, t1] (fractions of a period, any reals
+    /// within ±2⁵³ bins; the period wraps).
+    fn over(&self, t0: f64, t1: f64) -> [f64; 2] {
         let n = self.levels[0].len();
-        let first = (t0 * n as f64).floor();
-        let last = ((t1 * n as f64).ceil() - 1.0).max(first);
-        if last - first + 1.0 >= n as f64 {
+        let first = floor_int(t0 * n as f64);
+        let last = (ceil_int(t1 * n as f64) - 1).max(first);
+        if last - first + 1 >= n as i64 {
             return self.run(0, n - 1);
         }
-        let lo = first.rem_euclid(n as f64) as usize;
+        let lo = first.rem_euclid(n as i64) as usize;
         let hi = lo + (last - first) as usize;
         if hi < n {
             self.run(lo, hi)
         } else {
-            self.run(lo, n - 1).max(self.run(0, hi - n))
+            pair_max(self.run(lo, n - 1), self.run(0, hi - n))
         }
+    }
+}
+
+/// ⌊x⌋ as an integer, without a call to libm (x within ±2⁵³).
+fn floor_int(x: f64) -> i64 {
+    let i = x as i64;
+    if (i as f64) > x {
+        i - 1
+    } else {
+        i
+    }
+}
+
+/// ⌈x⌉ as an integer, without a call to libm (x within ±2⁵³).
+fn ceil_int(x: f64) -> i64 {
+    let i = x as i64;
+    if (i as f64) < x {
+        i + 1
+    } else {
+        i
     }
 }
 
@@ -260,24 +289,23 @@ impl Kinematics {
         let mut out = vec![IntervalSpeed::default(); 9];
         for from in Frame::ALL {
             for to in Frame::ALL.into_iter().filter(|&to| to != from) {
-                let (spin, drift): (Vec<f64>, Vec<f64>) = rates
+                let rate: Vec<[f64; 2]> = rates
                     .iter()
                     .map(|r| {
                         let [wa, ta, va] = r[from.index()];
                         let [wb, tb, vb] = r[to.index()];
-                        ((wa - wb).norm(), (va - vb - wb.cross(&(ta - tb))).norm())
+                        [(wa - wb).norm(), (va - vb - wb.cross(&(ta - tb))).norm()]
                     })
-                    .unzip();
-                let bins = |v: &[f64]| -> BinMax {
-                    BinMax::new(
-                        (0..n)
-                            .map(|i| v[2 * i].max(v[2 * i + 1]).max(v[2 * i + 2]) * SPEED_SAFETY)
-                            .collect(),
-                    )
-                };
+                    .collect();
+                let bins = (0..n)
+                    .map(|i| {
+                        let most =
+                            pair_max(pair_max(rate[2 * i], rate[2 * i + 1]), rate[2 * i + 2]);
+                        most.map(|x| x * SPEED_SAFETY)
+                    })
+                    .collect();
                 out[from.index() * 3 + to.index()] = IntervalSpeed {
-                    spin: bins(&spin),
-                    drift: bins(&drift),
+                    bins: BinMax::new(bins),
                 };
             }
         }
@@ -303,8 +331,8 @@ impl Kinematics {
         if from == to {
             return (0.0, 0.0);
         }
-        let s = &self.within[from.index() * 3 + to.index()];
-        (s.spin.over(t0, t1), s.drift.over(t0, t1))
+        let [spin, drift] = self.within[from.index() * 3 + to.index()].bins.over(t0, t1);
+        (spin, drift)
     }
 
     /// The map from frame `from` to frame `to` at time `t`. At the instants of the table
@@ -313,7 +341,8 @@ impl Kinematics {
         let n = TRANSFORM_TABLE as f64;
         // t·2¹⁴ is exact, so an integer j means t = j / 2¹⁴ exactly.
         let j = t * n;
-        if (0.0..n).contains(&j) && j.fract() == 0.0 {
+        // An integer test by a cast (`fract` calls libm's `trunc` on this target).
+        if (0.0..n).contains(&j) && (j as usize) as f64 == j {
             return self.table(from, to)[j as usize];
         }
         self.transform_at(from, to, t)
@@ -397,7 +426,9 @@ mod tests {
     #[test]
     fn bin_maxima_are_the_largest_over_the_bins_met() {
         let mut rng = ChaCha8Rng::seed_from_u64(31);
-        let bins: Vec<f64> = (0..37).map(|_| rng.random::<f64>()).collect();
+        let bins: Vec<[f64; 2]> = (0..37)
+            .map(|_| [rng.random::<f64>(), rng.random::<f64>()])
+            .collect();
         let table = BinMax::new(bins.clone());
         let n = bins.len() as f64;
         for _ in 0..2000 {
@@ -407,7 +438,16 @@ mod tests {
             let last = (((t1 * n).ceil() as i64) - 1).max(first);
             let brute = (first..=last)
                 .map(|i| bins[i.rem_euclid(bins.len() as i64) as usize])
-                .fold(f64::NEG_INFINITY, f64::max);
+                .fold([f64::NEG_INFINITY; 2], pair_max);
+            assert_eq!(table.over(t0, t1), brute, "[{t0}, {t1}]");
+        }
+        // Ends on bin boundaries, where floor and ceil meet.
+        for (t0, t1) in [(0.0, 1.0 / n), (-2.0 / n, 3.0 / n), (5.0 / n, 5.0 / n)] {
+            let first = (t0 * n).floor() as i64;
+            let last = (((t1 * n).ceil() as i64) - 1).max(first);
+            let brute = (first..=last)
+                .map(|i| bins[i.rem_euclid(bins.len() as i64) as usize])
+                .fold([f64::NEG_INFINITY; 2], pair_max);
             assert_eq!(table.over(t0, t1), brute, "[{t0}, {t1}]");
         }
     }
