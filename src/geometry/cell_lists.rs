@@ -67,12 +67,19 @@ impl CellLists {
         bounds: impl Fn(usize, &Aabb) -> (f64, f64) + Sync,
     ) -> CellLists {
         let all = boxes.iter().fold(Aabb::EMPTY, |b, x| b.union(x));
-        let (min, dims) = if all.min[0] <= all.max[0] {
+        let (min, dims, cell) = if all.min[0] <= all.max[0] {
             let grown = all.inflate(reach);
-            let dims = grown.size().map(|s| ((s / cell).ceil() as usize).max(1));
-            (grown.min, dims)
+            let dims_at = |cell: f64| grown.size().map(|s| ((s / cell).ceil() as usize).max(1));
+            let count = |d: [usize; 3]| d[0] as f64 * d[1] as f64 * d[2] as f64;
+            // The grid spans the items' whole box: over a large part, coarser cells (the
+            // lists hold for any size, only less tightly).
+            let mut cell = cell;
+            while count(dims_at(cell)) > MAX_CELLS as f64 {
+                cell *= (count(dims_at(cell)) / MAX_CELLS as f64).cbrt().max(1.01);
+            }
+            (grown.min, dims_at(cell), cell)
         } else {
-            ([0.0; 3], [0; 3])
+            ([0.0; 3], [0; 3], cell)
         };
         let cells = dims[0] * dims[1] * dims[2];
         let index = |c: [usize; 3]| (c[2] * dims[1] + c[1]) * dims[0] + c[0];
@@ -194,6 +201,11 @@ impl CellLists {
     pub fn entries(&self) -> usize {
         self.items.len()
     }
+
+    /// How many cells the grid has.
+    pub fn cells(&self) -> usize {
+        self.dims[0] * self.dims[1] * self.dims[2]
+    }
 }
 
 /// The distance between two boxes (0 when they touch or overlap).
@@ -205,6 +217,10 @@ fn box_gap(a: &Aabb, b: &Aabb) -> f64 {
     }
     s.sqrt()
 }
+
+/// Most cells a grid holds (two u32 per cell, 32 MiB): a box over the lists' reach of
+/// 2²² cells of 1 mm is 161 mm on every side; a larger one takes coarser cells.
+const MAX_CELLS: usize = 1 << 22;
 
 /// Round-off a bound may carry from being computed over a cell rather than at the point,
 /// mm: far below any resolution, far above f64 round-off at part scale.
@@ -297,6 +313,22 @@ mod tests {
             }
         }
         assert!(with_high > 5_000, "{with_high} points with an upper bound");
+    }
+
+    /// Guards the grid's size over a large box: items 2 m apart get no more than
+    /// [`MAX_CELLS`] cells, and every item is still listed where it is near.
+    #[test]
+    fn a_large_box_takes_coarser_cells() {
+        let boxes = [
+            Aabb::new([0.0; 3], [1.0; 3]),
+            Aabb::new([2000.0, 1500.0, 900.0], [2001.0, 1501.0, 901.0]),
+        ];
+        let lists = CellLists::new(&boxes, 1.0, 3.0, |_, _| (0.0, f64::INFINITY));
+        assert!(lists.cells() <= MAX_CELLS, "{} cells", lists.cells());
+        for (i, p) in [(0, [0.5; 3]), (1, [2002.5, 1500.5, 900.5])] {
+            let near = lists.near(p).unwrap();
+            assert!(near.items.contains(&i), "{i} not listed at {p:?}");
+        }
     }
 
     /// Guards that a caller's bound tightens the lists: an item whose bound is at the reach
