@@ -6,9 +6,10 @@
 //! bounds of the item's value over a cell, it answers a point with the items of its cell
 //! and their lower bounds, sorted so that a search for the least value can stop at the
 //! first bound not below the best so far, and with an upper bound of the least value over
-//! the cell, so that the search can start below its own limit. It does not know what the items are or how their values are
-//! computed ([`super::sweep`] lists a sweep's pieces with it), and it answers nothing
-//! beyond the reach: the caller falls back to its own search there.
+//! the cell, so that the search can start below its own limit. It does not know what the
+//! items are or how their values are computed ([`super::sweep`] lists a sweep's pieces
+//! with it), and it answers nothing beyond the reach: the caller falls back to its own
+//! search there.
 
 use rayon::prelude::*;
 
