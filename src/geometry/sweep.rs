@@ -906,8 +906,10 @@ impl Sweep {
         for &i in ids {
             listed[i] = boxes[i];
         }
+        // The section's share of the bounds, the same for every piece and cell.
+        let (extent, origin_gap) = (section.extent(), section.dist(0.0, 0.0).max(0.0));
         CellLists::new(&listed, SWEEP_CELL_MM, SWEEP_CELLS_REACH_MM, |i, cell| {
-            Sweep::bounds_over(&segs[i], ends[i], section, cell)
+            Sweep::bounds_over(&segs[i], ends[i], extent, origin_gap, cell)
         })
     }
 
@@ -917,12 +919,14 @@ impl Sweep {
     /// from the segment's line less the section's extent (the section lies within that of
     /// the line wherever along it the point is measured). Above: the value is at most the
     /// point's distance from the segment plus the section's distance at its origin (the
-    /// section's distance changes by at most the distance moved in its plane). Infinity for
-    /// an empty segment, which is never measured.
+    /// section's distance changes by at most the distance moved in its plane). `extent` is
+    /// the section's [`Section::extent`], `origin_gap` its distance at the origin (0 when
+    /// the section holds it). Infinity for an empty segment, which is never measured.
     fn bounds_over(
         seg: &Segment,
         [m0, m1]: [Vec3; 2],
-        section: Section,
+        extent: f64,
+        origin_gap: f64,
         cell: &Aabb,
     ) -> (f64, f64) {
         if seg.len <= 0.0 {
@@ -936,11 +940,9 @@ impl Sweep {
         let half_diagonal = 0.5 * norm2(norm2(size[0], size[1]), size[2]);
         let from = c - seg.o;
         let (raw, r) = (from.dot(&seg.t), spread(seg.t));
-        let lateral = ((from - seg.t * raw).norm()
-            - half_diagonal
-            - section.extent()
-            - SECTION_TABLE_SLACK_MM)
-            .max(0.0);
+        let lateral =
+            ((from - seg.t * raw).norm() - half_diagonal - extent - SECTION_TABLE_SLACK_MM)
+                .max(0.0);
         let along = if raw + r >= 0.0 && raw - r <= seg.len {
             0.0
         } else {
@@ -956,8 +958,7 @@ impl Sweep {
             }
         };
         let to_segment = (from - seg.t * raw.clamp(0.0, seg.len)).norm();
-        let high =
-            to_segment + half_diagonal + section.dist(0.0, 0.0).max(0.0) + SECTION_TABLE_SLACK_MM;
+        let high = to_segment + half_diagonal + origin_gap + SECTION_TABLE_SLACK_MM;
         (norm2(lateral, along), high)
     }
 }
