@@ -83,7 +83,6 @@ impl CellLists {
             ([0.0; 3], [0; 3], cell)
         };
         let cells = dims[0] * dims[1] * dims[2];
-        let index = |c: [usize; 3]| (c[2] * dims[1] + c[1]) * dims[0] + c[0];
         let cell_box = |c: [usize; 3]| {
             let lo = [0, 1, 2].map(|k| min[k] + c[k] as f64 * cell);
             Aabb::new(lo, lo.map(|x| x + cell))
@@ -112,7 +111,7 @@ impl CellLists {
                             let low = box_gap(&cb, b).max(low);
                             if low < reach {
                                 let (low, high) = (round_down(low), round_up(high));
-                                out.push((index(c) as u32, low, high, i as u32));
+                                out.push((flat(dims, c) as u32, low, high, i as u32));
                             }
                         }
                     }
@@ -184,7 +183,7 @@ impl CellLists {
             }
             c[k] = x as usize;
         }
-        let i = (c[2] * self.dims[1] + c[1]) * self.dims[0] + c[0];
+        let i = flat(self.dims, c);
         let (a, b) = (self.starts[i] as usize, self.starts[i + 1] as usize);
         Some(Near {
             items: &self.items[a..b],
@@ -207,6 +206,11 @@ impl CellLists {
     pub fn cells(&self) -> usize {
         self.dims[0] * self.dims[1] * self.dims[2]
     }
+}
+
+/// Cell `c`'s index in a grid of `dims` cells, x fastest.
+fn flat(dims: [usize; 3], c: [usize; 3]) -> usize {
+    (c[2] * dims[1] + c[1]) * dims[0] + c[0]
 }
 
 /// The distance between two boxes (0 when they touch or overlap).
@@ -260,13 +264,9 @@ mod tests {
     /// value.
     #[test]
     fn every_item_within_reach_is_listed_with_bounds_that_hold() {
-        let mut state = 12345u64;
-        let mut rnd = move || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((state >> 11) as f64) / ((1u64 << 53) as f64)
-        };
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(12345);
+        let mut rnd = move || rng.random::<f64>();
         let points: Vec<[f64; 3]> = (0..60)
             .map(|_| [rnd() * 20.0, rnd() * 20.0, rnd() * 20.0])
             .collect();
