@@ -813,8 +813,8 @@ impl Sweep {
         let v = t.cross(&u);
         let (du, dv) = (d.dot(&u), d.dot(&v));
         let bound = self.section.lower_bound(du, dv);
-        let lower = norm2(bound, along);
-        if lower > 0.0 && lower >= best {
+        // The exact bounds, compared squared with the same slack as the rectangle's.
+        if bound * bound + along * along >= reach * reach {
             return f64::INFINITY;
         }
         // Far from a half ellipse its distance is a lower bound that may be below `bound`;
