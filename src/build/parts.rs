@@ -18,6 +18,8 @@
 
 use std::sync::Arc;
 
+use rayon::prelude::*;
+
 use crate::geometry::mesh::Aabb;
 use crate::geometry::sdf::{
     Cylinder, Difference, Offset, Sdf, ThickPolyline, ThickTriangles, Union, Vec3,
@@ -153,14 +155,19 @@ pub fn design(
             source,
         }
     };
-    let rims: Vec<Sweep> = pairs
-        .iter()
-        .map(|(k, cp)| shapes::rim(cp, s).map_err(sweep_err("rim", *k)))
-        .collect::<Result<_, _>>()?;
-    let bands: Vec<Sweep> = pairs
-        .iter()
-        .map(|(k, cp)| shapes::band(cp, s).map_err(sweep_err("band", *k)))
-        .collect::<Result<_, _>>()?;
+    // Side by side (each sweep makes its cells' lists on one thread); the first failure in
+    // the pairs' order is the one reported.
+    let (rims, bands): (Vec<_>, Vec<_>) = pairs
+        .par_iter()
+        .map(|(k, cp)| {
+            (
+                shapes::rim(cp, s).map_err(sweep_err("rim", *k)),
+                shapes::band(cp, s).map_err(sweep_err("band", *k)),
+            )
+        })
+        .unzip();
+    let rims: Vec<Sweep> = rims.into_iter().collect::<Result<_, _>>()?;
+    let bands: Vec<Sweep> = bands.into_iter().collect::<Result<_, _>>()?;
     let webs_tris: Vec<(ThickTriangles, Vec<[Vec3; 3]>)> = rims.iter().map(shapes::web).collect();
     let rim_covers: Vec<Balls> = rims
         .iter()
@@ -205,10 +212,60 @@ pub fn design(
     let mut f_bodies: Vec<&Balls> = f_cover.iter().collect();
     f_bodies.extend(follower_pieces.cover.iter());
     let fgrid = connect::grid_around(&kin, &f_bodies, Frame::Follower);
-    let d_rims = connect::clearance(&kin, &rim_covers, Frame::Driver, dgrid);
     let mut d_others_rule: Vec<Balls> = follower_pieces.cover.clone();
     d_others_rule.extend(support_pieces.cover.iter().cloned());
-    let d_others = connect::clearance(&kin, &d_others_rule, Frame::Driver, dgrid);
+    let mut f_others_rule: Vec<Balls> = driver_pieces.cover.clone();
+    f_others_rule.extend(support_pieces.cover.iter().cloned());
+    // The swept fields below are independent: made side by side, the serial parts of one
+    // (marking the traces, the transform's gathers) overlap the others.
+    let reach = carve_reach(opts.cell_mm, opts.clearance_mm);
+    let ((d_rims, d_others), ((rim_fields, band_fields), follower_other_field)) = rayon::join(
+        || {
+            rayon::join(
+                || connect::clearance(&kin, &rim_covers, Frame::Driver, dgrid),
+                || connect::clearance(&kin, &d_others_rule, Frame::Driver, dgrid),
+            )
+        },
+        || {
+            rayon::join(
+                || {
+                    rayon::join(
+                        // Each rim's own sweep, so that near one groove the carve searches
+                        // that rim alone.
+                        || {
+                            rim_covers
+                                .par_iter()
+                                .map(|c| {
+                                    Arc::new(connect::clearance_within(
+                                        &kin,
+                                        c,
+                                        Frame::Driver,
+                                        reach,
+                                    ))
+                                })
+                                .collect::<Vec<Arc<DistanceField>>>()
+                        },
+                        // One field per band, so that the exact sweep is run only for the
+                        // bands near a point.
+                        || {
+                            band_covers
+                                .par_iter()
+                                .map(|b| {
+                                    connect::clearance(
+                                        &kin,
+                                        std::slice::from_ref(b),
+                                        Frame::Follower,
+                                        fgrid,
+                                    )
+                                })
+                                .collect::<Vec<DistanceField>>()
+                        },
+                    )
+                },
+                || connect::clearance(&kin, &f_others_rule, Frame::Follower, fgrid),
+            )
+        },
+    );
     let mut driver_field = d_rims.min(&d_others);
     let (carve_rims, carve_of): (Vec<Sweep>, Vec<usize>) = rims
         .iter()
@@ -219,26 +276,13 @@ pub fn design(
                 .map(move |part| (part, k))
         })
         .unzip();
-    // Each rim's own sweep, so that near one groove the carve searches that rim alone.
-    let reach = carve_reach(opts.cell_mm, opts.clearance_mm);
-    let rim_fields: Vec<Arc<DistanceField>> = rim_covers
-        .iter()
-        .map(|c| Arc::new(connect::clearance_within(&kin, c, Frame::Driver, reach)))
-        .collect();
     let carve_fields: Vec<Arc<DistanceField>> =
         carve_of.iter().map(|&k| rim_fields[k].clone()).collect();
-    // One field per band, so that the exact sweep is run only for the bands near a point.
-    let band_fields: Vec<DistanceField> = band_covers
-        .iter()
-        .map(|b| connect::clearance(&kin, std::slice::from_ref(b), Frame::Follower, fgrid))
-        .collect();
     let f_bands = band_fields
         .iter()
         .skip(1)
         .fold(band_fields[0].clone(), |acc, f| acc.min(f));
-    let mut f_others_rule: Vec<Balls> = driver_pieces.cover.clone();
-    f_others_rule.extend(support_pieces.cover.iter().cloned());
-    let mut follower_other_field = connect::clearance(&kin, &f_others_rule, Frame::Follower, fgrid);
+    let mut follower_other_field = follower_other_field;
     let driver_top = band_covers
         .iter()
         .flat_map(|b| b.centers.iter().map(move |c| c.z + b.radius))
@@ -246,27 +290,33 @@ pub fn design(
     // The columns are checked against the other part's functional surfaces exactly: a
     // column on the axis is where the coarse fields are most pessimistic.
     let exact_cap = COLUMN_RADIUS_MM + STRUT_MARGIN_MM + 1.0;
-    let driver_column = column(
-        &|p| {
-            let rims =
-                SweptEach::new(&kin, &rims, Frame::Follower, Frame::Driver).value(p, exact_cap);
-            rims.min(d_others.sample(p))
+    let (driver_column, follower_column) = rayon::join(
+        || {
+            column(
+                &|p| {
+                    let rims = SweptEach::new(&kin, &rims, Frame::Follower, Frame::Driver)
+                        .value(p, exact_cap);
+                    rims.min(d_others.sample(p))
+                },
+                layout.driver_hub.1,
+                driver_top,
+            )
         },
-        layout.driver_hub.1,
-        driver_top,
+        || {
+            layout.follower_hub.and_then(|(_, top)| {
+                let up_to = layout.cap.map_or(layout.z_hi, |c| c.0 + 1.0);
+                column(
+                    &|p| {
+                        let bands = SweptEach::new(&kin, &bands, Frame::Driver, Frame::Follower)
+                            .value(p, exact_cap);
+                        bands.min(follower_other_field.sample(p))
+                    },
+                    top,
+                    up_to,
+                )
+            })
+        },
     );
-    let follower_column = layout.follower_hub.and_then(|(_, top)| {
-        let up_to = layout.cap.map_or(layout.z_hi, |c| c.0 + 1.0);
-        column(
-            &|p| {
-                let bands = SweptEach::new(&kin, &bands, Frame::Driver, Frame::Follower)
-                    .value(p, exact_cap);
-                bands.min(follower_other_field.sample(p))
-            },
-            top,
-            up_to,
-        )
-    });
     // A column that stops just short of the magnet cap leaves the cap loose (half-turn-2to1:
     // 0.5 mm short, the cap dropped and the follower without its magnet). The cap itself
     // sits there, so the last stretch up into it is taken; the check measures the result.
@@ -466,12 +516,21 @@ const COLUMN_RADIUS_MM: f64 = 3.5;
 
 /// The column from `z0` up its part's axis towards `z1`, as far as `clearance` allows a
 /// [`COLUMN_RADIUS_MM`] post with the strut margin; `None` when not even 5 mm fit.
-fn column(clearance: &dyn Fn(Vec3) -> f64, z0: f64, z1: f64) -> Option<Cylinder> {
+fn column(clearance: &(dyn Fn(Vec3) -> f64 + Sync), z0: f64, z1: f64) -> Option<Cylinder> {
     let need = COLUMN_RADIUS_MM + STRUT_MARGIN_MM;
+    // The heights in 0.5 mm steps from z0 to z1 (and the first beyond); the column rises
+    // to the first whose next half millimetre is not clear. The exact sweeps are asked at
+    // every height side by side: each value is a search of its own on one thread.
+    let mut steps = Vec::new();
     let mut z = z0;
-    while z < z1 && clearance(Vec3::new(0.0, 0.0, z + 0.5)) >= need {
+    while z < z1 {
+        steps.push(z);
         z += 0.5;
     }
+    let blocked = steps
+        .par_iter()
+        .position_first(|&z| clearance(Vec3::new(0.0, 0.0, z + 0.5)) < need);
+    let z = blocked.map_or(z, |k| steps[k]);
     (z - z0 >= 5.0).then(|| Cylinder::z(0.0, 0.0, z0 - 1.0, z, COLUMN_RADIUS_MM))
 }
 
