@@ -279,7 +279,7 @@ mod tests {
 
     /// Guards that the sums are the same to the last bit however the threads split the
     /// faces: one thread and three, on a sphere of 57 k faces (rayon's own fold gave
-    /// the support of half-turn-2to1 areas 10⁻¹³ apart from run to run).
+    /// the support of half-turn-2to1 areas 10⁻¹⁰ mm² apart from run to run).
     #[test]
     fn the_sums_do_not_depend_on_the_threads() {
         let ball = uv_sphere([1.0, 2.0, 3.0], 5.0, 240, 120);
