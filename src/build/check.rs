@@ -28,7 +28,7 @@
 //! same figures. With the skipped instants, on the 0.4 mm half-turn-2to1 parts it went
 //! from 183 to 50 s, a tenth of the vertex tests, with the same figures (also on a
 //! follower grown 1 % so that it penetrates). With the parity columns off the mesher's
-//! grid lines ([`COLUMN_OFFSET_MM`]) and a bound at the fine centres of far coarse voxels,
+//! grid lines (`COLUMN_OFFSET_MM`) and a bound at the fine centres of far coarse voxels,
 //! parry's queries fell from 5.2 M to 2.8 M and the check from 16.5 to 11.5 s, the same
 //! figures. It does not build anything.
 
