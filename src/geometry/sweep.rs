@@ -266,15 +266,7 @@ impl Section {
     /// distance; beyond [`ELLIPSE_FAR`], where `dist` gives a lower bound itself, it may
     /// be the larger of the two (both stay below the exact distance).
     pub fn lower_bound(&self, u: f64, v: f64) -> f64 {
-        let (u_lo, u_hi, hv) = match *self {
-            Section::HalfEllipse { a, b } => (-a, 0.0, b),
-            Section::RoundedRect {
-                u_min,
-                u_max,
-                half_width,
-                ..
-            } => (u_min, u_max, half_width),
-        };
+        let (u_lo, u_hi, hv) = self.rect();
         let rect = norm2((u_lo - u).max(u - u_hi).max(0.0), (v.abs() - hv).max(0.0));
         match *self {
             Section::HalfEllipse { a, b } => {
@@ -285,12 +277,9 @@ impl Section {
         }
     }
 
-    /// The squared distance to the section's bounding rectangle (the first term of
-    /// [`Section::lower_bound`]) at (u, v) = (`su`, `sv`) / `scale`, times `scale`²: the
-    /// rectangle's bound of a point measured along axes of length `scale` (not yet made
-    /// unit), without a square root or a division.
-    fn rect_gap_sq_scaled(&self, su: f64, sv: f64, scale: f64) -> f64 {
-        let (u_lo, u_hi, hv) = match *self {
+    /// The section's bounding rectangle: u from, u to, and the half width in v.
+    fn rect(&self) -> (f64, f64, f64) {
+        match *self {
             Section::HalfEllipse { a, b } => (-a, 0.0, b),
             Section::RoundedRect {
                 u_min,
@@ -298,7 +287,15 @@ impl Section {
                 half_width,
                 ..
             } => (u_min, u_max, half_width),
-        };
+        }
+    }
+
+    /// The squared distance to the section's bounding rectangle (the first term of
+    /// [`Section::lower_bound`]) at (u, v) = (`su`, `sv`) / `scale`, times `scale`²: the
+    /// rectangle's bound of a point measured along axes of length `scale` (not yet made
+    /// unit), without a square root or a division.
+    fn rect_gap_sq_scaled(&self, su: f64, sv: f64, scale: f64) -> f64 {
+        let (u_lo, u_hi, hv) = self.rect();
         let gu = (u_lo * scale - su).max(su - u_hi * scale).max(0.0);
         let gv = (sv.abs() - hv * scale).max(0.0);
         gu * gu + gv * gv
