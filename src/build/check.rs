@@ -409,20 +409,21 @@ impl Queryable {
                 return f32::NAN;
             };
             let vi = self.grid.index(v);
+            let off = (c - self.grid.center(v)).norm();
             // A coarse voxel far from the surface has no value; the nearest vertex's voxel
-            // bounds its centre's distance, as for a point in it (`room`). The fine grid's
+            // bounds the distance in it, as for a vertex there (`room`). The fine grid's
             // voxels straddle the coarse ones, so a vertex in a near coarse voxel may have
             // its fine centre in a far one: with no value there, each of its tests went
             // to parry (on half-turn-2to1 the outer edge of every near band).
-            let at_coarse = if self.occ[vi] == 0 {
-                f64::from(self.to_vertex[vi]) - self.to_vertex_slack
+            let (bound, coarse_inside) = if self.occ[vi] == 0 {
+                (self.far_bound(vi, off), false)
             } else {
-                self.coarse_at(vi)
+                let at_coarse = self.coarse_at(vi);
+                (at_coarse - off, at_coarse + off < 0.0)
             };
-            let off = (c - self.grid.center(v)).norm();
-            if at_coarse - off > FINE_EXACT_WITHIN_MM {
-                (at_coarse - off) as f32
-            } else if at_coarse.is_nan() || at_coarse + off < 0.0 {
+            if bound > FINE_EXACT_WITHIN_MM {
+                bound as f32
+            } else if bound.is_nan() || coarse_inside {
                 f32::NAN
             } else {
                 self.signed(c) as f32
@@ -443,10 +444,16 @@ impl Queryable {
         };
         let i = self.grid.index(v);
         if self.occ[i] == 0 {
-            let far = self.to_vertex[i] as f64 - (p - self.grid.center(v)).norm();
-            return (far - self.to_vertex_slack).max(0.0);
+            return self.far_bound(i, (p - self.grid.center(v)).norm()).max(0.0);
         }
         self.proved_room(p).unwrap_or_else(|| self.signed(p))
+    }
+
+    /// In coarse voxel `i`, far from the surface by the occupancy, a lower bound of the
+    /// distance at a point `off` from its centre: the distance to the nearest voxel holding
+    /// a vertex, less the slack from a surface point to such a voxel's centre.
+    fn far_bound(&self, i: usize, off: f64) -> f64 {
+        f64::from(self.to_vertex[i]) - off - self.to_vertex_slack
     }
 
     /// The fine grid's bound at `p`'s voxel centre less `p`'s distance from it, where that

@@ -108,7 +108,7 @@ impl CellLists {
                             let c = [x, y, z];
                             let cb = cell_box(c);
                             let (low, high) = bounds(i, &cb);
-                            let low = box_gap(&cb, b).max(low);
+                            let low = cb.gap(b).max(low);
                             if low < reach {
                                 let (low, high) = (round_down(low), round_up(high));
                                 out.push((flat(dims, c) as u32, low, high, i as u32));
@@ -211,16 +211,6 @@ impl CellLists {
 /// Cell `c`'s index in a grid of `dims` cells, x fastest.
 fn flat(dims: [usize; 3], c: [usize; 3]) -> usize {
     (c[2] * dims[1] + c[1]) * dims[0] + c[0]
-}
-
-/// The distance between two boxes (0 when they touch or overlap).
-fn box_gap(a: &Aabb, b: &Aabb) -> f64 {
-    let mut s = 0.0;
-    for k in 0..3 {
-        let d = (a.min[k] - b.max[k]).max(b.min[k] - a.max[k]).max(0.0);
-        s += d * d;
-    }
-    s.sqrt()
 }
 
 /// Most cells a grid holds (two u32 per cell, 32 MiB): a box over the lists' reach of

@@ -75,6 +75,18 @@ impl Aabb {
         self.distance_squared(p).sqrt()
     }
 
+    /// Euclidean distance between this box and `o`, 0 where they touch or overlap.
+    pub fn gap(&self, o: &Aabb) -> f64 {
+        let mut s = 0.0;
+        for k in 0..3 {
+            let d = (self.min[k] - o.max[k])
+                .max(o.min[k] - self.max[k])
+                .max(0.0);
+            s += d * d;
+        }
+        s.sqrt()
+    }
+
     /// The square of [`Aabb::distance`] (no square root: for comparisons).
     #[inline]
     pub fn distance_squared(&self, p: [f64; 3]) -> f64 {
