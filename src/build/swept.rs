@@ -573,6 +573,8 @@ impl<S: Sdf> ExactSweep<'_, S> {
         // Every value found ([`Sample`]): what the runs' refinement starts from, and where
         // an interval split from its centre finds an end its neighbour already asked.
         let mut samples: Vec<Sample> = Vec::new();
+        // Which of `samples` were asked at a leaf's end (see `end` below).
+        let mut at_ends: Vec<usize> = Vec::new();
         for o in &open {
             match *o {
                 Open::Centre { c, w, f } => {
@@ -624,11 +626,28 @@ impl<S: Sdf> ExactSweep<'_, S> {
                 Open::Centre { f, .. } => {
                     // A leaf's end is no other value's instant (the values inside the leaves
                     // lie strictly within them), so one found there is a neighbour's end.
+                    // So only the values asked here can be found here: they are looked
+                    // through alone (searching every sample, 104 on average, took 2.7 G
+                    // comparisons over half-turn-2to1's build).
                     let mut end = |t: f64, limit: f64| {
-                        if let Some(s) = samples.iter().rfind(|s| s.t == t && s.serves(limit)) {
+                        let found = at_ends
+                            .iter()
+                            .rev()
+                            .map(|&i| &samples[i])
+                            .find(|s| s.t == t && s.serves(limit));
+                        debug_assert_eq!(
+                            found.map(|s| s.f),
+                            samples
+                                .iter()
+                                .rfind(|s| s.t == t && s.serves(limit))
+                                .map(|s| s.f),
+                            "a leaf's end at {t} is another value's instant"
+                        );
+                        if let Some(s) = found {
                             return s.f;
                         }
                         let fe = self.at(p, t, limit);
+                        at_ends.push(samples.len());
                         samples.push(Sample::new(t, fe, limit));
                         fe
                     };
