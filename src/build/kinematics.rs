@@ -140,7 +140,12 @@ impl BinMax {
         if last - first + 1 >= n as i64 {
             return self.run(0, n - 1);
         }
-        let lo = first.rem_euclid(n as i64) as usize;
+        // Nearly every interval asked starts within the period: no integer division then.
+        let lo = if (0..n as i64).contains(&first) {
+            first as usize
+        } else {
+            first.rem_euclid(n as i64) as usize
+        };
         let hi = lo + (last - first) as usize;
         if hi < n {
             self.run(lo, hi)
