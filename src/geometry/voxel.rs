@@ -119,11 +119,14 @@ impl VoxelGrid {
         let q = (p - self.origin) / self.h;
         let mut out = [0usize; 3];
         for k in 0..3 {
-            let r = q[k].round();
-            if !(r >= 0.0 && (r as usize) < self.n[k]) {
+            // The nearest centre is in the grid for q in (−½, n − ½) (NaN is not).
+            if !(q[k] > -0.5 && q[k] < self.n[k] as f64 - 0.5) {
                 return None;
             }
-            out[k] = r as usize;
+            // Rounded half away from zero, as `f64::round` does, without its call into libm
+            // (a share of the build's check in perf): the truncation's remainder is exact.
+            let t = q[k] as usize;
+            out[k] = if q[k] - t as f64 >= 0.5 { t + 1 } else { t };
         }
         Some(out)
     }
@@ -421,6 +424,48 @@ fn shorten(path: &[Vec3], field: &DistanceField, min_clearance: f64) -> Vec<Vec3
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Guards `voxel_of`'s rounding without libm: the voxel is the one `f64::round` picks,
+    /// halves, the largest double below a half, both ends of the grid, beyond them and NaN
+    /// included.
+    #[test]
+    fn voxel_of_rounds_as_round_does() {
+        // At the origin with 1 mm voxels a point's coordinate is its q to the bit.
+        let g = VoxelGrid {
+            origin: Vec3::zeros(),
+            h: 1.0,
+            n: [7, 1, 300],
+        };
+        let by_round = |p: Vec3| -> Option<[usize; 3]> {
+            let q = (p - g.origin) / g.h;
+            let mut out = [0usize; 3];
+            for k in 0..3 {
+                let r = q[k].round();
+                if !(r >= 0.0 && (r as usize) < g.n[k]) {
+                    return None;
+                }
+                out[k] = r as usize;
+            }
+            Some(out)
+        };
+        let below_half = 0.5 - f64::EPSILON / 4.0;
+        let mut qs: Vec<f64> = vec![f64::NAN, f64::INFINITY, f64::NEG_INFINITY, below_half];
+        for i in -3..305 {
+            for f in [0.0, 0.25, 0.5, -0.5, below_half, -below_half, 0.999_999] {
+                qs.push(f64::from(i) + f);
+            }
+        }
+        let mut seen = 0;
+        for &q in &qs {
+            for k in 0..3 {
+                let mut p = g.origin + Vec3::new(0.1, 0.1, 0.1) * g.h;
+                p[k] = g.origin[k] + q * g.h;
+                assert_eq!(g.voxel_of(p), by_round(p), "q = {q:e} along {k}");
+                seen += usize::from(by_round(p).is_some());
+            }
+        }
+        assert!(seen > 2000, "{seen} points inside");
+    }
 
     /// The transform equals brute force over all marks on a random sparse pattern.
     #[test]
