@@ -21,11 +21,11 @@
 //! It does not decide what is swept against what (`build::parts` does).
 
 use std::borrow::Borrow;
-use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
 use nalgebra::Isometry3;
 use rayon::prelude::*;
+use rustc_hash::FxHashMap as HashMap;
 
 use crate::geometry::mesh::Aabb;
 use crate::geometry::sdf::{Sdf, Vec3};
@@ -353,7 +353,7 @@ impl Certificates {
         Certificates {
             cell,
             cap,
-            map: Mutex::new(HashMap::new()),
+            map: Mutex::new(HashMap::default()),
         }
     }
 

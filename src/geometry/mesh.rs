@@ -9,9 +9,8 @@
 //! looks at every edge. It does not build shapes (see `geometry::mesher`) nor read or write
 //! files.
 
-use std::collections::HashMap;
-
 use rayon::prelude::*;
+use rustc_hash::FxHashMap as HashMap;
 
 /// Smallest face area, mm², below which a face counts as degenerate. Default 1e-10 mm²: the
 /// mesher's smallest legitimate faces (slivers next to a grid vertex) are several orders
@@ -380,7 +379,7 @@ impl Mesh {
                 parent[ra] = rb;
             }
         }
-        let mut shell_of_root: HashMap<usize, usize> = HashMap::new();
+        let mut shell_of_root: HashMap<usize, usize> = HashMap::default();
         let mut out: Vec<Mesh> = Vec::new();
         let mut remap: Vec<u32> = vec![u32::MAX; nv];
         for t in &self.triangles {
@@ -524,7 +523,7 @@ impl Mesh {
                 }
                 i
             }
-            let mut by_other: HashMap<u32, usize> = HashMap::new();
+            let mut by_other: HashMap<u32, usize> = HashMap::default();
             for (j, &f) in fs.iter().enumerate() {
                 for &w in &self.triangles[f as usize] {
                     if w as usize == v {
@@ -689,7 +688,7 @@ pub(crate) mod tests {
 
     /// Merge vertices at identical positions (test helper).
     fn weld(m: &mut Mesh) {
-        let mut map: HashMap<[u64; 3], u32> = HashMap::new();
+        let mut map: HashMap<[u64; 3], u32> = HashMap::default();
         let mut verts = Vec::new();
         let mut remap = Vec::new();
         for v in &m.vertices {

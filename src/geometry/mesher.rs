@@ -19,10 +19,10 @@
 //! the signs of such points are ever read). It does not decide the
 //! resolution (callers pass the cell size) nor simplify the result.
 
-use std::collections::HashMap;
 use std::sync::OnceLock;
 
 use rayon::prelude::*;
+use rustc_hash::FxHashMap as HashMap;
 
 use super::mesh::{Aabb, Mesh};
 use super::sdf::Vec3;
@@ -391,7 +391,7 @@ fn evaluate_block(f: &(dyn Fn(Vec3) -> f64 + Sync), g: &Grid, b: [usize; 3]) -> 
 fn triangulate_block(g: &Grid, vals: &[f64], out: &mut BlockOut) {
     let (base, ext) = extent(g, out.block);
     let table = table();
-    let mut seen: HashMap<u64, ()> = HashMap::new();
+    let mut seen: HashMap<u64, ()> = HashMap::default();
     for k in 0..ext[2] {
         for j in 0..ext[1] {
             for i in 0..ext[0] {
@@ -741,7 +741,8 @@ fn mesh_inferring(
     }
     // Weld: one vertex per edge key.
     let total_verts: usize = outs.iter().map(|o| o.verts.len()).sum();
-    let mut index: HashMap<u64, u32> = HashMap::with_capacity(total_verts);
+    let mut index: HashMap<u64, u32> =
+        HashMap::with_capacity_and_hasher(total_verts, Default::default());
     let mut mesh = Mesh::default();
     for o in &outs {
         for &(key, p) in &o.verts {

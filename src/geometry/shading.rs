@@ -9,7 +9,7 @@
 //! positions are the mesh's own, and the watertight mesh stays in [`Mesh`]. A scene's
 //! shading is made once ([`shade_scene`]) and shared by the export and every picture.
 
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 
 use rayon::prelude::*;
 
@@ -68,7 +68,8 @@ impl ShadedMesh {
             triangles: Vec::with_capacity(mesh.triangles.len()),
         };
         // (source vertex, normal bits) → output vertex.
-        let mut index: HashMap<(u32, [u64; 3]), u32> = HashMap::with_capacity(nv * 2);
+        let mut index: HashMap<(u32, [u64; 3]), u32> =
+            HashMap::with_capacity_and_hasher(nv * 2, Default::default());
         for (f, t) in mesh.triangles.iter().enumerate() {
             let nf = face_normals[f];
             let flat = nf == [0.0; 3];

@@ -161,7 +161,8 @@ pub fn parse_stl(bytes: &[u8]) -> Result<Mesh, StlFormatError> {
         vertices: Vec::with_capacity(facets / 2 + 3),
         triangles: Vec::with_capacity(facets),
     };
-    let mut index = std::collections::HashMap::with_capacity(facets / 2 + 3);
+    let mut index =
+        rustc_hash::FxHashMap::with_capacity_and_hasher(facets / 2 + 3, Default::default());
     let f32_at = |o: usize| f32::from_le_bytes(bytes[o..o + 4].try_into().expect("4 bytes"));
     for f in 0..facets {
         let base = HEADER_LEN + 4 + f * FACET_LEN + 12;
