@@ -32,8 +32,8 @@
 //! parry's queries fell from 5.2 M to 2.8 M and the check from 16.5 to 11.5 s, the same
 //! figures. Vertices are followed in chunks of near ones, skipped together while the
 //! chunk is far outside: the vertex–instant tests fell from 153 M to 31 M and the check
-//! from 16.4 to 11.1–12.7 s (2026-12-07, a machine a third slower than the day before),
-//! the same figures. It does not build anything.
+//! from 14.0–15.3 to 10.0–10.8 s (2026-12-07, on a machine a third slower than for the
+//! figures before), the same figures. It does not build anything.
 
 use nalgebra::{Isometry3, Point3};
 use rayon::prelude::*;
