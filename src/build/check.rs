@@ -638,9 +638,7 @@ impl Chunk {
                     .iter()
                     .map(|&(_, i)| Point3::from(mesh.vertices[i]))
                     .collect();
-                let bx = vertices.iter().fold(Aabb::EMPTY, |bx, p| {
-                    bx.union(&Aabb::new([p.x, p.y, p.z], [p.x, p.y, p.z]))
-                });
+                let bx = Aabb::around(vertices.iter().map(|p| [p.x, p.y, p.z]));
                 let centre = Point3::from(bx.center());
                 let radius = vertices
                     .iter()

@@ -947,14 +947,13 @@ pub fn swept_bounds(kin: &Kinematics, body: &Balls, target: Frame, samples: usiz
         .map(|&c| speed(kin, body.frame, target, c))
         .fold(0.0, f64::max);
     let n = if body.frame == target { 1 } else { samples };
-    let mut b = Aabb::EMPTY;
-    for j in 0..n {
+    let b = Aabb::around((0..n).flat_map(|j| {
         let m = kin.transform(body.frame, target, j as f64 / n as f64);
-        for &c in &body.centers {
+        body.centers.iter().map(move |&c| {
             let x = m * nalgebra::Point3::from(c);
-            b = b.union(&Aabb::new([x.x, x.y, x.z], [x.x, x.y, x.z]));
-        }
-    }
+            [x.x, x.y, x.z]
+        })
+    }));
     b.inflate(body.radius + 0.5 * vmax / n as f64)
 }
 

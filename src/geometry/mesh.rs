@@ -49,6 +49,17 @@ impl Aabb {
         Aabb { min, max }
     }
 
+    /// The smallest box holding every point of `points` ([`Aabb::EMPTY`] for none).
+    pub fn around(points: impl IntoIterator<Item = [f64; 3]>) -> Aabb {
+        points.into_iter().fold(Aabb::EMPTY, |mut b, p| {
+            for (k, &x) in p.iter().enumerate() {
+                b.min[k] = b.min[k].min(x);
+                b.max[k] = b.max[k].max(x);
+            }
+            b
+        })
+    }
+
     /// The smallest box holding both.
     pub fn union(&self, o: &Aabb) -> Aabb {
         let mut out = *self;
@@ -325,15 +336,7 @@ impl Mesh {
                 max: [0.0; 3],
             };
         }
-        let mut min = [f64::INFINITY; 3];
-        let mut max = [f64::NEG_INFINITY; 3];
-        for v in &self.vertices {
-            for k in 0..3 {
-                min[k] = min[k].min(v[k]);
-                max[k] = max[k].max(v[k]);
-            }
-        }
-        Aabb { min, max }
+        Aabb::around(self.vertices.iter().copied())
     }
 
     /// Apply `f` to every vertex (a rigid motion keeps the mesh valid; a reflection would
