@@ -39,7 +39,7 @@ fn measure_both_ways(opts: SimDynamixelOptions, rec: &Path) {
 /// half-turn ratio stays 2 within 0.05.
 #[test]
 fn plant_backlash_and_lag_are_recovered_from_a_simulated_session() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let mut opts = dxl_options();
     opts.plant = PlantConfig::from_faults(&["backlash_deg=2", "phase_lag_deg=1.5"]).unwrap();
     let tmp = tempfile::tempdir().unwrap();
@@ -137,7 +137,7 @@ fn parts_folder(dir: &Path) {
 #[test]
 fn the_geometry_plant_shows_the_parts_play_in_a_measurement() {
     use mpc_rig::predict::table::PlayTable;
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let tmp = tempfile::tempdir().unwrap();
     let prediction = tmp.path().join("prediction.json");
     uniform_prediction(&prediction, 1.0);
@@ -240,7 +240,7 @@ fn slide_only_prediction(path: &Path, free: f64) {
 fn the_geometry_plant_drags_a_1r1t_follower_along_its_free_slide() {
     use mpc_rig::predict::table::PlayTable;
     use mpc_rig::rig::sim::stepper::{self, Mechanics, SimStepperOptions};
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let tmp = tempfile::tempdir().unwrap();
     let prediction = tmp.path().join("prediction.json");
     slide_only_prediction(&prediction, 0.5);

@@ -14,7 +14,7 @@ const TEST_MECHANISM: &str = "tests/data/mechanism/half-turn-2to1";
 /// joined (docs/build.md, "Printable designs").
 #[test]
 fn a_design_without_room_is_refused_whole_and_writes_nothing() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::alone();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("parts");
     let assert = Command::cargo_bin("mpc-rig")

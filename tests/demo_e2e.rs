@@ -38,7 +38,7 @@ fn summary_of(stdout: &str) -> serde_json::Value {
 /// run, and `--fault backlash=2` yields a driver-side backlash of 2° ± 0.5°.
 #[test]
 fn demo_end_to_end_with_cache_and_backlash() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::alone();
     let tmp = tempfile::tempdir().unwrap();
     let (out, stdout) = demo(tmp.path(), &[]);
     assert!(
@@ -159,7 +159,7 @@ fn the_geometry_plant_is_refused_for_a_class_it_cannot_predict() {
 /// cached under OUT/mechanisms/, not beside the given file, and a second run reuses them.
 #[test]
 fn demo_measures_the_parts_of_a_given_mechanism() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::alone();
     let tmp = tempfile::tempdir().unwrap();
     let given =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/mechanism/half-turn-2to1-printable");

@@ -68,7 +68,7 @@ fn run_until_the_stream_ends(
 /// θ = φ + 0.3·sin φ read through the calibration, and shutdown leaves torque off.
 #[test]
 fn streams_a_constant_speed_run_with_the_follower_on_the_target_law() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = sim_with(PlantConfig::default());
     let rig = rig(sim.path());
     let mut bench = DynamixelBench::from_rig(&rig).expect("bench opens");
@@ -135,7 +135,7 @@ fn streams_a_constant_speed_run_with_the_follower_on_the_target_law() {
 /// rig's max speed and the servo's Velocity Limit refuse too fast a run.
 #[test]
 fn speed_conversion_and_safety_refusals() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = sim_with(PlantConfig::default());
     let mut rig = rig(sim.path());
     let mpc_rig::rig::config::DriverConfig::Dynamixel(d) = &mut rig.driver else {
@@ -159,7 +159,7 @@ fn speed_conversion_and_safety_refusals() {
 /// position_deg reads it back.
 #[test]
 fn extended_position_move_to_lands_on_target() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = sim_with(PlantConfig::default());
     let mut rig = rig(sim.path());
     let mpc_rig::rig::config::DriverConfig::Dynamixel(d) = &mut rig.driver else {
@@ -196,7 +196,7 @@ fn extended_position_move_to_lands_on_target() {
 /// (CI once failed a run's final stop with "servo error 4 (data range error)".)
 #[test]
 fn a_command_after_a_watchdog_trip_rearms_and_is_obeyed() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = sim_with(PlantConfig::from_faults(&["dropout_at_s=1.0", "dropout_s=0.5"]).unwrap());
     let started = Instant::now();
     let mut bench = DynamixelBench::from_rig(&rig(sim.path())).unwrap();
@@ -223,7 +223,7 @@ fn a_command_after_a_watchdog_trip_rearms_and_is_obeyed() {
 /// command succeeds (with the spin, the watchdog tripped by the 9th).
 #[test]
 fn command_retries_on_a_lossy_bus_never_silence_the_host() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = sim_with(PlantConfig::from_faults(&["drop_prob=0.02", "seed=5"]).unwrap());
     let mut bench = DynamixelBench::from_rig(&rig(sim.path())).unwrap();
     bench.enable().unwrap();
@@ -245,7 +245,7 @@ fn command_retries_on_a_lossy_bus_never_silence_the_host() {
 /// the rig file's model.
 #[test]
 fn wrong_id_and_wrong_model_are_explained() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = sim_with(PlantConfig::default());
     let mut rig = rig(sim.path());
     let mpc_rig::rig::config::DriverConfig::Dynamixel(d) = &mut rig.driver else {
@@ -280,7 +280,7 @@ fn wrong_id_and_wrong_model_are_explained() {
 /// disconnection (not a hang, not a panic) and dropping the bench afterwards is clean.
 #[test]
 fn lost_bus_is_reported_as_disconnected() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let plant = PlantConfig::from_faults(&["disconnect_at_s=1.0"]).unwrap();
     let sim = sim_with(plant);
     let rig = rig(sim.path());
@@ -299,7 +299,7 @@ fn lost_bus_is_reported_as_disconnected() {
 /// 0x1, got 0x2"; seen once in CI under load).
 #[test]
 fn late_replies_after_a_stall_do_not_desynchronize_the_stream() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let plant = PlantConfig::from_faults(&["stall_at_s=1.0", "stall_s=0.06"]).unwrap();
     let sim = sim_with(plant);
     let rig = rig(sim.path());
@@ -321,7 +321,7 @@ fn late_replies_after_a_stall_do_not_desynchronize_the_stream() {
 /// with a device clock that kept pace with the host's.
 #[test]
 fn a_driver_reboot_ends_the_stream_with_its_reason() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = sim_with(PlantConfig::from_faults(&["reboot_at_s=1.5"]).unwrap());
     let rig = rig(sim.path());
     let mut bench = DynamixelBench::from_rig(&rig).unwrap();
@@ -367,7 +367,7 @@ fn a_driver_reboot_ends_the_stream_with_its_reason() {
 /// failures are counted as gaps/CRC errors and flagged on the next sample, nothing panics.
 #[test]
 fn corrupted_link_is_counted_not_fatal() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let plant =
         PlantConfig::from_faults(&["corrupt_prob=0.002", "drop_prob=0.001", "seed=7"]).unwrap();
     let sim = sim_with(plant);
@@ -394,7 +394,7 @@ fn corrupted_link_is_counted_not_fatal() {
 /// profile, watchdog, indirect block — and shuts down with torque off.
 #[test]
 fn setup_survives_the_noise_the_stream_survives() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     for seed in 1..=10 {
         let sim = sim_with(
             PlantConfig::from_faults(&["corrupt_prob=0.01", &format!("seed={seed}")]).unwrap(),

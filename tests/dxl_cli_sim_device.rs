@@ -48,7 +48,7 @@ fn serve(extra: &[&str]) -> SimChild {
 /// Protocol 2.0 host finds the XL430 driver and follower on it.
 #[test]
 fn prints_pty_path_and_serves_the_bus() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let served = serve(&[]);
     assert!(
         served.first_line.starts_with("/dev/"),
@@ -64,7 +64,7 @@ fn prints_pty_path_and_serves_the_bus() {
 /// `disconnect_at_s` and the port stops answering.
 #[test]
 fn custom_ids_and_configured_disconnect() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let mut served = serve(&[
         "--driver-id",
         "5",

@@ -47,7 +47,7 @@ fn measure(rig: &str, ports: &[&str], motion: &str, out: &Path) -> (bool, String
 /// with a message naming the echo and the port, and nothing panics.
 #[test]
 fn an_echoing_adapter_is_refused_without_a_panic() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let tmp = tempfile::tempdir().unwrap();
     let dxl = SimChild::spawn([
         "sim-device",
@@ -105,7 +105,7 @@ fn short_status(id: u8) -> Vec<u8> {
 /// that names the library's panic after the usual retries, and the process goes on.
 #[test]
 fn a_reply_the_library_cannot_parse_is_an_error_not_a_dead_thread() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let mut pty = Pty::open().unwrap();
     let path = pty.path().to_path_buf();
     let stop = Arc::new(AtomicBool::new(false));

@@ -65,7 +65,7 @@ const MAX_LOADED_MISSING_FRACTION: f64 = 0.15;
 /// bounds below leave room for that and still catch a stream that loses samples steadily.
 #[test]
 fn measure_cli_records_forward_and_reverse_and_analyses() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = sim_process(&[]);
     let out = tempfile::tempdir().unwrap();
     let dir = out.path().join("rec");
@@ -121,7 +121,7 @@ fn measure_cli_records_forward_and_reverse_and_analyses() {
 /// failures counted, and the driver servo ends with torque off and at rest.
 #[test]
 fn session_with_link_faults_survives_and_stops_the_motor() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let motion = Motion::from_file(&motion_file()).unwrap();
     let mut opts = SimDynamixelOptions::new(Arc::new(MotionTarget::new(motion).unwrap()));
     opts.plant = PlantConfig::from_faults(&[
@@ -172,7 +172,7 @@ fn session_with_link_faults_survives_and_stops_the_motor() {
 /// resumes the run, and the session finishes with the drop-out counted.
 #[test]
 fn brief_dropout_rearms_the_watchdog_and_finishes() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let motion = Motion::from_file(&motion_file()).unwrap();
     let mut opts = SimDynamixelOptions::new(Arc::new(MotionTarget::new(motion).unwrap()));
     opts.plant = PlantConfig::from_faults(&["dropout_at_s=1.5", "dropout_s=0.6"]).unwrap();
@@ -215,7 +215,7 @@ fn brief_dropout_rearms_the_watchdog_and_finishes() {
 /// marks it incomplete with the reason, says so clearly and exits with code 5 (`EXIT_DISCONNECTED`; 3 is a missed tolerance).
 #[test]
 fn unplug_mid_run_keeps_the_recording_and_exits_disconnected() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = sim_process(&["disconnect_at_s=2.5"]);
     let out = tempfile::tempdir().unwrap();
     let dir = out.path().join("unplugged");

@@ -27,7 +27,7 @@ fn sdk_available() -> Result<(), String> {
 /// implementation: the script exits 0 only if every step behaves like a real XL430 pair.
 #[test]
 fn robotis_python_sdk_talks_to_the_simulator() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     if let Err(why) = sdk_available() {
         eprintln!("SKIPPED robotis_python_sdk_talks_to_the_simulator: {why}");
         return;

@@ -41,7 +41,7 @@ fn open(path: &std::path::Path) -> dynamixel2::Bus<Vec<u8>, Vec<u8>> {
 /// reporting the XL430-W250 model number 1060.
 #[test]
 fn dynamixel2_scan_and_ping_find_two_xl430() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = sim();
     let mut bus = open(sim.path());
     // A scan waits a fixed time for all replies; on a busy machine repeat it.
@@ -68,7 +68,7 @@ fn dynamixel2_scan_and_ping_find_two_xl430() {
 /// read-only item refused.
 #[test]
 fn dynamixel2_read_write_and_errors() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = sim();
     let mut bus = open(sim.path());
     assert_eq!(retry!(bus.read_u8(1, addr::BAUD_RATE)).unwrap().data, 1);
@@ -105,7 +105,7 @@ fn dynamixel2_read_write_and_errors() {
 /// driver turn for this law), and the realtime tick advances in milliseconds.
 #[test]
 fn dynamixel2_sync_read_follower_tracks_driver() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = sim();
     let mut bus = open(sim.path());
     retry!(bus.write_u8(1, addr::OPERATING_MODE, mode::VELOCITY)).unwrap();

@@ -3,9 +3,10 @@
 //! Each former file is a module of its own; `cargo test --test integration rig_mixed` runs
 //! one of them, and their tests are named `module::test`.
 //!
-//! The tests of one binary run in parallel, so the ones that must not run beside each
-//! other, the real-time bench tests and the CPU-heavy ones, hold the lock of
-//! [`support::serial_group`]; its doc says which and why. A new test file in `tests/` is
+//! The tests of one binary run in parallel, so the ones that must not run beside some
+//! others, the real-time bench tests (beside each other, not beside the CPU-heavy ones) and
+//! the CPU-heavy ones (beside neither), hold the lock of [`support::serial_group`]; its doc
+//! says which and why. A new test file in `tests/` is
 //! only built once it is declared here (`autotests = false` in Cargo.toml).
 
 mod support;

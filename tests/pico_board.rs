@@ -231,7 +231,7 @@ fn status_after(board: &PicoHandle, t_s: f64) -> PicoStatus {
 /// puts it (a wrong STEP, DIR or EN pin moves nothing, the wrong way, or disabled).
 #[test]
 fn sensors_pins_and_serial_number_as_wired() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::alone();
     let Some(files) = files() else { return };
     let b = board(files, all_sensors(), 0x0123_4567_89ab_cdef);
     let mut host = Host::open(b.path());
@@ -280,7 +280,7 @@ fn sensors_pins_and_serial_number_as_wired() {
 /// (device clock), disables the driver at its EN input, and no step follows.
 #[test]
 fn watchdog_stops_the_motor_when_the_host_goes_silent() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::alone();
     let Some(files) = files() else { return };
     let b = board(files, Mechanics::default(), pico::DEFAULT_FLASH_ID);
     let mut host = Host::open(b.path());
@@ -317,7 +317,7 @@ fn watchdog_stops_the_motor_when_the_host_goes_silent() {
 /// the button is pressed and can be after it is released (the motor staying disabled).
 #[test]
 fn estop_input_stops_and_latches() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::alone();
     let Some(files) = files() else { return };
     let b = board(files, Mechanics::default(), pico::DEFAULT_FLASH_ID);
     let mut host = Host::open(b.path());
@@ -358,7 +358,7 @@ fn estop_input_stops_and_latches() {
 /// refuses a configuration that asks for one.
 #[test]
 fn missing_sensors_at_boot_are_not_capabilities() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::alone();
     let Some(files) = files() else { return };
     let none = Mechanics {
         as5600: false,

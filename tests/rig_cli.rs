@@ -57,7 +57,7 @@ fn measure_with(sim: &SimChild, out: &Path, args: &[&str]) -> std::process::Outp
 /// Guards: the simulator prints a usable pseudo-terminal path on its first line.
 #[test]
 fn sim_device_prints_pty_path_first() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = start_sim(&[]);
     assert!(
         sim.first_line.starts_with("/dev/pts/"),
@@ -73,7 +73,7 @@ fn sim_device_prints_pty_path_first() {
 /// incomplete but readable recording.
 #[test]
 fn measure_reports_unplug_with_exit_code_and_kept_recording() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let dir = tempfile::tempdir().unwrap();
     let rec = dir.path().join("rec");
     let sim = start_sim(&["disconnect_at_s=1.5"]);
@@ -96,7 +96,7 @@ fn measure_reports_unplug_with_exit_code_and_kept_recording() {
 /// a message naming both protocol versions.
 #[test]
 fn measure_reports_version_mismatch() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let dir = tempfile::tempdir().unwrap();
     let sim = start_sim(&["protocol_version=7"]);
     let out = measure(&sim, &dir.path().join("rec"));
@@ -113,7 +113,7 @@ fn measure_reports_version_mismatch() {
 /// analyzable, marked incomplete.
 #[test]
 fn host_crash_leaves_valid_recording_and_watchdog_stops_motor() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     use mpc_rig::motion::Motion;
     use mpc_rig::rig::sim::plant::PlantConfig;
     use mpc_rig::rig::sim::stepper::{self, Mechanics, SimStepperOptions};
@@ -167,7 +167,7 @@ fn host_crash_leaves_valid_recording_and_watchdog_stops_motor() {
 /// the same object when the run fails a tolerance (exit 3).
 #[test]
 fn measure_json_is_one_object_with_the_outcome_and_the_summary() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = start_sim(&[]);
     let dir = tempfile::tempdir().unwrap();
     for (tol, code) in [("5", 0), ("0.000001", 3)] {

@@ -39,7 +39,7 @@ fn assert_counts_match_disk(dir: &Path) -> (u64, u64) {
 /// disk, counted exactly in the sidecar.
 #[test]
 fn stepper_counts_match_the_csv() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = stepper_sim("half-turn-2to1", &["drop_prob=0.002", "seed=5"]);
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("rec");
@@ -61,7 +61,7 @@ fn stepper_counts_match_the_csv() {
 /// hole on disk is counted, for each.
 #[test]
 fn dynamixel_counts_match_the_csv() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let tmp = tempfile::tempdir().unwrap();
     for (faults, name) in [
         (&["dropout_at_s=1.5", "dropout_s=1.0"][..], "dropout"),
@@ -92,7 +92,7 @@ fn dynamixel_counts_match_the_csv() {
 /// board's link its holes are counted exactly (bus losses are bridged, not holes).
 #[test]
 fn mixed_counts_match_the_csv() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let rig = RigConfig::load(&repo("rigs/sim-dynamixel-1r1t.toml")).unwrap();
     let sim = mixed::spawn_with(
         &rig,
@@ -121,7 +121,7 @@ fn mixed_counts_match_the_csv() {
 /// counts no complete cycle (it printed a ratio from "0 cycles" before).
 #[test]
 fn a_run_missing_most_samples_is_degraded() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = SimChild::spawn([
         "sim-device".into(),
         "stepper".into(),

@@ -37,7 +37,7 @@ fn measure_on(port: &Path, out: &Path, extra: &[&str]) -> (Option<i32>, String) 
 /// printed, the run records with it, and the saved rig file loads with the port set.
 #[test]
 fn our_firmware_on_a_port_picks_its_shipped_rig() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = stepper_sim::<&str>("half-turn-2to1", &[]);
     let tmp = tempfile::tempdir().unwrap();
     let saved = tmp.path().join("bench.toml");
@@ -69,7 +69,7 @@ fn our_firmware_on_a_port_picks_its_shipped_rig() {
 /// finds the two servos at 57 600 baud and `sim-dynamixel` (a pseudo-terminal) is used.
 #[test]
 fn a_dynamixel_bus_on_a_port_is_found_by_its_ping_scan() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = dxl_sim::<&str>("half-turn-2to1", &[]);
     let tmp = tempfile::tempdir().unwrap();
     let (code, stderr) = measure_on(sim.path(), &tmp.path().join("rec"), &[]);
@@ -91,7 +91,7 @@ fn a_dynamixel_bus_on_a_port_is_found_by_its_ping_scan() {
 /// recorded; and a second port given without a rig is refused before anything is opened.
 #[test]
 fn a_silent_port_is_an_error_that_says_what_was_tried() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let pty = Pty::open().unwrap();
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("rec");

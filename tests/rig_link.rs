@@ -42,7 +42,7 @@ fn silent_port_is_reported_as_no_answer() {
 /// reported as the wrong device, with what was seen, not as a hang or a panic.
 #[test]
 fn foreign_device_is_reported_as_wrong_device() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let mut pty = Pty::open().unwrap();
     let path = pty.path().to_path_buf();
     let stop = Arc::new(AtomicBool::new(false));
@@ -88,7 +88,7 @@ fn missing_port_is_an_open_error() {
 /// whether this is the right port, instead of hanging.
 #[test]
 fn dynamixel_bus_on_the_port_is_reported() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     use mpc_rig::rig::sim::dynamixel::{self, MotionTarget, SimDynamixelOptions};
     let motion = mpc_rig::motion::Motion::from_file(
         &Path::new(env!("CARGO_MANIFEST_DIR")).join("data/motions/half-turn-2to1.toml"),

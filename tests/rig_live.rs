@@ -37,7 +37,7 @@ fn http(addr: &str, method: &str, path: &str) -> Option<(u16, String)> {
 /// end reaching the page.
 #[test]
 fn the_live_view_follows_the_run_and_its_stop_button_stops_it() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = stepper_sim::<&str>("half-turn-2to1", &[]);
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("rec");

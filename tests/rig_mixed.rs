@@ -105,7 +105,7 @@ fn analyse_ideal(run: &Run, label: &str) -> mpc_rig::analysis::Summary {
 /// driver per ms, so under 1.7 ms).
 #[test]
 fn mixed_bench_measures_a_3r_follower_turned_by_a_servo() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let run = run_session(
         "rigs/sim-dynamixel-imu.toml",
         "data/motions/cone-sweep.toml",
@@ -135,7 +135,7 @@ fn mixed_bench_measures_a_3r_follower_turned_by_a_servo() {
 /// clock misalignment showing as phase lag.
 #[test]
 fn mixed_bench_measures_a_1r1t_follower_turned_by_a_servo() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let run = run_session(
         "rigs/sim-dynamixel-1r1t.toml",
         "data/motions/screw-bob.toml",
@@ -153,7 +153,7 @@ fn mixed_bench_measures_a_1r1t_follower_turned_by_a_servo() {
 /// the still-connected bus is left with its torque off.
 #[test]
 fn unplugging_the_sensor_board_keeps_the_recording_and_stops_the_servo() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let run = run_session(
         "rigs/sim-dynamixel-imu.toml",
         "data/motions/cone-sweep.toml",
@@ -183,7 +183,7 @@ fn bin() -> std::process::Command {
 /// the port does not hold the servos the rig describes.
 #[test]
 fn measure_cli_against_sim_device_mixed_and_swapped_ports() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let motion = repo("data/motions/figure-eight.toml");
     let sim = SimChild::spawn([
         "sim-device".into(),
@@ -239,7 +239,7 @@ fn measure_cli_against_sim_device_mixed_and_swapped_ports() {
 /// the rebooted driver is left with torque off.
 #[test]
 fn a_driver_reboot_on_a_mixed_bench_ends_the_run_with_its_reason() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let run = run_session_with(
         "rigs/sim-dynamixel-imu.toml",
         "data/motions/cone-sweep.toml",
@@ -270,7 +270,7 @@ fn a_driver_reboot_on_a_mixed_bench_ends_the_run_with_its_reason() {
 /// answer and the run ended with "invalid parameter count".
 #[test]
 fn a_long_bus_stall_on_a_mixed_bench_costs_rows_not_the_run() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let run = run_session_with(
         "rigs/sim-dynamixel-imu.toml",
         "data/motions/figure-eight.toml",
@@ -296,7 +296,7 @@ fn a_long_bus_stall_on_a_mixed_bench_costs_rows_not_the_run() {
 /// a row, and the bus's driver angle stays interpolated across it.
 #[test]
 fn a_brief_board_dropout_is_bridged() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let run = run_session(
         "rigs/sim-dynamixel-imu.toml",
         "data/motions/cone-sweep.toml",

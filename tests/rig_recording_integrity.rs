@@ -54,7 +54,7 @@ fn run(rig: &str, port: &Path, out: &Path) -> MeasureOutcome {
 /// --replace`), leaving one consistent recording.
 #[test]
 fn a_busy_or_taken_folder_is_refused() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = stepper_sim();
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("rec");
@@ -118,7 +118,7 @@ fn a_busy_or_taken_folder_is_refused() {
 /// device time never goes backwards (they interleaved their rows into one before).
 #[test]
 fn runs_without_an_output_folder_get_one_each() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sims = [stepper_sim(), stepper_sim()];
     let cwd = tempfile::tempdir().unwrap();
     let children: Vec<_> = sims
@@ -164,7 +164,7 @@ fn runs_without_an_output_folder_get_one_each() {
 /// each refused with "does not belong"; the untouched recordings analyse.
 #[test]
 fn analyze_refuses_a_sidecar_of_another_run() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = stepper_sim();
     let dxl = dxl_sim::<&str>("half-turn-2to1", &[]);
     let tmp = tempfile::tempdir().unwrap();
@@ -255,7 +255,7 @@ fn in_small_tmpfs(mnt: &Path, size: &str, script: &str, args: &[&Path]) -> Optio
 /// fingerprint check passes) and no `.tmp` or lock file.
 #[test]
 fn a_full_disk_ends_the_run_truthfully() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = stepper_sim();
     let tmp = tempfile::tempdir().unwrap();
     let mnt = tmp.path().join("small");

@@ -96,7 +96,7 @@ fn mixed_sim(fault: &str) -> mixed::SimMixedHandle {
 /// stop, which the session names at once; the motor ends disabled and still.
 #[test]
 fn stepper_driver_fault_is_named_and_stops_the_run() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let (end, tmp) = stepper_run("driver_fault_at_s");
     assert!(
         matches!(&end, EndReason::DriverStalled(m) if m.contains("emergency stop")),
@@ -117,7 +117,7 @@ fn stepper_driver_fault_is_named_and_stops_the_run() {
 /// target, recording the driver angle there.
 #[test]
 fn stepper_blocked_shaft_is_caught_by_the_follower() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let (end, tmp) = stepper_run("driver_stall_at_s");
     assert!(matches!(end, EndReason::Jammed { .. }), "{end}");
     let (_, stop) = stopped_recording(tmp.path(), "jam");
@@ -128,7 +128,7 @@ fn stepper_blocked_shaft_is_caught_by_the_follower() {
 /// run stops with the driver angle where the follower left the target.
 #[test]
 fn stepper_jam_stops_the_run_at_its_driver_angle() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let (end, tmp) = stepper_run("jam_at_s");
     let EndReason::Jammed {
         driver_angle_deg, ..
@@ -149,7 +149,7 @@ fn stepper_jam_stops_the_run_at_its_driver_angle() {
 /// driver servo ends with its torque off.
 #[test]
 fn dynamixel_faults_stalls_and_jams_stop_the_run() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     for (fault, check) in [
         (
             "driver_fault_at_s",
@@ -198,7 +198,7 @@ fn dynamixel_faults_stalls_and_jams_stop_the_run() {
 /// board's timeline, and a 3R follower that binds is a jam by its geodesic error.
 #[test]
 fn mixed_faults_stalls_and_jams_stop_the_run() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     for (fault, kind) in [
         ("driver_fault_at_s", "driver fault"),
         ("driver_stall_at_s", "driver stall"),

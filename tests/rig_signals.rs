@@ -80,7 +80,7 @@ fn assert_cancelled_recording(dir: &Path) {
 /// simulated motor disabled and still.
 #[test]
 fn sigterm_stops_a_stepper_run_like_ctrl_c() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = stepper_sim::<&str>("half-turn-2to1", &[]);
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("rec");
@@ -103,7 +103,7 @@ fn sigterm_stops_a_stepper_run_like_ctrl_c() {
 /// and flushed, the driver servo's torque off and its velocity 0.
 #[test]
 fn sighup_stops_a_dynamixel_run_like_ctrl_c() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = dxl_sim::<&str>("half-turn-2to1", &[]);
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("rec");
@@ -126,7 +126,7 @@ fn sighup_stops_a_dynamixel_run_like_ctrl_c() {
 /// recording cancelled and flushed, the driver servo stopped with its torque off.
 #[test]
 fn sigterm_stops_a_mixed_run_like_ctrl_c() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let rig = RigConfig::load(&repo("rigs/sim-dynamixel-imu.toml")).unwrap();
     let sim = mixed::spawn(&rig, motion("cone-sweep"), PlantConfig::default()).unwrap();
     let tmp = tempfile::tempdir().unwrap();

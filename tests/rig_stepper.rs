@@ -66,7 +66,7 @@ fn assert_motor_stopped(status: &SimStatus) {
 /// stopped.
 #[test]
 fn full_session_against_simulated_stepper_bench() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let dir = tempfile::tempdir().unwrap();
     let sim = sim(&[]);
     let out = session(&sim, dir.path(), 1, true);
@@ -118,7 +118,7 @@ fn full_session_against_simulated_stepper_bench() {
 /// recording, and ends with the motor stopped.
 #[test]
 fn faulty_link_session_survives_and_counts() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let dir = tempfile::tempdir().unwrap();
     let sim = sim(&[
         "drop_prob=0.0005",
@@ -147,7 +147,7 @@ fn faulty_link_session_survives_and_counts() {
 /// first sample after it is flagged.
 #[test]
 fn brief_unplug_reconnects_without_losing_recording() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let dir = tempfile::tempdir().unwrap();
     let sim = sim(&["dropout_at_s=1.5", "dropout_s=0.4"]);
     let out = session(&sim, dir.path(), 2, false);
@@ -165,7 +165,7 @@ fn brief_unplug_reconnects_without_losing_recording() {
 /// samples recorded so far in a valid recording marked incomplete, and does not panic.
 #[test]
 fn unplug_mid_run_keeps_incomplete_recording() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let dir = tempfile::tempdir().unwrap();
     let sim = sim(&["disconnect_at_s=1.5"]);
     let out = session(&sim, dir.path(), 3, false);
@@ -192,7 +192,7 @@ fn unplug_mid_run_keeps_incomplete_recording() {
 /// a message naming both versions and what to do.
 #[test]
 fn version_mismatch_is_reported_clearly() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let sim = sim(&["protocol_version=9"]);
     let mut rig = RigConfig::load(&root().join("rigs/sim-stepper.toml")).unwrap();
     rig.apply_port_overrides(&[sim.path().display().to_string()])
@@ -218,7 +218,7 @@ fn version_mismatch_is_reported_clearly() {
 /// IMU world frame, measured at home), with repeated IMU values flagged stale.
 #[test]
 fn imu_bench_records_follower_orientation() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let dir = tempfile::tempdir().unwrap();
     let rig_path = root().join("rigs/pico-bno055.toml");
     let motion_file = root().join("data/motions/figure-eight.toml");

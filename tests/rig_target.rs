@@ -156,7 +156,7 @@ fn the_accepted_mechanism_is_a_target() {
 /// bench, none of which sees a byte or moves; `analyze`'s target loader refuses each too.
 #[test]
 fn broken_mechanisms_never_move_a_motor() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let tmp = tempfile::tempdir().unwrap();
     let variants = broken_variants(tmp.path());
     let stepper_sim = stepper_sim::<&str>("half-turn-2to1", &[]);
@@ -251,7 +251,7 @@ fn sim_device_refuses_broken_mechanisms() {
 /// missing sensor; the live simulators see nothing.
 #[test]
 fn targets_the_rig_cannot_measure_are_refused_before_moving() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::real_time();
     let tmp = tempfile::tempdir().unwrap();
     let stepper_sim = stepper_sim::<&str>("half-turn-2to1", &[]);
     let dxl_sim = dxl_sim::<&str>("half-turn-2to1", &[]);

@@ -45,7 +45,7 @@ fn synth_reduced(
 /// wrong.
 #[test]
 fn synth_end_to_end_then_check_and_reject_tampering() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::alone();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("ht");
     synth_small(&out)
@@ -281,7 +281,7 @@ fn synth_refuses_k_below_minimum() {
 /// to use the printed cone (|n·p̂| ≤ sin 10°) fails the cone check.
 #[test]
 fn synth_3r_with_arm_cone_closes_and_check_knows_the_cone() {
-    let _serial = serial_group::lock();
+    let _serial = serial_group::alone();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("cs");
     synth_reduced(

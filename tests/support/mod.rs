@@ -1,8 +1,8 @@
 //! Helpers shared by the integration tests, which are all modules of one test binary
 //! (`tests/main.rs`):
 //!
-//! - [`serial_group`]: the lock that keeps the real-time bench tests and the CPU-heavy
-//!   tests from running beside each other; its doc gives the rule and lists its members.
+//! - [`serial_group`]: the lock that keeps the CPU-heavy tests from running beside each
+//!   other or beside the real-time bench tests; its doc gives the rule and lists its members.
 //! - [`SimChild`]: an `mpc-rig sim-device` child process, killed on drop.
 //! - [`bench`]: simulated benches and session options for the tests of the bench's safety
 //!   and data integrity.
