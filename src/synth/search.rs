@@ -1322,7 +1322,7 @@ mod tests {
     ///
     /// A test of its own so that libtest runs its one-thread synthesis beside the
     /// two-thread one of the test above (which it then reads) rather than after it: the two
-    /// in one test were the lib tests' longest, 70 s of their 128 s.
+    /// in one test were the lib tests' longest, 50 s of their 92 s.
     #[test]
     fn the_margin_push_reaches_an_asked_min_margin_whatever_the_thread_count() {
         let asked = reduced_helicopter(1, 0.06);
