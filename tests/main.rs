@@ -6,8 +6,8 @@
 //! The tests of one binary run in parallel, so the ones that must not run beside some
 //! others, the real-time bench tests (beside each other, not beside the CPU-heavy ones) and
 //! the CPU-heavy ones (beside neither), hold the lock of [`support::serial_group`]; its doc
-//! says which and why. A new test file in `tests/` is
-//! only built once it is declared here (`autotests = false` in Cargo.toml).
+//! says which and why. A new test file in `tests/` is only built once it is declared here
+//! (`autotests = false` in Cargo.toml).
 
 mod support;
 

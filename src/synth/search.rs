@@ -1326,9 +1326,10 @@ mod tests {
     #[test]
     fn the_margin_push_reaches_an_asked_min_margin_whatever_the_thread_count() {
         let asked = reduced_helicopter(1, 0.06);
-        let at = &reduced_helicopter_as_found().solve.attempts;
+        let found = reduced_helicopter_as_found();
+        let at = &found.solve.attempts;
         let first = at.iter().position(|a| a.closes).expect("K = 6 closes");
-        assert_eq!(asked.curve_pairs, reduced_helicopter_as_found().curve_pairs);
+        assert_eq!(asked.curve_pairs, found.curve_pairs);
         assert_eq!(asked.solve.attempts.len(), at.len());
         for (b, a) in asked.solve.attempts.iter().zip(at) {
             assert_eq!(
