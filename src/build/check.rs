@@ -5,7 +5,10 @@
 //!   placed by the target motion is tested against the other parts' meshes (follower ↔
 //!   driver, both against the support); the worst penetration depth and its time are kept.
 //!   A vertex outside by some room skips the instants it cannot cover that room by (its
-//!   speed bound), which gives the same figures as testing every instant;
+//!   speed bound), which gives the same figures as testing every instant. The sharp
+//!   convex edges of the follower (against the driver and the support) and of the driver
+//!   (against the support) are tested along their length too (`deepest_ridge`): where
+//!   two such edges cross, each can be inside the other with no vertex inside;
 //! - **contact gaps**: at every sample time of every curve pair, the design contact point's
 //!   signed distance to the driver mesh (c¹, driver frame) plus its distance to the follower
 //!   mesh (c², follower frame): the play the printed pair has at that contact, which should
@@ -38,7 +41,7 @@
 use nalgebra::{Isometry3, Point3};
 use rayon::prelude::*;
 
-use crate::geometry::mesh::{Aabb, Mesh};
+use crate::geometry::mesh::{edge_uses, Aabb, Mesh};
 use crate::geometry::query::MeshQuery;
 use crate::geometry::sdf::Vec3;
 use crate::geometry::thickness::{wall_thickness, WallThickness};
@@ -167,7 +170,8 @@ impl BuiltClosure {
 pub struct Penetration {
     /// "follower into driver", ...
     pub what: String,
-    /// Deepest vertex, mm (0 when none is inside).
+    /// Deepest point inside, mm (0 when none is): a vertex, or the middle of a ridge's
+    /// stretch inside (see `RIDGE_DEG`).
     pub depth_mm: f64,
     /// Its time.
     pub t: f64,
@@ -472,18 +476,58 @@ impl Queryable {
     fn signed(&self, p: Vec3) -> f64 {
         self.tri.signed([p.x, p.y, p.z])
     }
+
+    /// How deep the segment from `a` to `b` goes inside, where it does: the depth at the
+    /// middle of its stretch inside, from where it enters (at `a` when `a` is inside,
+    /// `a_inside`) to where it leaves (at `b` when `b` is). `None` when it enters nowhere.
+    /// For a ridge that cuts across another part's ridge that middle is the deepest point
+    /// (the two wedges are symmetric about it); elsewhere it is a lower bound of the
+    /// deepest.
+    fn segment_depth(&self, a: Vec3, b: Vec3, a_inside: bool, b_inside: bool) -> Option<f64> {
+        let len = (b - a).norm();
+        if len <= 0.0 {
+            return None;
+        }
+        let dir = (b - a) / len;
+        let enters = if a_inside {
+            0.0
+        } else {
+            self.tri
+                .entry_along([a.x, a.y, a.z], [dir.x, dir.y, dir.z], len)?
+        };
+        let leaves = if b_inside {
+            len
+        } else {
+            len - self
+                .tri
+                .entry_along([b.x, b.y, b.z], [-dir.x, -dir.y, -dir.z], len)?
+        };
+        if leaves < enters {
+            return None;
+        }
+        let middle = a + dir * (0.5 * (enters + leaves));
+        Some((-self.signed(middle)).max(0.0))
+    }
 }
 
-/// Deepest vertex of `moving` (frame `from`) inside `fixed` (frame `into`) over the period.
+/// Deepest point of `moving` (frame `from`) inside `fixed` (frame `into`) over the period:
+/// its vertices and, when given, its `ridges` ([`deepest_ridge`]).
 fn penetration(
     design: &Design,
-    moving: &Mesh,
+    (moving, ridges): (&Mesh, Option<&[[Point3<f64>; 2]]>),
     from: Frame,
     fixed: &Queryable,
     into: Frame,
     what: &str,
 ) -> Penetration {
-    let d = deepest(&design.kin, moving, from, fixed, into);
+    let by_vertices = deepest(&design.kin, moving, from, fixed, into);
+    let d = match ridges {
+        Some(r) => Deepest::deeper(
+            by_vertices,
+            deepest_ridge(&design.kin, r, from, fixed, into),
+        ),
+        None => by_vertices,
+    };
     Penetration {
         what: what.to_string(),
         depth_mm: d.depth,
@@ -515,43 +559,14 @@ fn deepest(
     fixed: &Queryable,
     into: Frame,
 ) -> Deepest {
-    let times = if from == into { 1 } else { CHECK_TIMES };
-    let at = |j: usize| j as f64 / times as f64;
-    let poses: Vec<Isometry3<f64>> = (0..times)
-        .map(|j| kin.transform(from, into, at(j)))
-        .collect();
-    // How far a point may move from each instant to the next: per mm of its distance from
-    // its frame's origin, and in all.
-    let steps: Vec<(f64, f64)> = (0..times)
-        .map(|j| {
-            let (spin, drift) = kin.spin_drift_within(from, into, at(j), at(j + 1));
-            (spin / times as f64, drift / times as f64)
-        })
-        .collect();
-    // The first instant after `j` that a point at `norm` from its frame's origin, outside
-    // by `room` at `j`, may have covered that room by (`times` when none).
-    let next_after = |j: usize, room: f64, norm: f64| {
-        let mut next = j + 1;
-        let mut moved = 0.0;
-        while room > 0.0 && next < times {
-            let (spin, drift) = steps[next - 1];
-            moved += spin * norm + drift;
-            if moved >= room {
-                break;
-            }
-            next += 1;
-        }
-        next
-    };
-    let none = Deepest {
-        depth: 0.0,
-        t: 0.0,
-        tests: 0,
-    };
+    let instants = Instants::new(kin, from, into);
+    let (times, poses) = (instants.times, &instants.poses);
+    let at = |j: usize| instants.at(j);
+    let next_after = |j: usize, room: f64, norm: f64| instants.next_after(j, room, norm);
     Chunk::cover(moving)
         .par_iter()
         .map(|chunk| {
-            let mut d = none;
+            let mut d = Deepest::NONE;
             // Per vertex of the chunk, the next instant it must be tested at.
             let mut due = vec![0; chunk.vertices.len()];
             let mut j = 0;
@@ -581,17 +596,187 @@ fn deepest(
             }
             d
         })
-        .reduce(
-            || none,
-            |a, b| {
-                let tests = a.tests + b.tests;
-                if b.depth > a.depth || (b.depth == a.depth && b.t < a.t) {
-                    Deepest { tests, ..b }
+        .reduce(|| Deepest::NONE, Deepest::deeper)
+}
+
+/// Edges of a part whose two faces turn by more than this are tested as segments, not by
+/// their ends alone, degrees. Between smooth surfaces a penetration deeper than
+/// [`PENETRATION_TOL_MM`] holds a vertex: at the default 0.4 mm cells the faces of a
+/// smooth surface turn by at most about 27° from one to the next (docs/build.md, "Mesh
+/// error"), so it bends by at least 0.4 mm per 27°, and a dent it makes in another part
+/// that no vertex (at most 0.58 of an edge from any point of a face) reaches is under
+/// 0.03 mm deep. Two sharp edges crossing are not bounded so: where the other's edge cuts
+/// across its ridge, a ridge can go half an edge deep with both its ends outside, and so
+/// can the other. Ridges are the sharp convex edges ([`ridges`]).
+const RIDGE_DEG: f64 = 30.0;
+
+/// The convex edges of `mesh` whose faces turn by more than [`RIDGE_DEG`], as their two
+/// ends. An edge is convex where the far corner of one of its faces lies behind the other
+/// face's plane.
+fn ridges(mesh: &Mesh) -> Vec<[Point3<f64>; 2]> {
+    let point = |v: u32| Point3::from(mesh.vertices[v as usize]);
+    let normal = |t: usize| {
+        let [a, b, c] = mesh.triangles[t].map(point);
+        (b - a).cross(&(c - a)).try_normalize(0.0)
+    };
+    let cos_sharp = RIDGE_DEG.to_radians().cos();
+    let uses = edge_uses(&mesh.triangles, |_| true);
+    uses.chunk_by(|a, b| (a.lo, a.hi) == (b.lo, b.hi))
+        .filter_map(|group| {
+            let [u, w] = group else {
+                return None;
+            };
+            let (nu, nw) = (normal(u.triangle as usize)?, normal(w.triangle as usize)?);
+            if nu.dot(&nw) >= cos_sharp {
+                return None;
+            }
+            let far = mesh.triangles[w.triangle as usize][(w.k as usize + 2) % 3];
+            let (lo, hi) = (point(u.lo), point(u.hi));
+            ((point(far) - lo).dot(&nu) < 0.0).then_some([lo, hi])
+        })
+        .collect()
+}
+
+/// The [`Deepest`] point of a moving part's `ridges` (frame `from`) inside `fixed` (frame
+/// `into`) at the instants [`deepest`] tests its vertices at: the stretch between a
+/// ridge's ends that may be inside, where the vertices' test cannot see it. Ridges go in
+/// runs of near ones and skip instants as the vertices do. At an instant a ridge is
+/// looked along ([`Queryable::segment_depth`]) only where its ends leave room for it to
+/// reach inside: every point of it is outside by at least half the sum of its ends'
+/// rooms less its length.
+fn deepest_ridge(
+    kin: &Kinematics,
+    ridges: &[[Point3<f64>; 2]],
+    from: Frame,
+    fixed: &Queryable,
+    into: Frame,
+) -> Deepest {
+    if ridges.is_empty() {
+        return Deepest::NONE;
+    }
+    let instants = Instants::new(kin, from, into);
+    let times = instants.times;
+    let middles: Vec<[f64; 3]> = ridges
+        .iter()
+        .map(|[a, b]| nalgebra::center(a, b).coords.into())
+        .collect();
+    runs_of_near(&middles)
+        .par_iter()
+        .map(|run| {
+            let segments: Vec<[Point3<f64>; 2]> = run.iter().map(|&i| ridges[i]).collect();
+            let ends: Vec<Point3<f64>> = segments.iter().flatten().copied().collect();
+            let (centre, radius, farthest) = centre_radius_farthest(&ends);
+            let mut d = Deepest::NONE;
+            let mut due = vec![0; segments.len()];
+            let mut j = 0;
+            while j < times {
+                let pose = &instants.poses[j];
+                let room = fixed.room((pose * centre).coords) - radius;
+                d.tests += 1;
+                if room > 0.0 {
+                    let next = instants.next_after(j, room, farthest);
+                    for n in &mut due {
+                        *n = (*n).max(next);
+                    }
                 } else {
-                    Deepest { tests, ..a }
+                    for (n, [a, b]) in due.iter_mut().zip(&segments) {
+                        if *n != j {
+                            continue;
+                        }
+                        let (pa, pb) = ((pose * a).coords, (pose * b).coords);
+                        let (ra, rb) = (fixed.room(pa), fixed.room(pb));
+                        d.tests += 1;
+                        let room = if ra > 0.0 && rb > 0.0 {
+                            0.5 * (ra + rb - (pb - pa).norm())
+                        } else {
+                            0.0
+                        };
+                        if room <= 0.0 {
+                            if let Some(depth) = fixed.segment_depth(pa, pb, ra <= 0.0, rb <= 0.0) {
+                                if depth > d.depth {
+                                    (d.depth, d.t) = (depth, instants.at(j));
+                                }
+                            }
+                        }
+                        *n = instants.next_after(j, room, a.coords.norm().max(b.coords.norm()));
+                    }
                 }
-            },
-        )
+                j = due.iter().copied().min().unwrap_or(times);
+            }
+            d
+        })
+        .reduce(|| Deepest::NONE, Deepest::deeper)
+}
+
+impl Deepest {
+    /// Nothing inside.
+    const NONE: Deepest = Deepest {
+        depth: 0.0,
+        t: 0.0,
+        tests: 0,
+    };
+
+    /// The deeper of two (the earlier of equals), with both's tests.
+    fn deeper(a: Deepest, b: Deepest) -> Deepest {
+        let tests = a.tests + b.tests;
+        if b.depth > a.depth || (b.depth == a.depth && b.t < a.t) {
+            Deepest { tests, ..b }
+        } else {
+            Deepest { tests, ..a }
+        }
+    }
+}
+
+/// The instants a moving part is tested at ([`CHECK_TIMES`]; one when the frames are the
+/// same), its poses there, and how far its points may move from each to the next.
+struct Instants {
+    times: usize,
+    poses: Vec<Isometry3<f64>>,
+    /// Per instant, how far a point may move from it to the next: per mm of its distance
+    /// from its frame's origin, and in all.
+    steps: Vec<(f64, f64)>,
+}
+
+impl Instants {
+    fn new(kin: &Kinematics, from: Frame, into: Frame) -> Instants {
+        let times = if from == into { 1 } else { CHECK_TIMES };
+        let at = |j: usize| j as f64 / times as f64;
+        let poses = (0..times)
+            .map(|j| kin.transform(from, into, at(j)))
+            .collect();
+        let steps = (0..times)
+            .map(|j| {
+                let (spin, drift) = kin.spin_drift_within(from, into, at(j), at(j + 1));
+                (spin / times as f64, drift / times as f64)
+            })
+            .collect();
+        Instants {
+            times,
+            poses,
+            steps,
+        }
+    }
+
+    /// The time of instant `j`.
+    fn at(&self, j: usize) -> f64 {
+        j as f64 / self.times as f64
+    }
+
+    /// The first instant after `j` that a point at `norm` from its frame's origin, outside
+    /// by `room` at `j`, may have covered that room by (`times` when none).
+    fn next_after(&self, j: usize, room: f64, norm: f64) -> usize {
+        let mut next = j + 1;
+        let mut moved = 0.0;
+        while room > 0.0 && next < self.times {
+            let (spin, drift) = self.steps[next - 1];
+            moved += spin * norm + drift;
+            if moved >= room {
+                break;
+            }
+            next += 1;
+        }
+        next
+    }
 }
 
 /// Vertices per [`Chunk`]. Measured on half-turn-2to1's printable parts (2026-12-07, a
@@ -616,35 +801,53 @@ struct Chunk {
     farthest: f64,
 }
 
+/// The indices of `points` in runs of [`CHUNK_VERTICES`] near one another: taken in the
+/// Morton order of their [`CHUNK_ORDER_CELL_MM`] cells, ties in the points' order.
+fn runs_of_near(points: &[[f64; 3]]) -> Vec<Vec<usize>> {
+    let b = Aabb::around(points.iter().copied());
+    let mut order: Vec<(u64, usize)> = points
+        .par_iter()
+        .enumerate()
+        .map(|(i, v)| {
+            let cell = |k: usize| ((v[k] - b.min[k]) / CHUNK_ORDER_CELL_MM) as u64;
+            (morton([cell(0), cell(1), cell(2)]), i)
+        })
+        .collect();
+    order.par_sort_unstable();
+    order
+        .chunks(CHUNK_VERTICES)
+        .map(|run| run.iter().map(|&(_, i)| i).collect())
+        .collect()
+}
+
+/// A run's centre (of its points' box), its points' farthest distance from that centre
+/// and from the frame's origin, mm.
+fn centre_radius_farthest(points: &[Point3<f64>]) -> (Point3<f64>, f64, f64) {
+    let bx = Aabb::around(points.iter().map(|p| [p.x, p.y, p.z]));
+    let centre = Point3::from(bx.center());
+    let radius = points
+        .iter()
+        .map(|p| (p - centre).norm())
+        .fold(0.0, f64::max);
+    let farthest = points.iter().map(|p| p.coords.norm()).fold(0.0, f64::max);
+    (centre, radius, farthest)
+}
+
 impl Chunk {
-    /// `mesh`'s vertices in chunks of [`CHUNK_VERTICES`], taken in the Morton order of
-    /// their [`CHUNK_ORDER_CELL_MM`] cells (ties in the mesh's order).
+    /// `mesh`'s vertices in chunks of [`CHUNK_VERTICES`] near one another
+    /// ([`runs_of_near`]).
     fn cover(mesh: &Mesh) -> Vec<Chunk> {
-        let b = mesh.aabb();
-        let mut order: Vec<(u64, usize)> = mesh
-            .vertices
+        if mesh.vertices.is_empty() {
+            return Vec::new();
+        }
+        runs_of_near(&mesh.vertices)
             .par_iter()
-            .enumerate()
-            .map(|(i, v)| {
-                let cell = |k: usize| ((v[k] - b.min[k]) / CHUNK_ORDER_CELL_MM) as u64;
-                (morton([cell(0), cell(1), cell(2)]), i)
-            })
-            .collect();
-        order.par_sort_unstable();
-        order
-            .par_chunks(CHUNK_VERTICES)
             .map(|run| {
                 let vertices: Vec<Point3<f64>> = run
                     .iter()
-                    .map(|&(_, i)| Point3::from(mesh.vertices[i]))
+                    .map(|&i| Point3::from(mesh.vertices[i]))
                     .collect();
-                let bx = Aabb::around(vertices.iter().map(|p| [p.x, p.y, p.z]));
-                let centre = Point3::from(bx.center());
-                let radius = vertices
-                    .iter()
-                    .map(|p| (p - centre).norm())
-                    .fold(0.0, f64::max);
-                let farthest = vertices.iter().map(|p| p.coords.norm()).fold(0.0, f64::max);
+                let (centre, radius, farthest) = centre_radius_farthest(&vertices);
                 Chunk {
                     vertices,
                     centre,
@@ -681,14 +884,23 @@ pub fn run(
 ) -> CheckFigures {
     // Side by side: most of a part's preparation (parry's hierarchy, the pseudo-normals,
     // the parity columns) runs on one thread.
-    let (qd, (qf, qs)) = rayon::join(
-        || Queryable::new(driver),
-        || rayon::join(|| Queryable::new(follower), || Queryable::new(support)),
+    let ((qd, rd), ((qf, rf), qs)) = rayon::join(
+        || rayon::join(|| Queryable::new(driver), || ridges(driver)),
+        || {
+            rayon::join(
+                || rayon::join(|| Queryable::new(follower), || ridges(follower)),
+                || Queryable::new(support),
+            )
+        },
     );
+    // Two ridges that cross are each inside the other: the follower's ridges against the
+    // driver find them, so the driver's are not looked at there. The support's vertices
+    // are not tested against the moving parts (it stands clear of their sweeps), so the
+    // moving parts' ridges are, against it.
     let penetrations = vec![
         penetration(
             design,
-            follower,
+            (follower, Some(&rf)),
             Frame::Follower,
             &qd,
             Frame::Driver,
@@ -696,7 +908,7 @@ pub fn run(
         ),
         penetration(
             design,
-            driver,
+            (driver, None),
             Frame::Driver,
             &qf,
             Frame::Follower,
@@ -704,7 +916,7 @@ pub fn run(
         ),
         penetration(
             design,
-            follower,
+            (follower, Some(&rf)),
             Frame::Follower,
             &qs,
             Frame::Reference,
@@ -712,7 +924,7 @@ pub fn run(
         ),
         penetration(
             design,
-            driver,
+            (driver, Some(&rd)),
             Frame::Driver,
             &qs,
             Frame::Reference,
@@ -1011,6 +1223,81 @@ mod tests {
         assert_eq!((got.depth, got.t), want);
         let all = moving.vertices.len() * CHECK_TIMES;
         assert!(got.tests * 10 < all, "{} of {all} tests made", got.tests);
+    }
+
+    /// A square bar 20 mm long along `along` (x or y), turned 45° about that axis so that
+    /// one of its edges runs along the bar at height `tip_z`, pointing up (`up`) or down.
+    /// Its half diagonal is 5 mm.
+    fn bar_on_edge(along: usize, tip_z: f64, up: bool) -> Mesh {
+        use crate::geometry::primitive_meshes::cuboid;
+        use nalgebra::{Rotation3, Vector3};
+        let s = 5.0 / 2f64.sqrt();
+        let (mut lo, mut hi) = ([-s; 3], [s; 3]);
+        (lo[along], hi[along]) = (-10.0, 10.0);
+        let mut bar = cuboid(lo, hi);
+        let axis = if along == 0 {
+            Vector3::x_axis()
+        } else {
+            Vector3::y_axis()
+        };
+        let turn = Rotation3::from_axis_angle(&axis, std::f64::consts::FRAC_PI_4);
+        let centre_z = if up { tip_z - 5.0 } else { tip_z + 5.0 };
+        bar.map_vertices(|v| {
+            let p = turn * Point3::from(v);
+            [p.x, p.y, p.z + centre_z]
+        });
+        bar
+    }
+
+    /// Guards the ridges' test: two square bars crossed at right angles with an edge of
+    /// each pointing at the other, 0.3 mm into each other, every corner of each far
+    /// outside the other. No vertex is inside, so the vertices' test finds nothing; the
+    /// ridges' test finds each edge inside the other bar by the depth of its middle
+    /// there: 0.3/√2 mm from the other's two faces. Without the ridges' test the check
+    /// would have passed these parts.
+    #[test]
+    fn crossing_ridges_are_found_where_no_vertex_is_inside() {
+        let mech = test_mechanism();
+        let kin = Kinematics::new(&mech, mech.scale_mm).expect("kinematics");
+        let lower = bar_on_edge(1, 0.0, true);
+        let upper = bar_on_edge(0, -0.3, false);
+        let want = 0.3 / 2f64.sqrt();
+        for (moving, fixed) in [(&upper, &lower), (&lower, &upper)] {
+            let fixed = Queryable::new(fixed);
+            let by_vertices = deepest(&kin, moving, Frame::Driver, &fixed, Frame::Driver);
+            assert_eq!(by_vertices.depth, 0.0);
+            let ridges = ridges(moving);
+            let by_ridges = deepest_ridge(&kin, &ridges, Frame::Driver, &fixed, Frame::Driver);
+            assert!(
+                (by_ridges.depth - want).abs() < 1e-9,
+                "{} deep, {want} expected",
+                by_ridges.depth
+            );
+        }
+        // Apart by 0.1 mm, neither is inside.
+        let apart = bar_on_edge(0, 0.1, false);
+        let fixed = Queryable::new(&lower);
+        let by_ridges = deepest_ridge(&kin, &ridges(&apart), Frame::Driver, &fixed, Frame::Driver);
+        assert_eq!(by_ridges.depth, 0.0);
+    }
+
+    /// Guards which edges are ridges: a box's twelve edges (square, convex) and not its
+    /// faces' diagonals (flat); none of a finely divided sphere's (its faces turn by about
+    /// 11° from one to the next); none of a box turned inside out (every edge concave).
+    #[test]
+    fn ridges_are_the_sharp_convex_edges() {
+        use crate::geometry::primitive_meshes::{cuboid, uv_sphere};
+        let mut boxed = cuboid([0.0; 3], [3.0, 4.0, 5.0]);
+        assert_eq!(ridges(&boxed).len(), 12);
+        for [a, b] in ridges(&boxed) {
+            let along = (b - a).map(f64::abs);
+            assert_eq!(along.iter().filter(|&&x| x > 0.0).count(), 1, "{a} to {b}");
+        }
+        assert!(ridges(&uv_sphere([0.0; 3], 5.0, 32, 16)).is_empty());
+        for t in &mut boxed.triangles {
+            t.swap(1, 2);
+        }
+        assert!(ridges(&boxed).is_empty());
     }
 
     /// Guards the chunks' order: the Morton key interleaves the cells' bits (x lowest),

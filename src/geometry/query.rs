@@ -92,6 +92,20 @@ impl MeshQuery {
             .cast_local_ray_with_culling(&ray, max_mm, RayCullingMode::IgnoreFrontfaces)
             .map(|hit| (hit.time_of_impact, hit.subshape))
     }
+
+    /// Where a ray from `origin` along `dir` (unit) enters the solid through a face, when
+    /// that is within `max_mm`: how far it travelled, mm. The first face it crosses from
+    /// the front (the face's outward normal against `dir`); faces it would leave through
+    /// are passed by.
+    pub fn entry_along(&self, origin: [f64; 3], dir: [f64; 3], max_mm: f64) -> Option<f64> {
+        let ray = Ray::new(
+            PVec::new(origin[0], origin[1], origin[2]),
+            PVec::new(dir[0], dir[1], dir[2]),
+        );
+        self.tri
+            .cast_local_ray_with_culling(&ray, max_mm, RayCullingMode::IgnoreBackfaces)
+            .map(|hit| hit.time_of_impact)
+    }
 }
 
 /// The vertices' and edges' pseudo-normals of the triangles `tris` over `verts`, as parry

@@ -262,7 +262,8 @@ pub struct PartsSummary {
     pub problems: Vec<String>,
     /// Print clearance, mm.
     pub clearance_mm: f64,
-    /// Deepest vertex of one part inside another over the period, mm.
+    /// Deepest point of one part inside another over the period (a vertex or a point of a
+    /// ridge), mm.
     pub worst_penetration_mm: f64,
     /// Smallest gap at a design contact over the period, mm (`None` without pairs).
     pub smallest_gap_mm: Option<f64>,
