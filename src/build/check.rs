@@ -1281,6 +1281,28 @@ mod tests {
         assert_eq!(by_ridges.depth, 0.0);
     }
 
+    /// Guards the depth along a segment: through a 10 mm cube, its middle inside is the
+    /// cube's centre; from the centre out through a face, the middle of the stretch from
+    /// the start to that face; one that passes beside the cube, or ends before it, has none.
+    #[test]
+    fn a_segment_is_as_deep_as_the_middle_of_its_stretch_inside() {
+        use crate::geometry::primitive_meshes::cuboid;
+        let q = Queryable::new(&cuboid([0.0; 3], [10.0; 3]));
+        let v = |x: f64, y: f64, z: f64| Vec3::new(x, y, z);
+        let through = q.segment_depth(v(-5.0, 5.0, 5.0), v(15.0, 5.0, 5.0), false, false);
+        assert!((through.unwrap() - 5.0).abs() < 1e-12, "{through:?}");
+        let out = q.segment_depth(v(5.0, 5.0, 5.0), v(5.0, 5.0, 15.0), true, false);
+        assert!((out.unwrap() - 2.5).abs() < 1e-12, "{out:?}");
+        assert_eq!(
+            q.segment_depth(v(-5.0, 12.0, 5.0), v(15.0, 12.0, 5.0), false, false),
+            None
+        );
+        assert_eq!(
+            q.segment_depth(v(-5.0, 5.0, 5.0), v(-1.0, 5.0, 5.0), false, false),
+            None
+        );
+    }
+
     /// Guards which edges are ridges: a box's twelve edges (square, convex) and not its
     /// faces' diagonals (flat); none of a finely divided sphere's (its faces turn by about
     /// 11° from one to the next); none of a box turned inside out (every edge concave).
