@@ -600,14 +600,15 @@ fn deepest(
 }
 
 /// Edges of a part whose two faces turn by more than this are tested as segments, not by
-/// their ends alone, degrees. Between smooth surfaces a penetration deeper than
-/// [`PENETRATION_TOL_MM`] holds a vertex: at the default 0.4 mm cells the faces of a
-/// smooth surface turn by at most about 27° from one to the next (docs/build.md, "Mesh
-/// error"), so it bends by at least 0.4 mm per 27°, and a dent it makes in another part
-/// that no vertex (at most 0.58 of an edge from any point of a face) reaches is under
-/// 0.03 mm deep. Two sharp edges crossing are not bounded so: where the other's edge cuts
-/// across its ridge, a ridge can go half an edge deep with both its ends outside, and so
-/// can the other. Ridges are the sharp convex edges ([`ridges`]).
+/// their ends alone, degrees. Between smooth surfaces the depth no vertex sees is bounded
+/// by their bend: at the default 0.4 mm cells the faces of a smooth surface turn by at
+/// most about 27° from one to the next (docs/build.md, "Mesh error"), a radius of 0.85 mm
+/// or more, and two surfaces that overlap by a lens wider than 0.58 of an edge (the
+/// farthest a point of a face is from its corners) have a vertex in it. A narrower lens is
+/// at most (0.58 · 0.4)² / (2 · 0.85) = 0.03 mm deep against a flat face, 0.06 mm between
+/// two such bends. Sharp edges are not bounded so: where two cross, each can go half an
+/// edge deep (0.2 mm) with both its ends outside. Ridges are the sharp convex edges
+/// ([`ridges`]).
 const RIDGE_DEG: f64 = 30.0;
 
 /// The convex edges of `mesh` whose faces turn by more than [`RIDGE_DEG`], as their two
