@@ -600,16 +600,23 @@ fn deepest(
 }
 
 /// Edges of a part whose two faces turn by more than this are tested as segments, not by
-/// their ends alone, degrees. Between smooth surfaces the depth no vertex sees is bounded
-/// by their bend: at the default 0.4 mm cells the faces of a smooth surface turn by at
-/// most about 27° from one to the next (docs/build.md, "Mesh error"), a radius of 0.85 mm
-/// or more, and two surfaces that overlap by a lens wider than 0.58 of an edge (the
-/// farthest a point of a face is from its corners) have a vertex in it. A narrower lens is
-/// at most (0.58 · 0.4)² / (2 · 0.85) = 0.03 mm deep against a flat face, 0.06 mm between
-/// two such bends. Sharp edges are not bounded so: where two cross, each can go half an
-/// edge deep (0.2 mm) with both its ends outside. Ridges are the sharp convex edges
-/// ([`ridges`]).
-const RIDGE_DEG: f64 = 30.0;
+/// their ends alone, degrees. What the vertices alone can miss, at the default 0.4 mm
+/// cells (edges up to about 0.4 mm; a point of a face is at most 0.58 of an edge from a
+/// corner, so a lens of overlap wider than that holds a vertex):
+/// - two sharp edges that cross: each can go half an edge deep (0.2 mm) with both its ends
+///   outside. Both are then inside the other part, so one side's ridges find it;
+/// - two surfaces whose faces turn by less than this bend at a radius of 0.4 mm /
+///   (2 sin 7.5°) = 1.53 mm or more, and a lens no vertex of either reaches is at most
+///   (0.58 · 0.4)² / (2 · 1.53) = 0.018 mm deep on each side: 0.035 mm in all, under
+///   [`PENETRATION_TOL_MM`];
+/// - a sharp edge of the other part into such a surface: the edge's stretch inside is
+///   shorter than an edge only while it is under 0.4² / (8 · 1.53) = 0.013 mm deep.
+///
+/// At 30° (a 0.77 mm bend) the second would reach 0.06 mm. On half-turn-2to1's printable
+/// parts 15° makes 92.7 k of the follower's edges ridges and 162 k of the driver's, and
+/// their tests cost 0.8 s of the check (30°: 47.6 k and 69.9 k, 0.4 s). Ridges are the
+/// sharp convex edges ([`ridges`]).
+const RIDGE_DEG: f64 = 15.0;
 
 /// The convex edges of `mesh` whose faces turn by more than [`RIDGE_DEG`], as their two
 /// ends. An edge is convex where the far corner of one of its faces lies behind the other
@@ -895,9 +902,10 @@ pub fn run(
         },
     );
     // Two ridges that cross are each inside the other: the follower's ridges against the
-    // driver find them, so the driver's are not looked at there. The support's vertices
-    // are not tested against the moving parts (it stands clear of their sweeps), so the
-    // moving parts' ridges are, against it.
+    // driver find them, so the driver's are not looked at there (what else they can hide
+    // is bounded at `RIDGE_DEG`). The support's vertices are not tested against the moving
+    // parts (it stands clear of their sweeps), so the moving parts' ridges are, against
+    // it.
     let penetrations = vec![
         penetration(
             design,
