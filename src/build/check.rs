@@ -520,12 +520,10 @@ fn penetration(
     into: Frame,
     what: &str,
 ) -> Penetration {
-    let by_vertices = deepest(&design.kin, moving, from, fixed, into);
+    let instants = Instants::new(&design.kin, from, into);
+    let by_vertices = deepest(&instants, moving, fixed);
     let d = match ridges {
-        Some(r) => Deepest::deeper(
-            by_vertices,
-            deepest_ridge(&design.kin, r, from, fixed, into),
-        ),
+        Some(r) => Deepest::deeper(by_vertices, deepest_ridge(&instants, r, fixed)),
         None => by_vertices,
     };
     Penetration {
@@ -544,52 +542,64 @@ struct Deepest {
     tests: usize,
 }
 
-/// The [`Deepest`] vertex of `moving` (frame `from`) inside `fixed` (frame `into`) at
-/// [`CHECK_TIMES`] instants (one when the frames are the same). Each vertex is followed
-/// through the instants; where it is outside by some room, the instants it cannot cover
-/// that room by (its speed bound over each step, [`Kinematics::spin_drift_within`]) are
-/// skipped: it is outside at them too, so the figures are those of testing every instant.
-/// The vertices go in [`Chunk`]s of near ones, and an instant where a chunk's centre is
-/// outside by more than the chunk's radius skips every vertex of it at once: the deepest
-/// vertex and instant are the same, since only instants proven outside are skipped.
-fn deepest(
-    kin: &Kinematics,
-    moving: &Mesh,
-    from: Frame,
+/// The [`Deepest`] vertex of `moving` inside `fixed` at `instants` ([`CHECK_TIMES`], one
+/// when the frames are the same). Each vertex is followed through the instants; where it
+/// is outside by some room, the instants it cannot cover that room by (its speed bound
+/// over each step, [`Kinematics::spin_drift_within`]) are skipped: it is outside at them
+/// too, so the figures are those of testing every instant. The vertices go in [`Chunk`]s
+/// of near ones ([`follow`]): the deepest vertex and instant are the same, since only
+/// instants proven outside are skipped.
+fn deepest(instants: &Instants, moving: &Mesh, fixed: &Queryable) -> Deepest {
+    let vertices: Vec<Point3<f64>> = moving.vertices.iter().map(|&v| Point3::from(v)).collect();
+    let chunks = Chunk::cover(&vertices, |&p| p, |&p| [p]);
+    follow(instants, &chunks, fixed, |&p, pose| {
+        let room = fixed.room((pose * p).coords);
+        (room, -room, p.coords.norm())
+    })
+}
+
+/// The [`Deepest`] over `chunks` of elements (vertices, ridges) of a moving part followed
+/// through `instants` against `fixed`. `test` measures one element at a pose: a room it
+/// is outside by at least (0 or less when it may be inside), how deep inside it found it
+/// (anything not above 0 when outside), and how far its points are from their frame's
+/// origin at most. Each element is tested at the instants its room and speed bound cannot
+/// rule out, and every element of a chunk skips the instants where the chunk's centre is
+/// outside by more than the chunk's radius.
+fn follow<T: Sync>(
+    instants: &Instants,
+    chunks: &[Chunk<T>],
     fixed: &Queryable,
-    into: Frame,
+    test: impl Fn(&T, &Isometry3<f64>) -> (f64, f64, f64) + Sync,
 ) -> Deepest {
-    let instants = Instants::new(kin, from, into);
-    let (times, poses) = (instants.times, &instants.poses);
-    let at = |j: usize| instants.at(j);
-    let next_after = |j: usize, room: f64, norm: f64| instants.next_after(j, room, norm);
-    Chunk::cover(moving)
+    let times = instants.times;
+    chunks
         .par_iter()
         .map(|chunk| {
             let mut d = Deepest::NONE;
-            // Per vertex of the chunk, the next instant it must be tested at.
-            let mut due = vec![0; chunk.vertices.len()];
+            // Per element of the chunk, the next instant it must be tested at.
+            let mut due = vec![0; chunk.items.len()];
             let mut j = 0;
             while j < times {
-                let room = fixed.room((poses[j] * chunk.centre).coords) - chunk.radius;
+                let pose = &instants.poses[j];
+                let room = fixed.room((pose * chunk.centre).coords) - chunk.radius;
                 d.tests += 1;
                 if room > 0.0 {
-                    let next = next_after(j, room, chunk.farthest);
+                    let next = instants.next_after(j, room, chunk.farthest);
                     for n in &mut due {
                         *n = (*n).max(next);
                     }
                 } else {
-                    for (n, &p) in due.iter_mut().zip(&chunk.vertices) {
+                    for (n, item) in due.iter_mut().zip(&chunk.items) {
                         if *n != j {
                             continue;
                         }
-                        let room = fixed.room((poses[j] * p).coords);
+                        let (room, depth, norm) = test(item, pose);
                         d.tests += 1;
                         // Instants go in order, so of equal depths the earliest is kept.
-                        if -room > d.depth {
-                            (d.depth, d.t) = (-room, at(j));
+                        if depth > d.depth {
+                            (d.depth, d.t) = (depth, instants.at(j));
                         }
-                        *n = next_after(j, room, p.coords.norm());
+                        *n = instants.next_after(j, room, norm);
                     }
                 }
                 j = due.iter().copied().min().unwrap_or(times);
@@ -645,75 +655,32 @@ fn ridges(mesh: &Mesh) -> Vec<[Point3<f64>; 2]> {
         .collect()
 }
 
-/// The [`Deepest`] point of a moving part's `ridges` (frame `from`) inside `fixed` (frame
-/// `into`) at the instants [`deepest`] tests its vertices at: the stretch between a
-/// ridge's ends that may be inside, where the vertices' test cannot see it. Ridges go in
-/// runs of near ones and skip instants as the vertices do. At an instant a ridge is
+/// The [`Deepest`] point of a moving part's `ridges` inside `fixed` at `instants`: the
+/// stretch between a ridge's ends that may be inside, where the vertices' test cannot see
+/// it. Ridges go in runs of near ones and skip instants as the vertices do ([`follow`]).
+/// At an instant a ridge is
 /// looked along ([`Queryable::segment_depth`]) only where its ends leave room for it to
 /// reach inside: every point of it is outside by at least half the sum of its ends'
 /// rooms less its length.
-fn deepest_ridge(
-    kin: &Kinematics,
-    ridges: &[[Point3<f64>; 2]],
-    from: Frame,
-    fixed: &Queryable,
-    into: Frame,
-) -> Deepest {
-    if ridges.is_empty() {
-        return Deepest::NONE;
-    }
-    let instants = Instants::new(kin, from, into);
-    let times = instants.times;
-    let middles: Vec<[f64; 3]> = ridges
-        .iter()
-        .map(|[a, b]| nalgebra::center(a, b).coords.into())
-        .collect();
-    runs_of_near(&middles)
-        .par_iter()
-        .map(|run| {
-            let segments: Vec<[Point3<f64>; 2]> = run.iter().map(|&i| ridges[i]).collect();
-            let ends: Vec<Point3<f64>> = segments.iter().flatten().copied().collect();
-            let (centre, radius, farthest) = centre_radius_farthest(&ends);
-            let mut d = Deepest::NONE;
-            let mut due = vec![0; segments.len()];
-            let mut j = 0;
-            while j < times {
-                let pose = &instants.poses[j];
-                let room = fixed.room((pose * centre).coords) - radius;
-                d.tests += 1;
-                if room > 0.0 {
-                    let next = instants.next_after(j, room, farthest);
-                    for n in &mut due {
-                        *n = (*n).max(next);
-                    }
-                } else {
-                    for (n, [a, b]) in due.iter_mut().zip(&segments) {
-                        if *n != j {
-                            continue;
-                        }
-                        let (pa, pb) = ((pose * a).coords, (pose * b).coords);
-                        let (ra, rb) = (fixed.room(pa), fixed.room(pb));
-                        d.tests += 1;
-                        let room = if ra > 0.0 && rb > 0.0 {
-                            0.5 * (ra + rb - (pb - pa).norm())
-                        } else {
-                            0.0
-                        };
-                        if room <= 0.0 {
-                            if let Some(depth) = fixed.segment_depth(pa, pb, ra <= 0.0, rb <= 0.0) {
-                                if depth > d.depth {
-                                    (d.depth, d.t) = (depth, instants.at(j));
-                                }
-                            }
-                        }
-                        *n = instants.next_after(j, room, a.coords.norm().max(b.coords.norm()));
-                    }
-                }
-                j = due.iter().copied().min().unwrap_or(times);
-            }
-            d
-        })
-        .reduce(|| Deepest::NONE, Deepest::deeper)
+fn deepest_ridge(instants: &Instants, ridges: &[[Point3<f64>; 2]], fixed: &Queryable) -> Deepest {
+    let chunks = Chunk::cover(ridges, |[a, b]| nalgebra::center(a, b), |&ends| ends);
+    follow(instants, &chunks, fixed, |[a, b], pose| {
+        let (pa, pb) = ((pose * a).coords, (pose * b).coords);
+        let (ra, rb) = (fixed.room(pa), fixed.room(pb));
+        let room = if ra > 0.0 && rb > 0.0 {
+            0.5 * (ra + rb - (pb - pa).norm())
+        } else {
+            0.0
+        };
+        let depth = if room <= 0.0 {
+            fixed
+                .segment_depth(pa, pb, ra <= 0.0, rb <= 0.0)
+                .unwrap_or(0.0)
+        } else {
+            0.0
+        };
+        (room, depth, a.coords.norm().max(b.coords.norm()))
+    })
 }
 
 impl Deepest {
@@ -797,15 +764,16 @@ const CHUNK_VERTICES: usize = 32;
 /// of their cells.
 const CHUNK_ORDER_CELL_MM: f64 = 0.5;
 
-/// Vertices of a mesh near one another, tested together while all are far outside.
-struct Chunk {
-    /// The vertices.
-    vertices: Vec<Point3<f64>>,
-    /// The centre of their box.
+/// Elements of a part (vertices, ridges) near one another, tested together while all are
+/// far outside.
+struct Chunk<T> {
+    /// The elements.
+    items: Vec<T>,
+    /// The centre of their points' box.
     centre: Point3<f64>,
-    /// The farthest vertex from `centre`, mm.
+    /// The farthest of their points from `centre`, mm.
     radius: f64,
-    /// The farthest vertex from the frame's origin, mm (for the speed bound).
+    /// The farthest of their points from the frame's origin, mm (for the speed bound).
     farthest: f64,
 }
 
@@ -841,23 +809,27 @@ fn centre_radius_farthest(points: &[Point3<f64>]) -> (Point3<f64>, f64, f64) {
     (centre, radius, farthest)
 }
 
-impl Chunk {
-    /// `mesh`'s vertices in chunks of [`CHUNK_VERTICES`] near one another
-    /// ([`runs_of_near`]).
-    fn cover(mesh: &Mesh) -> Vec<Chunk> {
-        if mesh.vertices.is_empty() {
+impl<T: Copy + Send + Sync> Chunk<T> {
+    /// `items` in chunks of [`CHUNK_VERTICES`] near one another by the point `at` gives
+    /// each ([`runs_of_near`]); a chunk's bounds hold the points `ends` gives (an element
+    /// lies within their hull).
+    fn cover<const N: usize>(
+        items: &[T],
+        at: impl Fn(&T) -> Point3<f64> + Sync,
+        ends: impl Fn(&T) -> [Point3<f64>; N] + Sync,
+    ) -> Vec<Chunk<T>> {
+        if items.is_empty() {
             return Vec::new();
         }
-        runs_of_near(&mesh.vertices)
+        let points: Vec<[f64; 3]> = items.par_iter().map(|e| at(e).coords.into()).collect();
+        runs_of_near(&points)
             .par_iter()
             .map(|run| {
-                let vertices: Vec<Point3<f64>> = run
-                    .iter()
-                    .map(|&i| Point3::from(mesh.vertices[i]))
-                    .collect();
-                let (centre, radius, farthest) = centre_radius_farthest(&vertices);
+                let items: Vec<T> = run.iter().map(|&i| items[i]).collect();
+                let points: Vec<Point3<f64>> = items.iter().flat_map(&ends).collect();
+                let (centre, radius, farthest) = centre_radius_farthest(&points);
                 Chunk {
-                    vertices,
+                    items,
                     centre,
                     radius,
                     farthest,
@@ -1228,7 +1200,8 @@ mod tests {
             }
         }
         assert!(want.0 > 0.5, "the balls meet: {want:?}");
-        let got = deepest(&kin, &moving, Frame::Follower, &fixed, Frame::Driver);
+        let instants = Instants::new(&kin, Frame::Follower, Frame::Driver);
+        let got = deepest(&instants, &moving, &fixed);
         assert_eq!((got.depth, got.t), want);
         let all = moving.vertices.len() * CHECK_TIMES;
         assert!(got.tests * 10 < all, "{} of {all} tests made", got.tests);
@@ -1268,15 +1241,17 @@ mod tests {
     fn crossing_ridges_are_found_where_no_vertex_is_inside() {
         let mech = test_mechanism();
         let kin = Kinematics::new(&mech, mech.scale_mm).expect("kinematics");
+        // One instant, the parts as placed.
+        let still = Instants::new(&kin, Frame::Driver, Frame::Driver);
         let lower = bar_on_edge(1, 0.0, true);
         let upper = bar_on_edge(0, -0.3, false);
         let want = 0.3 / 2f64.sqrt();
         for (moving, fixed) in [(&upper, &lower), (&lower, &upper)] {
             let fixed = Queryable::new(fixed);
-            let by_vertices = deepest(&kin, moving, Frame::Driver, &fixed, Frame::Driver);
+            let by_vertices = deepest(&still, moving, &fixed);
             assert_eq!(by_vertices.depth, 0.0);
             let ridges = ridges(moving);
-            let by_ridges = deepest_ridge(&kin, &ridges, Frame::Driver, &fixed, Frame::Driver);
+            let by_ridges = deepest_ridge(&still, &ridges, &fixed);
             assert!(
                 (by_ridges.depth - want).abs() < 1e-9,
                 "{} deep, {want} expected",
@@ -1286,7 +1261,7 @@ mod tests {
         // Apart by 0.1 mm, neither is inside.
         let apart = bar_on_edge(0, 0.1, false);
         let fixed = Queryable::new(&lower);
-        let by_ridges = deepest_ridge(&kin, &ridges(&apart), Frame::Driver, &fixed, Frame::Driver);
+        let by_ridges = deepest_ridge(&still, &ridges(&apart), &fixed);
         assert_eq!(by_ridges.depth, 0.0);
     }
 
