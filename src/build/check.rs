@@ -3,7 +3,7 @@
 //! Owns [`run`] and [`CheckFigures`]:
 //! - **interference over the period**: at [`CHECK_TIMES`] times, every vertex of each part
 //!   placed by the target motion is tested against the other parts' meshes (follower ↔
-//!   driver, both against the support); the worst penetration depth and its time are kept.
+//!   driver, each ↔ the support); the worst penetration depth and its time are kept.
 //!   A vertex outside by some room skips the instants it cannot cover that room by (its
 //!   speed bound), which gives the same figures as testing every instant. The sharp
 //!   convex edges of the follower (against the driver and the support) and of the driver
@@ -510,17 +510,85 @@ impl Queryable {
     }
 }
 
+/// A part ready for the interference test: its mesh in its frame, its queries and its
+/// ridges ([`ridges`]; the support's are not asked for).
+struct Prepared<'a> {
+    mesh: &'a Mesh,
+    query: &'a Queryable,
+    ridges: &'a [[Point3<f64>; 2]],
+}
+
+/// The deepest each part goes into each other over the period: the driver, the follower
+/// and the support.
+fn interference(kin: &Kinematics, [d, f, s]: [Prepared; 3]) -> Vec<Penetration> {
+    // Two ridges that cross are each inside the other: the follower's ridges against the
+    // driver find them, so the driver's are not looked at there, and the moving parts'
+    // ridges against the support stand for the support's (what else they can hide is
+    // bounded at `RIDGE_DEG`). Every part's vertices go into both others: a corner of
+    // the support in a face of a moving part has no vertex of that part inside the support.
+    vec![
+        penetration(
+            kin,
+            (f.mesh, Some(f.ridges)),
+            Frame::Follower,
+            d.query,
+            Frame::Driver,
+            "follower into driver",
+        ),
+        penetration(
+            kin,
+            (d.mesh, None),
+            Frame::Driver,
+            f.query,
+            Frame::Follower,
+            "driver into follower",
+        ),
+        penetration(
+            kin,
+            (f.mesh, Some(f.ridges)),
+            Frame::Follower,
+            s.query,
+            Frame::Reference,
+            "follower into support",
+        ),
+        penetration(
+            kin,
+            (d.mesh, Some(d.ridges)),
+            Frame::Driver,
+            s.query,
+            Frame::Reference,
+            "driver into support",
+        ),
+        penetration(
+            kin,
+            (s.mesh, None),
+            Frame::Reference,
+            d.query,
+            Frame::Driver,
+            "support into driver",
+        ),
+        penetration(
+            kin,
+            (s.mesh, None),
+            Frame::Reference,
+            f.query,
+            Frame::Follower,
+            "support into follower",
+        ),
+    ]
+}
+
 /// Deepest point of `moving` (frame `from`) inside `fixed` (frame `into`) over the period:
 /// its vertices and, when given, its `ridges` ([`deepest_ridge`]).
 fn penetration(
-    design: &Design,
+    kin: &Kinematics,
     (moving, ridges): (&Mesh, Option<&[[Point3<f64>; 2]]>),
     from: Frame,
     fixed: &Queryable,
     into: Frame,
     what: &str,
 ) -> Penetration {
-    let instants = Instants::new(&design.kin, from, into);
+    let instants = Instants::new(kin, from, into);
     let by_vertices = deepest(&instants, moving, fixed);
     let d = match ridges {
         Some(r) => Deepest::deeper(by_vertices, deepest_ridge(&instants, r, fixed)),
@@ -873,45 +941,19 @@ pub fn run(
             )
         },
     );
-    // Two ridges that cross are each inside the other: the follower's ridges against the
-    // driver find them, so the driver's are not looked at there (what else they can hide
-    // is bounded at `RIDGE_DEG`). The support's vertices are not tested against the moving
-    // parts (it stands clear of their sweeps), so the moving parts' ridges are, against
-    // it.
-    let penetrations = vec![
-        penetration(
-            design,
-            (follower, Some(&rf)),
-            Frame::Follower,
-            &qd,
-            Frame::Driver,
-            "follower into driver",
-        ),
-        penetration(
-            design,
-            (driver, None),
-            Frame::Driver,
-            &qf,
-            Frame::Follower,
-            "driver into follower",
-        ),
-        penetration(
-            design,
-            (follower, Some(&rf)),
-            Frame::Follower,
-            &qs,
-            Frame::Reference,
-            "follower into support",
-        ),
-        penetration(
-            design,
-            (driver, Some(&rd)),
-            Frame::Driver,
-            &qs,
-            Frame::Reference,
-            "driver into support",
-        ),
-    ];
+    let prepared = |mesh, query, ridges| Prepared {
+        mesh,
+        query,
+        ridges,
+    };
+    let penetrations = interference(
+        &design.kin,
+        [
+            prepared(driver, &qd, &rd),
+            prepared(follower, &qf, &rf),
+            prepared(support, &qs, &[]),
+        ],
+    );
     let s = design.kin.scale_mm();
     let pairs: Vec<(usize, &crate::synth::mechanism::CurvePair)> = mech
         .curve_pairs
@@ -1263,6 +1305,78 @@ mod tests {
         let fixed = Queryable::new(&lower);
         let by_ridges = deepest_ridge(&still, &ridges(&apart), &fixed);
         assert_eq!(by_ridges.depth, 0.0);
+    }
+
+    /// A 2 mm cube standing on a corner, that corner at `corner` (every other corner above
+    /// it).
+    fn cube_on_corner(corner: Point3<f64>) -> Mesh {
+        use crate::geometry::primitive_meshes::cuboid;
+        use nalgebra::{UnitQuaternion, Vector3};
+        let up = UnitQuaternion::rotation_between(&Vector3::new(1.0, 1.0, 1.0), &Vector3::z())
+            .expect("not opposite");
+        let mut cube = cuboid([0.0; 3], [2.0; 3]);
+        cube.map_vertices(|v| (corner + up * Vector3::from(v)).coords.into());
+        cube
+    }
+
+    /// Guards the support's vertices in the interference test: a corner of the support
+    /// 0.3 mm into the top face of a slab the driver turns in its plane, and another
+    /// 0.2 mm into one the follower turns, at every instant. No vertex of either slab is
+    /// inside the support and no ridge of either comes near it, so the tests of the
+    /// moving parts' vertices and ridges find nothing: only the support's corners, as deep
+    /// as they go, from the first instant. Before the support's vertices were tested, the
+    /// check passed such parts.
+    #[test]
+    fn a_corner_of_the_support_inside_a_moving_part_is_found() {
+        use crate::geometry::primitive_meshes::cuboid;
+        let (_, kin) = crate::build::tests::half_turn();
+        let driver = cuboid([-20.0, -20.0, -1.0], [20.0, 20.0, 0.0]);
+        let follower = cuboid([-20.0, -20.0, -21.0], [20.0, 20.0, -20.0]);
+        let mut support = cube_on_corner(kin.driver(0.0) * Point3::new(3.0, 0.0, -0.3));
+        support.append(&cube_on_corner(
+            kin.follower(0.0) * Point3::new(3.0, 0.0, -20.2),
+        ));
+        let queries = [&driver, &follower, &support].map(Queryable::new);
+        let ridged = [ridges(&driver), ridges(&follower)];
+        let [qd, qf, qs] = &queries;
+        let found = interference(
+            &kin,
+            [
+                Prepared {
+                    mesh: &driver,
+                    query: qd,
+                    ridges: &ridged[0],
+                },
+                Prepared {
+                    mesh: &follower,
+                    query: qf,
+                    ridges: &ridged[1],
+                },
+                Prepared {
+                    mesh: &support,
+                    query: qs,
+                    ridges: &[],
+                },
+            ],
+        );
+        let found: Vec<(&str, f64, f64)> = found
+            .iter()
+            .map(|p| (p.what.as_str(), p.depth_mm, p.t))
+            .collect();
+        let want = [
+            ("follower into driver", 0.0),
+            ("driver into follower", 0.0),
+            ("follower into support", 0.0),
+            ("driver into support", 0.0),
+            ("support into driver", 0.3),
+            ("support into follower", 0.2),
+        ];
+        assert_eq!(found.len(), want.len(), "{found:?}");
+        for ((what, depth, t), (want_what, want_depth)) in found.iter().zip(want) {
+            assert_eq!(*what, want_what, "{found:?}");
+            assert!((depth - want_depth).abs() < 1e-9, "{found:?}");
+            assert_eq!(*t, 0.0, "{found:?}");
+        }
     }
 
     /// Guards the depth along a segment: through a 10 mm cube, its middle inside is the
