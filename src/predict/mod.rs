@@ -36,7 +36,7 @@ use crate::geometry::io::stl::{read_stl, StlError};
 use crate::synth::closure::Class;
 use crate::synth::mechanism::Mechanism;
 
-use play::{free_along, FreeTurns, PartMotion, Screw, Solid, SolidError};
+use play::{free_along, FreeTurns, PartMotion, Query, Screw, Solid, SolidError};
 
 /// Driver angles per period. 1 440 (every 0.25°): the floor, four times the
 /// mechanism file's 360 samples, so a loss of drive shorter than one file sample shows.
@@ -621,13 +621,17 @@ pub fn predict(
     // 48.4 s wall (2026-12-05). The follower's distance grid is made here too, the one
     // `crossings` asks; the driver, the larger mesh, gets none (the tracer, needed only
     // for a follower whose axis moves, makes both itself).
+    // The driver's parry hierarchy is made only if the tracer asks for it: the crossings
+    // ask the driver a few exact distances, from its clusters (`Solid::signed_near`).
     let load = |part: &str| -> Result<Solid, PredictError> {
         let mesh = read_stl(&parts_dir.join(format!("{part}.stl")))?;
-        let solid = Solid::new(&mesh, part)?;
         if part == "follower" {
+            let solid = Solid::new(&mesh, part)?;
             solid.prepare_bounds();
+            Ok(solid)
+        } else {
+            Ok(Solid::with_query(&mesh, part, Query::WhenAsked)?)
         }
-        Ok(solid)
     };
     let (driver, follower) = rayon::join(|| load("driver"), || load("follower"));
     let (driver, follower) = (driver?, follower?);

@@ -51,7 +51,7 @@ use rayon::prelude::*;
 
 use crate::geometry::mesh::{Aabb, Mesh};
 use crate::geometry::query::MeshQuery;
-use crate::geometry::sdf::Vec3;
+use crate::geometry::sdf::{closest_on_triangle, Vec3};
 use crate::geometry::voxel::{distance_transform, OnceValues, VoxelGrid};
 
 /// A vertex this near the other part's surface touches it, mm. 0.002 mm: a hundredth of
@@ -133,10 +133,29 @@ impl NormalCone {
     }
 }
 
-/// A part's mesh ready for distance queries (parry's BVH with pseudo-normals), with its
-/// vertices sorted into clusters.
+/// When a [`Solid`] makes parry's hierarchy and the pseudo-normals behind
+/// [`Solid::signed`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Query {
+    /// With the solid: a part asked many exact distances (its own distance grid, the
+    /// tracer's steps).
+    Now,
+    /// When first asked. For a part only ever placed against the other's bounds and asked
+    /// a few exact distances ([`Solid::signed_near`]): the driver of a prediction by
+    /// crossings, whose hierarchy and pseudo-normals took 3.35 s of the 6.0 s its
+    /// preparation took on half-turn-2to1's printable parts (docs/simulate.md).
+    WhenAsked,
+}
+
+/// The faces within this of the nearest one, with their nearest point within this of its,
+/// count as nearest too in [`Solid::signed_near`], mm: the faces round a vertex or along
+/// an edge the nearest point lies on are as near to the last bits.
+const NEAREST_TIE_MM: f64 = 1e-9;
+
+/// A part's mesh ready for distance queries (parry's BVH with pseudo-normals, made with it
+/// or when first asked: [`Query`]), with its vertices sorted into clusters.
 pub struct Solid {
-    tri: MeshQuery,
+    tri: OnceLock<MeshQuery>,
     pub(crate) verts: Vec<Point3<f64>>,
     /// The mesh's triangles as indices into `verts`, grouped by the cluster that owns
     /// them.
@@ -150,6 +169,10 @@ pub struct Solid {
     cones: Vec<NormalCone>,
     pub(crate) clusters: Vec<Cluster>,
     aabb: Aabb,
+    /// Per cluster, its cell of [`CLUSTER_MM`] (the clusters are in the cells' order).
+    cells: Vec<[i64; 3]>,
+    /// The largest [`Cluster::tri_radius`], mm.
+    cluster_reach: f64,
     /// The distance grid behind [`Solid::lower_bound`], made when first needed: a part
     /// only ever placed against the other's bounds (the driver of a 1R prediction) never
     /// needs its own, and it is the largest thing a `Solid` holds.
@@ -211,12 +234,29 @@ pub(crate) const F32_SLACK_MM: f64 = 1e-4;
 pub const EXACT_BELOW_MM: f64 = 2.0;
 
 impl Solid {
-    /// Prepare `mesh` (the part `part`, in its own frame, mm).
+    /// Prepare `mesh` (the part `part`, in its own frame, mm), its queries with it.
     pub fn new(mesh: &Mesh, part: &str) -> Result<Solid, SolidError> {
-        let tri = MeshQuery::new(mesh).map_err(|message| SolidError::Mesh {
+        Solid::with_query(mesh, part, Query::Now)
+    }
+
+    /// Prepare `mesh` (the part `part`, in its own frame, mm), its queries `when`.
+    pub fn with_query(mesh: &Mesh, part: &str, when: Query) -> Result<Solid, SolidError> {
+        let refused = |message: String| SolidError::Mesh {
             part: part.to_string(),
             message,
-        })?;
+        };
+        let tri = OnceLock::new();
+        match when {
+            Query::Now => {
+                let _ = tri.set(MeshQuery::new(mesh).map_err(refused)?);
+            }
+            // parry refuses a mesh without triangles and nothing else (no topology flags
+            // are asked for), so that is checked now and the making later cannot fail.
+            Query::WhenAsked if mesh.triangles.is_empty() => {
+                return Err(refused("it has no triangles".to_string()));
+            }
+            Query::WhenAsked => {}
+        }
         let cell =
             |v: &[f64; 3]| -> [i64; 3] { [0, 1, 2].map(|k| (v[k] / CLUSTER_MM).floor() as i64) };
         let mut order: Vec<usize> = (0..mesh.vertices.len()).collect();
@@ -226,6 +266,7 @@ impl Solid {
             .map(|&i| Point3::from(mesh.vertices[i]))
             .collect();
         let mut clusters = Vec::new();
+        let mut cells = Vec::new();
         let mut start = 0;
         while start < order.len() {
             let key = cell(&mesh.vertices[order[start]]);
@@ -250,6 +291,7 @@ impl Solid {
                 tri_end: 0,
                 tri_radius: radius,
             });
+            cells.push(key);
             start = end;
         }
         // Each triangle, its corners renumbered in the sorted order, goes to the cluster of
@@ -299,6 +341,7 @@ impl Solid {
         let cones = normal_cones(mesh);
         let cones = order.iter().map(|&i| cones[i]).collect();
         let aabb = mesh.aabb();
+        let cluster_reach = clusters.iter().map(|c| c.tri_radius).fold(0.0, f64::max);
         Ok(Solid {
             tri,
             verts,
@@ -308,6 +351,8 @@ impl Solid {
             cones,
             clusters,
             aabb,
+            cluster_reach,
+            cells,
             bounds: OnceLock::new(),
             centres: AtomicU64::new(0),
         })
@@ -363,13 +408,123 @@ impl Solid {
 
     /// Signed distance of `p` (this part's frame) to the surface, mm, negative inside.
     pub fn signed(&self, p: &Point3<f64>) -> f64 {
-        self.tri.signed([p.x, p.y, p.z])
+        self.query().signed([p.x, p.y, p.z])
     }
 
     /// [`signed`](Self::signed) when the surface is within `max_mm` of `p`; `None` when it
     /// is farther, at a fraction of the cost.
     pub fn signed_within(&self, p: &Point3<f64>, max_mm: f64) -> Option<f64> {
-        self.tri.signed_within([p.x, p.y, p.z], max_mm)
+        self.query().signed_within([p.x, p.y, p.z], max_mm)
+    }
+
+    /// parry's queries, made now if they were not ([`Query::WhenAsked`]): from the sorted
+    /// vertices and triangles, the same surface.
+    fn query(&self) -> &MeshQuery {
+        self.tri.get_or_init(|| {
+            let mesh = Mesh {
+                vertices: self.verts.iter().map(|v| [v.x, v.y, v.z]).collect(),
+                triangles: self.tris.clone(),
+            };
+            MeshQuery::new(&mesh).expect("a mesh with triangles, checked when it was prepared")
+        })
+    }
+
+    /// [`signed`](Self::signed) from the clusters, without parry's hierarchy: exact, its
+    /// sign from the angle-weighted pseudo-normal at the nearest point (the faces as near
+    /// as the nearest, each weighted by its angle there where that is a corner of it, else
+    /// alike: one face, or the two along an edge). It reads every cluster's ball and the
+    /// faces of those that may hold a nearer point, about 0.1 ms on the demo's driver: for
+    /// the few points a part is asked about when making its hierarchy would cost more than
+    /// all of them ([`Query::WhenAsked`]).
+    pub fn signed_near(&self, p: &Point3<f64>) -> f64 {
+        let q = p.coords;
+        let home = [0, 1, 2].map(|k| (q[k] / CLUSTER_MM).floor() as i64);
+        // The clusters of the cells within `r` of the point's, by a binary search each;
+        // all of them where there would be more such cells than a tenth of the clusters.
+        let around = |r: i64| -> Vec<usize> {
+            let side = (2 * r + 1) as usize;
+            if side.saturating_pow(3) > self.clusters.len() / 10 {
+                return (0..self.clusters.len()).collect();
+            }
+            let mut found = Vec::new();
+            for a in -r..=r {
+                for b in -r..=r {
+                    for c in -r..=r {
+                        let key = [home[0] + a, home[1] + b, home[2] + c];
+                        if let Ok(i) = self.cells.binary_search(&key) {
+                            found.push(i);
+                        }
+                    }
+                }
+            }
+            found
+        };
+        // No point is farther than the nearest vertex, each within its cluster's radius of
+        // its centre: first among the cells round the point, else among all.
+        let bound = |ids: &[usize]| {
+            ids.iter()
+                .map(|&i| (p - self.clusters[i].center).norm() + self.clusters[i].radius)
+                .fold(f64::INFINITY, f64::min)
+        };
+        let mut best = bound(&around(1));
+        if !best.is_finite() {
+            best = bound(&(0..self.clusters.len()).collect::<Vec<_>>());
+        }
+        // A face nearer than `best` has its cluster's centre within `best` plus the
+        // cluster's reach of the point, and that centre lies in the cluster's cell.
+        let r = ((best + self.cluster_reach + NEAREST_TIE_MM) / CLUSTER_MM).ceil() as i64 + 1;
+        // Nearest first, so that the bound falls fast and the farther clusters are passed by.
+        let mut order: Vec<(f64, usize)> = around(r)
+            .into_iter()
+            .map(|i| {
+                let c = &self.clusters[i];
+                ((p - c.center).norm() - c.tri_radius, i)
+            })
+            .filter(|&(lower, _)| lower <= best + NEAREST_TIE_MM)
+            .collect();
+        order.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut near: Vec<(f64, usize, Vec3)> = Vec::new();
+        for (lower, i) in order {
+            if lower > best + NEAREST_TIE_MM {
+                break;
+            }
+            let c = &self.clusters[i];
+            for ti in c.tri_start..c.tri_end {
+                let [a, b, d] = self.tris[ti].map(|v| self.verts[v as usize].coords);
+                let x = closest_on_triangle(q, a, b, d);
+                let dist = (q - x).norm();
+                if dist <= best + NEAREST_TIE_MM {
+                    best = best.min(dist);
+                    near.push((dist, ti, x));
+                }
+            }
+        }
+        let Some(&(_, _, x)) = near.iter().find(|n| n.0 == best) else {
+            return f64::NAN;
+        };
+        let normal: Vector3<f64> = near
+            .iter()
+            // A point as far from two places of the surface (between two posts, say) has
+            // the faces of one of them, those whose nearest point is the same.
+            .filter(|n| n.0 <= best + NEAREST_TIE_MM && (n.2 - x).norm() <= NEAREST_TIE_MM)
+            .map(|&(_, ti, at)| {
+                let c = self.tris[ti].map(|v| self.verts[v as usize].coords);
+                let Some(n) = (c[1] - c[0]).cross(&(c[2] - c[0])).try_normalize(0.0) else {
+                    return Vector3::zeros();
+                };
+                // Where the nearest point is a corner, the face counts by its angle there.
+                let weight = (0..3).find(|&k| c[k] == at).map_or(1.0, |k| {
+                    let (u, v) = (c[(k + 1) % 3] - c[k], c[(k + 2) % 3] - c[k]);
+                    u.angle(&v)
+                });
+                n * weight
+            })
+            .sum();
+        if (q - x).dot(&normal) <= 0.0 {
+            -best
+        } else {
+            best
+        }
     }
 
     /// Voxel centres whose exact distance was computed so far (a cost figure).
@@ -883,6 +1038,100 @@ pub(crate) mod tests {
         fn driver_reach(&self, p: &Point3<f64>) -> f64 {
             p.coords.norm()
         }
+    }
+
+    /// Guards the driver's exact distances without parry's hierarchy
+    /// ([`Solid::signed_near`]): on a box (whose corners and edges test the pseudo-normals'
+    /// weights), a coarse sphere and a torus, at 3 000 seeded points from deep inside to
+    /// 3 mm out, at points on the box's edges' and corners' diagonals, and at points as far
+    /// from two posts (the sign from one place, not a sum of the two), the value is
+    /// parry's to 1e-9 mm, sign and all. A solid prepared with its queries deferred makes
+    /// them when first asked, and they agree too.
+    #[test]
+    fn distances_from_the_clusters_are_parry_s() {
+        use crate::geometry::primitive_meshes::{torus, uv_sphere};
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        let meshes = [
+            cuboid([-4.0, -3.0, -2.0], [4.0, 3.0, 2.0]),
+            uv_sphere([1.0, 0.5, 0.0], 5.0, 12, 8),
+            torus([0.0, 0.0, 1.0], 6.0, 2.0, 24, 12),
+        ];
+        for mesh in &meshes {
+            let solid = Solid::new(mesh, "test").unwrap();
+            let deferred = Solid::with_query(mesh, "test", Query::WhenAsked).unwrap();
+            let b = mesh.aabb();
+            let mut points: Vec<Point3<f64>> = (0..1000)
+                .map(|_| {
+                    Point3::from(
+                        [0, 1, 2].map(|k| rng.random_range(b.min[k] - 3.0..b.max[k] + 3.0)),
+                    )
+                })
+                .collect();
+            // Off the box's corners and edges along their diagonals, where the nearest
+            // point is a corner or on an edge, outside and in.
+            for s in [-0.3, 0.2, 1.0] {
+                points.push(Point3::new(4.0 + s, 3.0 + s, 2.0 + s));
+                points.push(Point3::new(4.0 + s, 3.0 + s, 0.5));
+                points.push(Point3::new(-4.0 - s, 0.0, -2.0 - s));
+            }
+            for p in &points {
+                let (want, got) = (solid.signed(p), deferred.signed_near(p));
+                assert!(
+                    (want - got).abs() < 1e-9,
+                    "{p}: parry {want}, clusters {got}"
+                );
+            }
+            assert!(
+                deferred.tri.get().is_none(),
+                "signed_near made parry's queries"
+            );
+            for p in &points[..50] {
+                assert!((solid.signed(p) - deferred.signed(p)).abs() < 1e-9, "{p}");
+            }
+        }
+        // A large fine torus: about 10 000 clusters, so a point near its surface reads the
+        // clusters of the cells round it, not all of them.
+        let ring = torus([0.0; 3], 200.0, 5.0, 1200, 60);
+        let (solid, deferred) = (
+            Solid::new(&ring, "ring").unwrap(),
+            Solid::with_query(&ring, "ring", Query::WhenAsked).unwrap(),
+        );
+        assert!(
+            deferred.clusters.len() > 10 * 7usize.pow(3),
+            "{}",
+            deferred.clusters.len()
+        );
+        for _ in 0..500 {
+            let tau = std::f64::consts::TAU;
+            let (u, v): (f64, f64) = (rng.random_range(0.0..tau), rng.random_range(0.0..tau));
+            let r = 5.0 + rng.random_range(-1.0..1.0);
+            let p = Point3::new(
+                (200.0 + r * v.cos()) * u.cos(),
+                (200.0 + r * v.cos()) * u.sin(),
+                r * v.sin(),
+            );
+            let (want, got) = (solid.signed(&p), deferred.signed_near(&p));
+            assert!(
+                (want - got).abs() < 1e-9,
+                "{p}: parry {want}, clusters {got}"
+            );
+        }
+        // Midway between two posts, 2 mm from each face.
+        let (posts, _) = bar_between_posts();
+        let (solid, deferred) = (
+            Solid::new(&posts, "posts").unwrap(),
+            Solid::with_query(&posts, "posts", Query::WhenAsked).unwrap(),
+        );
+        for p in [[20.0, -0.5, -1.0], [12.0, -0.5, 0.0], [29.0, -0.5, 2.5]] {
+            let p = Point3::from(p);
+            assert_eq!(deferred.signed_near(&p), 2.0, "{p}");
+            assert_eq!(solid.signed(&p), 2.0, "{p}");
+        }
+        assert!(matches!(
+            Solid::with_query(&Mesh::default(), "empty", Query::WhenAsked),
+            Err(SolidError::Mesh { .. })
+        ));
     }
 
     /// Guards the traced turn against a case with a closed form: a thin bar along +x
