@@ -510,92 +510,88 @@ impl Queryable {
     }
 }
 
-/// A part ready for the interference test: its mesh in its frame, its queries and its
-/// ridges ([`ridges`]; the support's are not asked for).
-struct Prepared<'a> {
-    mesh: &'a Mesh,
-    query: &'a Queryable,
-    ridges: &'a [[Point3<f64>; 2]],
+/// A part ready for the interference test, its chunks made once for every other part it
+/// goes into: its name and frame, its queries, its vertices and its ridges ([`ridges`];
+/// none asked for the support's) in [`Chunk`]s.
+struct Prepared {
+    name: &'static str,
+    frame: Frame,
+    query: Queryable,
+    vertices: Vec<Chunk<Point3<f64>>>,
+    ridges: Vec<Chunk<[Point3<f64>; 2]>>,
+}
+
+impl Prepared {
+    /// `mesh`, the part `name` in its frame `frame`; its ridges too when `with_ridges`.
+    /// The queries (most of them serial: parry's hierarchy, the pseudo-normals, the parity
+    /// columns) and the chunks are made side by side.
+    fn new(name: &'static str, frame: Frame, mesh: &Mesh, with_ridges: bool) -> Prepared {
+        let (query, (vertices, ridges)) = rayon::join(
+            || Queryable::new(mesh),
+            || {
+                rayon::join(
+                    || vertex_chunks(mesh),
+                    || {
+                        if with_ridges {
+                            ridge_chunks(&ridges(mesh))
+                        } else {
+                            Vec::new()
+                        }
+                    },
+                )
+            },
+        );
+        Prepared {
+            name,
+            frame,
+            query,
+            vertices,
+            ridges,
+        }
+    }
 }
 
 /// The deepest each part goes into each other over the period: the driver, the follower
 /// and the support.
-fn interference(kin: &Kinematics, [d, f, s]: [Prepared; 3]) -> Vec<Penetration> {
+fn interference(kin: &Kinematics, [d, f, s]: [&Prepared; 3]) -> Vec<Penetration> {
     // Two ridges that cross are each inside the other: the follower's ridges against the
     // driver find them, so the driver's are not looked at there, and the moving parts'
     // ridges against the support stand for the support's (what else they can hide is
     // bounded at `RIDGE_DEG`). Every part's vertices go into both others: a corner of
     // the support in a face of a moving part has no vertex of that part inside the support.
+    let into = |moving: &Prepared, with_ridges: bool, fixed: &Prepared| {
+        penetration(kin, moving, with_ridges, fixed)
+    };
     vec![
-        penetration(
-            kin,
-            (f.mesh, Some(f.ridges)),
-            Frame::Follower,
-            d.query,
-            Frame::Driver,
-            "follower into driver",
-        ),
-        penetration(
-            kin,
-            (d.mesh, None),
-            Frame::Driver,
-            f.query,
-            Frame::Follower,
-            "driver into follower",
-        ),
-        penetration(
-            kin,
-            (f.mesh, Some(f.ridges)),
-            Frame::Follower,
-            s.query,
-            Frame::Reference,
-            "follower into support",
-        ),
-        penetration(
-            kin,
-            (d.mesh, Some(d.ridges)),
-            Frame::Driver,
-            s.query,
-            Frame::Reference,
-            "driver into support",
-        ),
-        penetration(
-            kin,
-            (s.mesh, None),
-            Frame::Reference,
-            d.query,
-            Frame::Driver,
-            "support into driver",
-        ),
-        penetration(
-            kin,
-            (s.mesh, None),
-            Frame::Reference,
-            f.query,
-            Frame::Follower,
-            "support into follower",
-        ),
+        into(f, true, d),
+        into(d, false, f),
+        into(f, true, s),
+        into(d, true, s),
+        into(s, false, d),
+        into(s, false, f),
     ]
 }
 
-/// Deepest point of `moving` (frame `from`) inside `fixed` (frame `into`) over the period:
-/// its vertices and, when given, its `ridges` ([`deepest_ridge`]).
+/// Deepest point of `moving` inside `fixed` over the period: its vertices and, when
+/// `with_ridges`, its ridges ([`deepest_ridge`]).
 fn penetration(
     kin: &Kinematics,
-    (moving, ridges): (&Mesh, Option<&[[Point3<f64>; 2]]>),
-    from: Frame,
-    fixed: &Queryable,
-    into: Frame,
-    what: &str,
+    moving: &Prepared,
+    with_ridges: bool,
+    fixed: &Prepared,
 ) -> Penetration {
-    let instants = Instants::new(kin, from, into);
-    let by_vertices = deepest(&instants, moving, fixed);
-    let d = match ridges {
-        Some(r) => Deepest::deeper(by_vertices, deepest_ridge(&instants, r, fixed)),
-        None => by_vertices,
+    let instants = Instants::new(kin, moving.frame, fixed.frame);
+    let by_vertices = deepest(&instants, &moving.vertices, &fixed.query);
+    let d = if with_ridges {
+        Deepest::deeper(
+            by_vertices,
+            deepest_ridge(&instants, &moving.ridges, &fixed.query),
+        )
+    } else {
+        by_vertices
     };
     Penetration {
-        what: what.to_string(),
+        what: format!("{} into {}", moving.name, fixed.name),
         depth_mm: d.depth,
         t: d.t,
     }
@@ -610,17 +606,16 @@ struct Deepest {
     tests: usize,
 }
 
-/// The [`Deepest`] vertex of `moving` inside `fixed` at `instants` ([`CHECK_TIMES`], one
+/// The [`Deepest`] vertex of a moving part's vertex `chunks` ([`vertex_chunks`]) inside
+/// `fixed` at `instants` ([`CHECK_TIMES`], one
 /// when the frames are the same). Each vertex is followed through the instants; where it
 /// is outside by some room, the instants it cannot cover that room by (its speed bound
 /// over each step, [`Kinematics::spin_drift_within`]) are skipped: it is outside at them
 /// too, so the figures are those of testing every instant. The vertices go in [`Chunk`]s
 /// of near ones ([`follow`]): the deepest vertex and instant are the same, since only
 /// instants proven outside are skipped.
-fn deepest(instants: &Instants, moving: &Mesh, fixed: &Queryable) -> Deepest {
-    let vertices: Vec<Point3<f64>> = moving.vertices.iter().map(|&v| Point3::from(v)).collect();
-    let chunks = Chunk::cover(&vertices, |&p| p, |&p| [p]);
-    follow(instants, &chunks, fixed, |&p, pose| {
+fn deepest(instants: &Instants, chunks: &[Chunk<Point3<f64>>], fixed: &Queryable) -> Deepest {
+    follow(instants, chunks, fixed, |&p, pose| {
         let room = fixed.room((pose * p).coords);
         (room, -room, p.coords.norm())
     })
@@ -723,16 +718,20 @@ fn ridges(mesh: &Mesh) -> Vec<[Point3<f64>; 2]> {
         .collect()
 }
 
-/// The [`Deepest`] point of a moving part's `ridges` inside `fixed` at `instants`: the
+/// The [`Deepest`] point of a moving part's ridge `chunks` ([`ridge_chunks`]) inside
+/// `fixed` at `instants`: the
 /// stretch between a ridge's ends that may be inside, where the vertices' test cannot see
 /// it. Ridges go in runs of near ones and skip instants as the vertices do ([`follow`]).
 /// At an instant a ridge is
 /// looked along ([`Queryable::segment_depth`]) only where its ends leave room for it to
 /// reach inside: every point of it is outside by at least half the sum of its ends'
 /// rooms less its length.
-fn deepest_ridge(instants: &Instants, ridges: &[[Point3<f64>; 2]], fixed: &Queryable) -> Deepest {
-    let chunks = Chunk::cover(ridges, |[a, b]| nalgebra::center(a, b), |&ends| ends);
-    follow(instants, &chunks, fixed, |[a, b], pose| {
+fn deepest_ridge(
+    instants: &Instants,
+    chunks: &[Chunk<[Point3<f64>; 2]>],
+    fixed: &Queryable,
+) -> Deepest {
+    follow(instants, chunks, fixed, |[a, b], pose| {
         let (pa, pb) = ((pose * a).coords, (pose * b).coords);
         let (ra, rb) = (fixed.room(pa), fixed.room(pb));
         let room = if ra > 0.0 && rb > 0.0 {
@@ -907,6 +906,17 @@ impl<T: Copy + Send + Sync> Chunk<T> {
     }
 }
 
+/// `mesh`'s vertices in [`Chunk`]s.
+fn vertex_chunks(mesh: &Mesh) -> Vec<Chunk<Point3<f64>>> {
+    let vertices: Vec<Point3<f64>> = mesh.vertices.iter().map(|&v| Point3::from(v)).collect();
+    Chunk::cover(&vertices, |&p| p, |&p| [p])
+}
+
+/// `ridges` in [`Chunk`]s, near by their middles.
+fn ridge_chunks(ridges: &[[Point3<f64>; 2]]) -> Vec<Chunk<[Point3<f64>; 2]>> {
+    Chunk::cover(ridges, |[a, b]| nalgebra::center(a, b), |&ends| ends)
+}
+
 /// The Morton (Z-order) key of a cell: the bits of its three indices interleaved (21 bits
 /// each, far more than a part's cells).
 fn morton(cell: [u64; 3]) -> u64 {
@@ -930,30 +940,18 @@ pub fn run(
     follower: &Mesh,
     support: &Mesh,
 ) -> CheckFigures {
-    // Side by side: most of a part's preparation (parry's hierarchy, the pseudo-normals,
-    // the parity columns) runs on one thread.
-    let ((qd, rd), ((qf, rf), qs)) = rayon::join(
-        || rayon::join(|| Queryable::new(driver), || ridges(driver)),
+    // The three parts side by side.
+    let (pd, (pf, ps)) = rayon::join(
+        || Prepared::new("driver", Frame::Driver, driver, true),
         || {
             rayon::join(
-                || rayon::join(|| Queryable::new(follower), || ridges(follower)),
-                || Queryable::new(support),
+                || Prepared::new("follower", Frame::Follower, follower, true),
+                || Prepared::new("support", Frame::Reference, support, false),
             )
         },
     );
-    let prepared = |mesh, query, ridges| Prepared {
-        mesh,
-        query,
-        ridges,
-    };
-    let penetrations = interference(
-        &design.kin,
-        [
-            prepared(driver, &qd, &rd),
-            prepared(follower, &qf, &rf),
-            prepared(support, &qs, &[]),
-        ],
-    );
+    let penetrations = interference(&design.kin, [&pd, &pf, &ps]);
+    let (qd, qf, qs) = (&pd.query, &pf.query, &ps.query);
     let s = design.kin.scale_mm();
     let pairs: Vec<(usize, &crate::synth::mechanism::CurvePair)> = mech
         .curve_pairs
@@ -987,7 +985,7 @@ pub fn run(
         })
         .collect();
     let closure = built_closure(mech, &pairs, &per_pair, kept_limit);
-    let walls = [(&qd, driver), (&qf, follower), (&qs, support)]
+    let walls = [(qd, driver), (qf, follower), (qs, support)]
         .map(|(q, m)| wall_thickness(&q.tri, m, SLIVER_MM, WALL_REACH_MM))
         .into();
     CheckFigures {
@@ -1243,7 +1241,7 @@ mod tests {
         }
         assert!(want.0 > 0.5, "the balls meet: {want:?}");
         let instants = Instants::new(&kin, Frame::Follower, Frame::Driver);
-        let got = deepest(&instants, &moving, &fixed);
+        let got = deepest(&instants, &vertex_chunks(&moving), &fixed);
         assert_eq!((got.depth, got.t), want);
         let all = moving.vertices.len() * CHECK_TIMES;
         assert!(got.tests * 10 < all, "{} of {all} tests made", got.tests);
@@ -1290,10 +1288,10 @@ mod tests {
         let want = 0.3 / 2f64.sqrt();
         for (moving, fixed) in [(&upper, &lower), (&lower, &upper)] {
             let fixed = Queryable::new(fixed);
-            let by_vertices = deepest(&still, moving, &fixed);
+            let by_vertices = deepest(&still, &vertex_chunks(moving), &fixed);
             assert_eq!(by_vertices.depth, 0.0);
             let ridges = ridges(moving);
-            let by_ridges = deepest_ridge(&still, &ridges, &fixed);
+            let by_ridges = deepest_ridge(&still, &ridge_chunks(&ridges), &fixed);
             assert!(
                 (by_ridges.depth - want).abs() < 1e-9,
                 "{} deep, {want} expected",
@@ -1303,7 +1301,7 @@ mod tests {
         // Apart by 0.1 mm, neither is inside.
         let apart = bar_on_edge(0, 0.1, false);
         let fixed = Queryable::new(&lower);
-        let by_ridges = deepest_ridge(&still, &ridges(&apart), &fixed);
+        let by_ridges = deepest_ridge(&still, &ridge_chunks(&ridges(&apart)), &fixed);
         assert_eq!(by_ridges.depth, 0.0);
     }
 
@@ -1336,29 +1334,12 @@ mod tests {
         support.append(&cube_on_corner(
             kin.follower(0.0) * Point3::new(3.0, 0.0, -20.2),
         ));
-        let queries = [&driver, &follower, &support].map(Queryable::new);
-        let ridged = [ridges(&driver), ridges(&follower)];
-        let [qd, qf, qs] = &queries;
-        let found = interference(
-            &kin,
-            [
-                Prepared {
-                    mesh: &driver,
-                    query: qd,
-                    ridges: &ridged[0],
-                },
-                Prepared {
-                    mesh: &follower,
-                    query: qf,
-                    ridges: &ridged[1],
-                },
-                Prepared {
-                    mesh: &support,
-                    query: qs,
-                    ridges: &[],
-                },
-            ],
-        );
+        let parts = [
+            Prepared::new("driver", Frame::Driver, &driver, true),
+            Prepared::new("follower", Frame::Follower, &follower, true),
+            Prepared::new("support", Frame::Reference, &support, false),
+        ];
+        let found = interference(&kin, [&parts[0], &parts[1], &parts[2]]);
         let found: Vec<(&str, f64, f64)> = found
             .iter()
             .map(|p| (p.what.as_str(), p.depth_mm, p.t))

@@ -152,6 +152,12 @@ pub enum Query {
 /// an edge the nearest point lies on are as near to the last bits.
 const NEAREST_TIE_MM: f64 = 1e-9;
 
+/// The cell of [`CLUSTER_MM`] a point lies in: a [`Solid`]'s clusters are its vertices by
+/// cell, and [`Solid::signed_near`] finds those round a point by the same cells.
+fn cluster_cell(p: [f64; 3]) -> [i64; 3] {
+    p.map(|x| (x / CLUSTER_MM).floor() as i64)
+}
+
 /// A part's mesh ready for distance queries (parry's BVH with pseudo-normals, made with it
 /// or when first asked: [`Query`]), with its vertices sorted into clusters.
 pub struct Solid {
@@ -257,8 +263,7 @@ impl Solid {
             }
             Query::WhenAsked => {}
         }
-        let cell =
-            |v: &[f64; 3]| -> [i64; 3] { [0, 1, 2].map(|k| (v[k] / CLUSTER_MM).floor() as i64) };
+        let cell = |v: &[f64; 3]| cluster_cell(*v);
         let mut order: Vec<usize> = (0..mesh.vertices.len()).collect();
         order.sort_by_key(|&i| (cell(&mesh.vertices[i]), i));
         let verts: Vec<Point3<f64>> = order
@@ -439,7 +444,7 @@ impl Solid {
     /// NaN for a point that is not finite, as [`signed`](Self::signed) gives.
     pub fn signed_near(&self, p: &Point3<f64>) -> f64 {
         let q = p.coords;
-        let home = [0, 1, 2].map(|k| (q[k] / CLUSTER_MM).floor() as i64);
+        let home = cluster_cell([q.x, q.y, q.z]);
         // The clusters of the cells within `r` of the point's, by a binary search each;
         // all of them where there would be more such cells than a tenth of the clusters.
         let around = |r: i64| -> Vec<usize> {
