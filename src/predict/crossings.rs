@@ -3,7 +3,8 @@
 //!
 //! Owns [`free_along`], the counterpart of
 //! [`play::free_along`](super::play::free_along) that `predict` uses whenever the follower
-//! moves about R's z axis. It answers the same question (how far the follower can move from
+//! moves about R's z axis (through `free_along_binned`, with the follower's bins made
+//! while its queries were). It answers the same question (how far the follower can move from
 //! its design pose along a screw about that axis, either way, before a vertex of one part
 //! meets a face of the other, capped) with the same tests (every follower vertex against
 //! the driver's faces and every driver vertex against the follower's), but exactly and in
@@ -116,6 +117,19 @@ pub fn free_along(
     n: usize,
     lines: &[(Screw, f64)],
 ) -> Option<Vec<FreeTurns>> {
+    free_along_binned(motion, driver, follower, None, n, lines)
+}
+
+/// [`free_along`] with the follower's bins made already ([`Bins::new`]), or made here
+/// when `None`: `simulate` makes them while the follower's queries are being made.
+pub(super) fn free_along_binned(
+    motion: &dyn PartMotion,
+    driver: &Solid,
+    follower: &Solid,
+    bins: Option<&Bins>,
+    n: usize,
+    lines: &[(Screw, f64)],
+) -> Option<Vec<FreeTurns>> {
     let about_z = (0..n).all(|i| {
         let f = motion.follower(i as f64 / n as f64);
         (f.rotation * Vector3::z() - Vector3::z()).norm() < AXIS_TOLERANCE
@@ -126,10 +140,16 @@ pub fn free_along(
     }
     // Only the follower's distance grid is asked (where the driver's clusters are), so
     // the driver's is never made; the follower's is made beside its bins.
-    let ((bins, edges), ()) = rayon::join(
-        || rayon::join(|| Bins::new(follower), || longest_edges(driver)),
+    let ((made, edges), ()) = rayon::join(
+        || {
+            rayon::join(
+                || bins.is_none().then(|| Bins::new(follower)),
+                || longest_edges(driver),
+            )
+        },
         || follower.prepare_bounds(),
     );
+    let bins = bins.or(made.as_ref()).expect("bins given or made");
     let runs = (rayon::current_num_threads() * RUNS_PER_THREAD).clamp(1, n.max(1));
     let per_run = n.div_ceil(runs);
     let along = |screw: Screw, cap: f64| {
@@ -138,7 +158,7 @@ pub fn free_along(
         let results: Vec<RunFigures> = (0..runs)
             .into_par_iter()
             .map(|k| {
-                let mut run = Run::new(motion, driver, follower, &bins, &edges, screw, cap);
+                let mut run = Run::new(motion, driver, follower, bins, &edges, screw, cap);
                 for i in (k * per_run)..((k + 1) * per_run).min(n) {
                     run.sample(i as f64 / n as f64);
                 }
@@ -422,7 +442,7 @@ impl Plane {
 
 /// The follower's vertices and faces sorted into (ρ, z) bins of [`BIN_MM`], each bin's by
 /// polar angle.
-struct Bins {
+pub(super) struct Bins {
     z0: f64,
     n_rho: usize,
     n_z: usize,
@@ -441,7 +461,9 @@ struct Bins {
 }
 
 impl Bins {
-    fn new(follower: &Solid) -> Bins {
+    /// The follower's vertices and faces sorted into bins of (ρ, z) ([`BIN_MM`]), each
+    /// bin's in order of polar angle.
+    pub(super) fn new(follower: &Solid) -> Bins {
         let corners = |t: &[u32; 3]| t.map(|v| follower.verts[v as usize]);
         let footprints: Vec<Footprint> = follower
             .tris

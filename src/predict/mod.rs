@@ -618,23 +618,32 @@ pub fn predict(
     let kin = Kinematics::new(mech, built.scale_mm)?;
     // Each part is read and prepared on its own thread: reading the STL and building
     // parry's BVH are serial inside. On the demo's parts `simulate` went from 55.6 to
-    // 48.4 s wall (2026-12-05). The follower's distance grid is made here too, the one
-    // `crossings` asks; the driver, the larger mesh, gets none (the tracer, needed only
-    // for a follower whose axis moves, makes both itself).
-    // The driver's parry hierarchy is made only if the tracer asks for it: the crossings
-    // ask the driver a few exact distances, from its clusters (`Solid::signed_near`).
-    let load = |part: &str| -> Result<Solid, PredictError> {
-        let mesh = read_stl(&parts_dir.join(format!("{part}.stl")))?;
-        if part == "follower" {
-            let solid = Solid::new(&mesh, part)?;
-            solid.prepare_bounds();
-            Ok(solid)
-        } else {
-            Ok(Solid::with_query(&mesh, part, Query::WhenAsked)?)
-        }
-    };
-    let (driver, follower) = rayon::join(|| load("driver"), || load("follower"));
-    let (driver, follower) = (driver?, follower?);
+    // 48.4 s wall (2026-12-05). The driver's parry hierarchy is made only if the tracer
+    // asks for it: the crossings ask the driver a few exact distances, from its clusters
+    // (`Solid::signed_near`). The follower's distance grid and its bins, which the
+    // crossings ask for, are made beside its hierarchy (the tracer, needed only for a
+    // follower whose axis moves, makes the driver's grid itself).
+    let read = |part: &str| read_stl(&parts_dir.join(format!("{part}.stl")));
+    let (driver, follower) = rayon::join(
+        || -> Result<Solid, PredictError> {
+            Ok(Solid::with_query(
+                &read("driver")?,
+                "driver",
+                Query::WhenAsked,
+            )?)
+        },
+        || -> Result<(Solid, crossings::Bins), PredictError> {
+            Ok(Solid::with_query_beside(
+                &read("follower")?,
+                "follower",
+                |f| {
+                    f.prepare_bounds();
+                    crossings::Bins::new(f)
+                },
+            )?)
+        },
+    );
+    let (driver, (follower, bins)) = (driver?, follower?);
     let n = opts.samples;
     let motions: Vec<(Screw, f64)> = if slides {
         plane_lines().iter().map(|l| (l.0, l.1)).collect()
@@ -644,8 +653,10 @@ pub fn predict(
     let started = Instant::now();
     // A follower moving about R's z axis has its free motions found exactly by
     // `crossings`; the tracer takes any other.
-    let lines = crossings::free_along(&PartsMotion(&kin), &driver, &follower, n, &motions)
-        .unwrap_or_else(|| free_along(&PartsMotion(&kin), &driver, &follower, n, &motions));
+    let motion = PartsMotion(&kin);
+    let bins = Some(&bins);
+    let lines = crossings::free_along_binned(&motion, &driver, &follower, bins, n, &motions)
+        .unwrap_or_else(|| free_along(&motion, &driver, &follower, n, &motions));
     let seconds = started.elapsed().as_secs_f64();
     let free = &lines[0];
 
