@@ -40,8 +40,9 @@
 //!   vertex in order is asked. The driver answers from its clusters
 //!   ([`Solid::signed_near`]), so it never makes parry's hierarchy: about 3 200 such
 //!   questions a period on half-turn-2to1's parts, 0.2 s of the two cores, where the
-//!   hierarchy and its pseudo-normals took 3.35 s to make. Overlaps where no vertex would stop the follower are not
-//!   looked for: the build's check measures the parts' interference.
+//!   hierarchy and its pseudo-normals took 3.35 s to make. Overlaps where no vertex would
+//!   stop the follower are not looked for: the build's check measures the parts'
+//!   interference.
 //! - Only the driver's clusters near the follower are looked at, by the same carried lower
 //!   bounds the tracer uses (`Solid`'s distance grid, the cluster's last bound and the
 //!   parts' speed bound), and within them only vertices and faces whose own bounds leave
