@@ -14,6 +14,15 @@ pub const DEFAULT_CLEARANCE_MM: f64 = 0.2;
 /// there the mesh lay 0.10–0.20 mm inside the solid (docs/build.md, screw-bob's K = 7).
 pub const DEFAULT_CELL_MM: f64 = 0.4;
 
+/// How far the parts' meshes may be simplified from the mesher's (default of
+/// `--simplify-mm`): every vertex left within this of the plane of each face it absorbed
+/// (`geometry::simplify`). 0.01 mm: a tenth of the 0.1 mm mesh-error budget and a
+/// twentieth of the clearance, below an STL's and a printer's resolution alike. The
+/// mesher's triangles are a third of a cell across even where the surface is flat; at
+/// this bound half-turn-2to1's printable parts keep 27–39 % of them (133 → 36 MB of STL
+/// for the driver).
+pub const DEFAULT_SIMPLIFY_MM: f64 = 0.01;
+
 /// Material thinner than this is not printed: the driver's mesh leaves out what the carve
 /// leaves thinner (the ragged sheets where a rim's sweep cut a band nearly through),
 /// farther than `geometry::mesher::trim_reach` from thicker material, and a band's pieces

@@ -8,7 +8,8 @@
 //!                        parts: follower = rims ∪ webs ∪ struts ∪ hub … (shrunk c/2)
 //!                               driver   = (bands ∪ struts ∪ hub) − sweep(rims ⊕ c/2) − bores
 //!                               support  = base ∪ bosses ∪ pillar/arm or post/cup − holes
-//!                        ─► mesher (closed 2-manifolds) ─► check (edges, interference, gaps)
+//!                        ─► mesher (closed 2-manifolds) ─► simplify (within 0.01 mm)
+//!                        ─► check (edges, interference, gaps)
 //!                        ─► files (STL, 3MF, GLB), renders, build.json / build.md
 //! ```
 //!
@@ -47,6 +48,7 @@ use std::time::Instant;
 use crate::geometry::mesh::{Mesh, MeshCheck};
 use crate::geometry::mesher::{mesh_solid_trimmed, MeshProgress, MesherError};
 use crate::geometry::sdf::{Sdf, Vec3};
+use crate::geometry::simplify::{simplify, SimplifyOptions};
 use crate::geometry::sweep::SweepError;
 use crate::synth::closure::Class;
 use crate::synth::mechanism::Mechanism;
@@ -159,6 +161,9 @@ pub struct BuildOptions {
     pub clearance_mm: f64,
     /// Mesher cell, mm.
     pub cell_mm: f64,
+    /// How far the meshes may be simplified, mm (`geometry::simplify`; 0 keeps the
+    /// mesher's triangles).
+    pub simplify_mm: f64,
     /// The bench the parts are for.
     pub bench: Option<Bench>,
     /// Leave curve pair k (0-based) out: an experiment whose parts need not close.
@@ -174,6 +179,7 @@ impl Default for BuildOptions {
             scale_mm: None,
             clearance_mm: dims::DEFAULT_CLEARANCE_MM,
             cell_mm: dims::DEFAULT_CELL_MM,
+            simplify_mm: dims::DEFAULT_SIMPLIFY_MM,
             bench: None,
             without_pair: None,
             allow_interference: false,
@@ -187,6 +193,10 @@ pub const CLEARANCE_RANGE_MM: (f64, f64) = (0.0, 2.0);
 /// Range of the mesher cell, mm: 0.1 mm is already finer than any nozzle; above 1 mm the
 /// 0.85 mm apex radius of the rims is lost.
 pub const CELL_RANGE_MM: (f64, f64) = (0.1, 1.0);
+/// Range of the simplification bound, mm: 0 keeps the mesher's triangles; above 0.05 mm
+/// the simplified surface alone would use half the 0.1 mm mesh-error budget and the
+/// check's whole penetration tolerance (`check::PENETRATION_TOL_MM`).
+pub const SIMPLIFY_RANGE_MM: (f64, f64) = (0.0, 0.05);
 /// Range of the scale, mm per model unit: below 4 the rims and bands (mm-sized) no longer
 /// fit between the 0.5-unit gaps of the bands; above 40 the parts outgrow desktop printers.
 pub const SCALE_RANGE_MM: (f64, f64) = (4.0, 40.0);
@@ -209,8 +219,12 @@ pub struct Part {
     /// part; see `Loose`), each piece's volume in mm³, largest first; empty when it is one
     /// piece.
     pub pieces: Vec<f64>,
-    /// Seconds spent meshing it.
+    /// Triangles the mesher made, before simplification.
+    pub meshed_triangles: usize,
+    /// Seconds spent meshing it (simplification included).
     pub seconds: f64,
+    /// Seconds of those spent simplifying the mesh.
+    pub simplify_seconds: f64,
     /// How far the mesh lies from the solid it was meshed from (`fidelity`).
     pub error: fidelity::MeshError,
     /// Seconds spent measuring that.
@@ -259,7 +273,8 @@ impl BuildOptions {
     /// caller that builds later (`demo`, after minutes of synthesis) checks first.
     pub fn check_ranges(&self) -> Result<(), BuildError> {
         in_range("--clearance", self.clearance_mm, CLEARANCE_RANGE_MM)?;
-        in_range("--cell-mm", self.cell_mm, CELL_RANGE_MM)
+        in_range("--cell-mm", self.cell_mm, CELL_RANGE_MM)?;
+        in_range("--simplify-mm", self.simplify_mm, SIMPLIFY_RANGE_MM)
     }
 }
 
@@ -342,7 +357,7 @@ pub fn build(
             "follower",
             &f,
             Loose::Anchored(&anchors),
-            opts.cell_mm,
+            opts,
             None,
             progress,
         )?);
@@ -356,7 +371,7 @@ pub fn build(
             "driver",
             &d,
             Loose::LeaveOut,
-            opts.cell_mm,
+            opts,
             Some(dims::SLIVER_MM),
             progress,
         )?);
@@ -368,7 +383,7 @@ pub fn build(
             "support",
             &s,
             Loose::Whole,
-            opts.cell_mm,
+            opts,
             None,
             progress,
         )?);
@@ -446,15 +461,17 @@ enum Loose<'a> {
 }
 
 /// Mesh one part (leaving out material thinner than `sliver`, when given: see
-/// [`mesh_solid_trimmed`]), check it, and sort out loose shells as `loose` says.
+/// [`mesh_solid_trimmed`]), simplify it as `opts` says, check it, and sort out loose
+/// shells as `loose` says.
 fn mesh_part(
     name: &'static str,
     solid: &dyn Sdf,
     loose: Loose<'_>,
-    cell: f64,
+    opts: &BuildOptions,
     sliver: Option<f64>,
     progress: &dyn Fn(&str),
 ) -> Result<Part, BuildError> {
+    let cell = opts.cell_mm;
     let t = Instant::now();
     let f = |p: Vec3| solid.dist(p);
     let mut last_line = t;
@@ -472,6 +489,14 @@ fn mesh_part(
     };
     let mesh = mesh_solid_trimmed(&f, solid.bounds(), cell, sliver, &mut report)
         .map_err(|source| BuildError::Mesh { part: name, source })?;
+    let meshed_triangles = mesh.len();
+    let t_simplify = Instant::now();
+    let mesh = if opts.simplify_mm > 0.0 {
+        simplify(&mesh, &SimplifyOptions::within(opts.simplify_mm)).0
+    } else {
+        mesh
+    };
+    let simplify_seconds = t_simplify.elapsed().as_secs_f64();
     let check = mesh.check();
     if !check.is_closed_manifold() {
         return Err(BuildError::NotManifold {
@@ -521,7 +546,9 @@ fn mesh_part(
         check,
         dropped,
         pieces,
+        meshed_triangles,
         seconds,
+        simplify_seconds,
         error,
         error_seconds: t.elapsed().as_secs_f64(),
     })
@@ -602,6 +629,13 @@ pub(crate) mod tests {
                     ..BuildOptions::default()
                 },
                 "--cell-mm: 0.01 is outside 0.1–1",
+            ),
+            (
+                BuildOptions {
+                    simplify_mm: 0.1,
+                    ..BuildOptions::default()
+                },
+                "--simplify-mm: 0.1 is outside 0–0.05",
             ),
             (
                 BuildOptions {

@@ -367,6 +367,7 @@ fn summary_json(summary: &Summary) -> serde_json::Value {
         "dx_mm": kin.dx_mm(),
         "clearance_mm": opts.clearance_mm,
         "cell_mm": opts.cell_mm,
+        "simplify_mm": opts.simplify_mm,
         "without_pair": opts.without_pair.map(|k| k + 1),
         "bench": built.design.layout.bench.to_string(),
         "parts": built.parts.iter().enumerate().map(|(i, p)| {
@@ -376,6 +377,7 @@ fn summary_json(summary: &Summary) -> serde_json::Value {
                 "name": p.name,
                 "file": format!("{}.stl", p.name),
                 "triangles": c.triangles,
+                "triangles_meshed": p.meshed_triangles,
                 "volume_mm3": c.volume_mm3,
                 "closed_manifold": c.is_closed_manifold(),
                 "bbox_min_mm": b.min,
@@ -404,6 +406,7 @@ fn summary_json(summary: &Summary) -> serde_json::Value {
                     "smooth_max_mm": p.error.smooth_max_mm,
                 }),
                 "seconds": p.seconds,
+                "simplify_seconds": p.simplify_seconds,
             })
         }).collect::<Vec<_>>(),
         "printable": built.printable(),
@@ -582,12 +585,17 @@ fn summary_md(summary: &Summary) -> String {
     let _ = writeln!(
         s,
         "{} mechanism, {} mm per model unit, d_x = {:.1} mm, print clearance {} mm, \
-         mesher cell {} mm; bench: {}.\n",
+         mesher cell {} mm, {}; bench: {}.\n",
         kin.class().label(),
         kin.scale_mm(),
         kin.dx_mm(),
         opts.clearance_mm,
         opts.cell_mm,
+        if opts.simplify_mm > 0.0 {
+            format!("simplified within {} mm", opts.simplify_mm)
+        } else {
+            "not simplified".to_string()
+        },
         built.design.layout.bench
     );
     if let Some(k) = opts.without_pair {
@@ -605,15 +613,19 @@ fn summary_md(summary: &Summary) -> String {
         let _ = writeln!(s);
     }
     let _ = writeln!(s, "![assembly](assembly-isometric.png)\n");
-    let _ = writeln!(s, "| part | triangles | volume mm³ | size mm | mesh |");
+    let _ = writeln!(
+        s,
+        "| part | triangles (the mesher's) | volume mm³ | size mm | mesh |"
+    );
     let _ = writeln!(s, "|---|---:|---:|---|---|");
     for p in &built.parts {
         let c = &p.check;
         let b = p.mesh.aabb().size();
         let _ = writeln!(
             s,
-            "| [{n}]({n}.stl) | {} | {:.0} | {:.0} × {:.0} × {:.0} | {} |",
+            "| [{n}]({n}.stl) | {} ({}) | {:.0} | {:.0} × {:.0} × {:.0} | {} |",
             c.triangles,
+            p.meshed_triangles,
             c.volume_mm3,
             b[0],
             b[1],
@@ -633,7 +645,8 @@ fn summary_md(summary: &Summary) -> String {
     let _ = writeln!(
         s,
         "\nMesh error: how far the faces' centres lie from the solid they were meshed from, \
-         along their normals, over {} faces drawn at random per part:\n",
+         along their normals, over {} faces drawn at random per part, each with a chance in \
+         proportion to its area (so the shares are shares of the surface):\n",
         super::fidelity::ERROR_SAMPLES
     );
     for p in &built.parts {
@@ -865,7 +878,9 @@ mod tests {
                 mesh,
                 dropped: Vec::new(),
                 pieces: Vec::new(),
+                meshed_triangles: 12,
                 seconds: 0.0,
+                simplify_seconds: 0.0,
                 error: MeshError::default(),
                 error_seconds: 0.0,
             }
@@ -900,7 +915,9 @@ mod tests {
                 check: mesh.check(),
                 dropped: Vec::new(),
                 pieces: Vec::new(),
+                meshed_triangles: 12,
                 seconds: 0.0,
+                simplify_seconds: 0.0,
                 error: MeshError::default(),
                 error_seconds: 0.0,
             })

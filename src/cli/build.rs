@@ -30,6 +30,10 @@ pub struct BuildArgs {
     /// Mesher cell size, mm (smaller: finer and slower).
     #[arg(long = "cell-mm", default_value_t = build::dims::DEFAULT_CELL_MM)]
     pub cell_mm: f64,
+    /// Simplify the meshes within this distance, mm (0: keep every triangle the mesher
+    /// makes, three to four times as many).
+    #[arg(long = "simplify-mm", default_value_t = build::dims::DEFAULT_SIMPLIFY_MM)]
+    pub simplify_mm: f64,
     /// Make the motor coupling and sensor mounts for this rig (default: the simulated
     /// stepper bench of the mechanism's class).
     #[arg(long)]
@@ -52,6 +56,7 @@ pub fn run(args: BuildArgs) -> anyhow::Result<ExitCode> {
         scale_mm: args.scale_mm,
         clearance_mm: args.clearance,
         cell_mm: args.cell_mm,
+        simplify_mm: args.simplify_mm,
         bench,
         without_pair: args.without_pair.map(|k| k.saturating_sub(1)),
         allow_interference: args.without_pair.is_some(),

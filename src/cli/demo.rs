@@ -334,10 +334,11 @@ fn parts_key(mechanism_bytes: &[u8], o: &BuildOptions, tool: &str) -> String {
     short_hash(
         mechanism_bytes,
         &format!(
-            "scale={:?} clearance={} cell={} bench={} without={:?} tool={tool}",
+            "scale={:?} clearance={} cell={} simplify={} bench={} without={:?} tool={tool}",
             o.scale_mm,
             o.clearance_mm,
             o.cell_mm,
+            o.simplify_mm,
             o.bench.as_ref().map_or(String::new(), |b| b.to_string()),
             o.without_pair,
         ),

@@ -249,20 +249,25 @@ pub(crate) fn edge_uses(
     uses
 }
 
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+/// `a − b`. These four are the array-vector helpers of the mesh code (`Mesh` stores plain
+/// `[f64; 3]`); `geometry::simplify` uses them too.
+pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+/// `a × b`.
+pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [
         a[1] * b[2] - a[2] * b[1],
         a[2] * b[0] - a[0] * b[2],
         a[0] * b[1] - a[1] * b[0],
     ]
 }
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+/// `a · b`.
+pub(crate) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
-fn norm(a: [f64; 3]) -> f64 {
+/// `|a|`.
+pub(crate) fn norm(a: [f64; 3]) -> f64 {
     dot(a, a).sqrt()
 }
 

@@ -14,6 +14,7 @@
 //! | [`thickness`] | a mesh's wall thickness, face by face (rays along the inward normals) |
 //! | [`primitive_meshes`] | closed meshes of boxes, UV spheres and tori, built directly |
 //! | [`shading`] | crease-split vertex normals, as the GLB and the renders shade a mesh |
+//! | [`simplify`] | fewer triangles within a distance bound (half-edge collapses) |
 //! | [`io`] | files: binary STL, 3MF packages laid out on a bed, the animated GLB |
 //! | [`render`] | shaded, anti-aliased PNG pictures of a scene at a key time |
 //!
@@ -30,6 +31,7 @@ pub mod render;
 pub mod scene;
 pub mod sdf;
 pub mod shading;
+pub mod simplify;
 pub mod sweep;
 pub mod thickness;
 pub mod voxel;
