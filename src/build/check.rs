@@ -266,7 +266,7 @@ pub fn windows(flags: &[bool]) -> Vec<[f64; 2]> {
 
 /// A mesh ready for queries: parry's BVH with pseudo-normals, a coarse occupancy grid
 /// (0 far outside, 1 near the surface, 2 inside by the parity of its column) with each
-/// voxel centre's distance to the nearest voxel holding a vertex, and, where the occupancy
+/// voxel centre's distance to the nearest voxel a face meets, and, where the occupancy
 /// is not 0, a lower bound of the signed distance at the centres of a finer grid: exact
 /// within [`FINE_EXACT_WITHIN_MM`] of the surface, from the coarse voxel's centre farther
 /// out (NaN where there is none, and inside, where a bound proves nothing). The signed
@@ -280,13 +280,12 @@ struct Queryable {
     bounds: Aabb,
     grid: VoxelGrid,
     occ: Vec<u8>,
-    /// Per coarse voxel, its centre's distance to the nearest centre of a voxel holding a
-    /// vertex, mm.
-    to_vertex: Vec<f32>,
-    /// What [`Queryable::to_vertex`] exceeds a point's distance to the surface by at most:
-    /// a voxel's half diagonal (the vertex in its voxel) plus the longest edge (a surface
-    /// point to a vertex of its triangle), mm.
-    to_vertex_slack: f64,
+    /// Per coarse voxel, its centre's distance to the nearest centre of a voxel that some
+    /// face's box meets, mm.
+    to_surface: Vec<f32>,
+    /// What [`Queryable::to_surface`] exceeds a point's distance to the surface by at
+    /// most: a voxel's half diagonal (a surface point in its marked voxel), mm.
+    to_surface_slack: f64,
     /// Per coarse voxel, [`Queryable::coarse_at`].
     coarse: OnceValues,
     fine: VoxelGrid,
@@ -299,24 +298,31 @@ impl Queryable {
         let tri = MeshQuery::new(m).expect("a checked, non-empty mesh");
         let b = m.aabb().inflate(NEAR_MM + 2.0 * OCCUPANCY_VOXEL_MM);
         let grid = VoxelGrid::covering(b, OCCUPANCY_VOXEL_MM);
-        // Near: within NEAR_MM of a vertex (vertices are < 1 mm apart on these meshes, so
-        // every surface point is within half that of one).
+        // Near: within NEAR_MM of a voxel holding some of the surface. Each face marks
+        // every voxel its box meets, so every surface point lies in a marked voxel and is
+        // within a voxel's half diagonal of its centre, whatever the faces' sizes (the
+        // simplified meshes' edges reach 2 mm: marked by their vertices alone, the slack
+        // would have been half a diagonal plus the longest edge).
         let mut marks = vec![false; grid.len()];
-        for v in &m.vertices {
-            if let Some(i) = grid.voxel_of(Vec3::new(v[0], v[1], v[2])) {
-                marks[grid.index(i)] = true;
+        for i in 0..m.triangles.len() {
+            let c = m.corners(i).map(|x| Vec3::new(x[0], x[1], x[2]));
+            let lo = c[0].inf(&c[1]).inf(&c[2]);
+            let hi = c[0].sup(&c[1]).sup(&c[2]);
+            let (Some(a), Some(b)) = (grid.voxel_of(lo), grid.voxel_of(hi)) else {
+                continue;
+            };
+            for x in a[0]..=b[0] {
+                for y in a[1]..=b[1] {
+                    for z in a[2]..=b[2] {
+                        marks[grid.index([x, y, z])] = true;
+                    }
+                }
             }
         }
-        let to_vertex = distance_transform(&grid, &marks);
-        let longest_edge = (0..m.triangles.len())
-            .map(|i| {
-                let [a, b, c] = m.corners(i).map(|x| Vec3::new(x[0], x[1], x[2]));
-                (a - b).norm().max((b - c).norm()).max((c - a).norm())
-            })
-            .fold(0.0, f64::max);
+        let to_surface = distance_transform(&grid, &marks);
         let half_diagonal = 0.5 * 3f64.sqrt() * grid.h;
-        let to_vertex_slack = half_diagonal + longest_edge;
-        let mut occ: Vec<u8> = to_vertex
+        let to_surface_slack = half_diagonal;
+        let mut occ: Vec<u8> = to_surface
             .iter()
             .map(|&x| u8::from((x as f64) <= NEAR_MM + grid.h))
             .collect();
@@ -373,8 +379,8 @@ impl Queryable {
             bounds: m.aabb(),
             grid,
             occ,
-            to_vertex,
-            to_vertex_slack,
+            to_surface,
+            to_surface_slack,
             coarse: OnceValues::new(grid.len()),
             lower: OnceValues::new(fine.len()),
             fine,
@@ -391,7 +397,7 @@ impl Queryable {
     fn coarse_at(&self, i: usize) -> f64 {
         let v = self.coarse.get_or(i, || {
             let half_diagonal = 0.5 * 3f64.sqrt() * self.grid.h;
-            let deep = self.to_vertex[i] as f64 > self.to_vertex_slack + half_diagonal;
+            let deep = self.to_surface[i] as f64 > self.to_surface_slack + half_diagonal;
             match self.occ[i] {
                 0 => f32::NAN,
                 2 if deep => f32::NEG_INFINITY,
@@ -405,7 +411,7 @@ impl Queryable {
     }
 
     /// The bound at fine voxel `i`'s centre, computed when first asked: from its coarse
-    /// voxel's value (or, far from the surface, its bound from the nearest vertex's voxel)
+    /// voxel's value (or, far from the surface, its bound from the nearest marked voxel)
     /// where that is more than [`FINE_EXACT_WITHIN_MM`] outside it, NaN outside the grid or
     /// where the coarse centre is inside (nothing to prove outside with), else the signed
     /// distance at the fine centre.
@@ -417,7 +423,7 @@ impl Queryable {
             };
             let vi = self.grid.index(v);
             let off = (c - self.grid.center(v)).norm();
-            // A coarse voxel far from the surface has no value; the nearest vertex's voxel
+            // A coarse voxel far from the surface has no value; the nearest marked voxel
             // bounds the distance in it, as for a vertex there (`room`). The fine grid's
             // voxels straddle the coarse ones, so a vertex in a near coarse voxel may have
             // its fine centre in a far one: with no value there, each of its tests went
@@ -441,7 +447,7 @@ impl Queryable {
 
     /// Where `p` is outside, a lower bound of its distance to the surface (0 when none is
     /// known); inside, minus its depth (exact). Outside the grid, the distance to the mesh's
-    /// box; far outside by the occupancy, the distance to the nearest vertex's voxel less
+    /// box; far outside by the occupancy, the distance to the nearest marked voxel less
     /// the slack; where the fine grid proves `p` outside, its bound; elsewhere parry's
     /// signed distance.
     fn room(&self, p: Vec3) -> f64 {
@@ -457,10 +463,10 @@ impl Queryable {
     }
 
     /// In coarse voxel `i`, far from the surface by the occupancy, a lower bound of the
-    /// distance at a point `off` from its centre: the distance to the nearest voxel holding
-    /// a vertex, less the slack from a surface point to such a voxel's centre.
+    /// distance at a point `off` from its centre: the distance to the nearest voxel a face
+    /// meets, less the slack from a surface point to such a voxel's centre.
     fn far_bound(&self, i: usize, off: f64) -> f64 {
-        f64::from(self.to_vertex[i]) - off - self.to_vertex_slack
+        f64::from(self.to_surface[i]) - off - self.to_surface_slack
     }
 
     /// The fine grid's bound at `p`'s voxel centre less `p`'s distance from it, where that
