@@ -19,7 +19,7 @@ pub const DEFAULT_CELL_MM: f64 = 0.4;
 /// (`geometry::simplify`). 0.01 mm: a tenth of the 0.1 mm mesh-error budget and a
 /// twentieth of the clearance, below an STL's and a printer's resolution alike. The
 /// mesher's triangles are a third of a cell across even where the surface is flat; at
-/// this bound half-turn-2to1's printable parts keep 27–39 % of them (133 → 36 MB of STL
+/// this bound half-turn-2to1's printable parts keep 25–39 % of them (134 → 34 MB of STL
 /// for the driver).
 pub const DEFAULT_SIMPLIFY_MM: f64 = 0.01;
 
