@@ -18,10 +18,9 @@ pub const DEFAULT_CELL_MM: f64 = 0.4;
 /// `--simplify-mm`): every vertex left within this of the plane of each face it absorbed
 /// (`geometry::simplify`). 0.01 mm: a tenth of the 0.1 mm mesh-error budget and a
 /// twentieth of the clearance, and less than a desktop printer's motor step (0.0125 mm
-/// at the common 80 steps per mm). The
-/// mesher's triangles are a third of a cell across even where the surface is flat; at
-/// this bound half-turn-2to1's printable parts keep 25–39 % of them (134 → 34 MB of STL
-/// for the driver).
+/// at the common 80 steps per mm). The mesher's triangles are a third of a cell across
+/// even where the surface is flat; at this bound half-turn-2to1's printable parts keep
+/// 25–39 % of them (134 → 34 MB of STL for the driver).
 pub const DEFAULT_SIMPLIFY_MM: f64 = 0.01;
 
 /// Material thinner than this is not printed: the driver's mesh leaves out what the carve
