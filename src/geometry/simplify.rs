@@ -162,8 +162,26 @@ struct State<'a> {
 }
 
 /// Simplify the closed mesh `mesh` as `opts` allow: see the module doc. The result has the
-/// same shells and the same orientation; its vertices are a subset of `mesh`'s.
+/// same shells and the same orientation; its vertices are a subset of `mesh`'s. The
+/// guards assume a closed 2-manifold (the mesher's guarantee; [`Mesh::check`] is what
+/// tells, and costs a second on a part): another mesh comes back without a panic but with
+/// no promise, and one with an index out of range comes back as it is.
 pub fn simplify(mesh: &Mesh, opts: &SimplifyOptions) -> (Mesh, SimplifyStats) {
+    let nv_in = mesh.vertices.len();
+    if mesh
+        .triangles
+        .iter()
+        .flatten()
+        .any(|&v| v as usize >= nv_in)
+    {
+        let n = mesh.triangles.len();
+        let stats = SimplifyStats {
+            triangles_before: n,
+            triangles_after: n,
+            ..SimplifyStats::default()
+        };
+        return (mesh.clone(), stats);
+    }
     // The vertices renumbered in the order the triangles first use them, so that the
     // vertices of neighbouring faces lie near each other in memory: the mesher numbers
     // them block by block as its threads finish, and on screw-bob's driver (3.1 M
@@ -572,6 +590,48 @@ mod tests {
         assert_eq!(stats.collapses, 0);
         assert_eq!(out.triangles.len(), mesh.triangles.len());
         assert!((out.volume() - 6.0).abs() < 1e-12);
+    }
+
+    /// Guards input that is not a closed 2-manifold: no panic on an empty mesh, two boxes
+    /// sharing an edge (four faces on it) or a box with a face left out (each still fails
+    /// the check after), and an index out of range comes back as it was.
+    #[test]
+    fn meshes_that_are_not_closed_manifolds_do_not_panic() {
+        let opts = SimplifyOptions::within(0.05);
+        let a = cuboid([0.0; 3], [1.0; 3]);
+        let mut b = cuboid([1.0, 1.0, 0.0], [2.0, 2.0, 1.0]);
+        // Weld b's corner column at (1, 1) onto a's, so the boxes share that edge.
+        let weld = |m: &Mesh, p: [f64; 3]| m.vertices.iter().position(|&v| v == p).unwrap();
+        let mut shared = a.clone();
+        for z in [0.0, 1.0] {
+            let (from, to) = (weld(&b, [1.0, 1.0, z]), weld(&a, [1.0, 1.0, z]));
+            b.vertices[from] = [9.0; 3];
+            for t in &mut b.triangles {
+                for v in t.iter_mut() {
+                    if *v as usize == from {
+                        *v = (to + 1000) as u32;
+                    }
+                }
+            }
+        }
+        let base = shared.vertices.len() as u32;
+        shared.vertices.extend_from_slice(&b.vertices);
+        shared.triangles.extend(
+            b.triangles
+                .iter()
+                .map(|t| t.map(|v| if v >= 1000 { v - 1000 } else { v + base })),
+        );
+        let mut open = a.clone();
+        open.triangles.pop();
+        let mut bad = a.clone();
+        bad.triangles[0][0] = 99;
+        let (out, stats) = simplify(&bad, &opts);
+        assert_eq!((out, stats.collapses), (bad, 0));
+        for m in [Mesh::default(), shared, open] {
+            assert!(!m.check().is_closed_manifold());
+            let (out, _) = simplify(&m, &opts);
+            assert!(!out.check().is_closed_manifold());
+        }
     }
 
     /// Guards determinism: the costs are computed on several threads, the collapses on
