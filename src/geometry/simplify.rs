@@ -21,12 +21,12 @@
 //!   max_turn_deg`], makes no face thinner than [`SimplifyOptions::min_quality`] unless it
 //!   was already, and no edge longer than [`SimplifyOptions::max_edge_mm`].
 //! - **Deterministic.** Costs are computed on every thread, but collapses are made on one,
-//!   in order of cost and then of index.
+//!   in order of cost level and then of index.
 //!
 //! It does not guarantee that two sheets of the surface closer than the tolerance stay
 //! apart; the build's bound, 0.01 mm, is an eightieth of the thinnest wall it means to
-//! print (`build::dims::SLIVER_MM`). It does not
-//! mesh (`geometry::mesher`) nor check (`Mesh::check`, which the callers run on its output).
+//! print (`build::dims::SLIVER_MM`). It does not mesh (`geometry::mesher`) nor check
+//! (`Mesh::check`, which the callers run on its output).
 
 use rayon::prelude::*;
 
@@ -299,12 +299,11 @@ impl State<'_> {
     }
 
     /// One pass: the vertices' cheapest collapses within the bound, in order of cost level
-    /// (`cost_level`), each
-    /// made unless a collapse of this pass changed its faces or its target's, or a guard
-    /// refuses it (then its next target in order of cost is tried). `dirty` holds the
-    /// vertices whose faces or neighbours changed since their cost was computed, and is
-    /// left holding those this pass changed; a vertex every guard refused is not tried
-    /// again until then. Returns the collapses made.
+    /// (`cost_level`), each made unless a collapse of this pass changed its faces or its
+    /// target's, or a guard refuses it (then its next target in order of cost is tried).
+    /// `dirty` holds the vertices whose faces or neighbours changed since their cost was
+    /// computed, and is left holding those this pass changed; a vertex every guard
+    /// refused is not tried again until then. Returns the collapses made.
     fn pass(&mut self, dirty: &mut [bool]) -> usize {
         let fresh: Vec<(u32, f64)> = (0..self.vfaces.len() as u32)
             .into_par_iter()
