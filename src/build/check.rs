@@ -692,9 +692,14 @@ fn follow<T: Sync>(
 ///   shorter than an edge only while it is under 0.4² / (8 · 1.53) = 0.013 mm deep.
 ///
 /// At 30° (a 0.77 mm bend) the second would reach 0.06 mm. On half-turn-2to1's printable
-/// parts 15° makes 92.7 k of the follower's edges ridges and 162 k of the driver's, and
-/// their tests cost 0.8 s of the check (30°: 47.6 k and 69.9 k, 0.4 s). Ridges are the
-/// sharp convex edges ([`ridges`]).
+/// parts, before they were simplified, 15° made 92.7 k of the follower's edges ridges and
+/// 162 k of the driver's, and their tests cost 0.8 s of the check (30°: 47.6 k and 69.9 k,
+/// 0.4 s). Ridges are the sharp convex edges ([`ridges`]).
+///
+/// On simplified meshes (`geometry::simplify`, within δ = 0.01 mm) a face is longer where
+/// the surface bends less: L long on a surface of radius R, it departs from it by L²/(8R),
+/// about δ at most, so the lens of the second item is (0.58 L)² / (2R) ≈ 1.35 δ = 0.013 mm
+/// deep on each side, whatever L; the ridges are tested along their length as before.
 const RIDGE_DEG: f64 = 15.0;
 
 /// The convex edges of `mesh` whose faces turn by more than [`RIDGE_DEG`], as their two

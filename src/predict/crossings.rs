@@ -63,14 +63,21 @@
 //! (2026-12-07, not committed) at both ends of every free turn on the two printable designs'
 //! parts (1 440 angles, the follower's sharp convex edges against the driver, as the build's
 //! check tests them): the deepest was 0.0044 mm inside on half-turn-2to1's and 0.0126 mm on
-//! screw-bob's, a quarter of the interference the check accepts and less.
+//! screw-bob's, a quarter of the interference the check accepts and less. Those parts
+//! were not simplified. The build now simplifies its meshes within 0.01 mm
+//! (`geometry::simplify`), and an edge along a straight ridge may then reach 2 mm; the probe
+//! was not run again. The predicted laws of half-turn-2to1's parts simplified and not
+//! differ by at most 0.053° (0.028 mm at a 30 mm arm), which bounds what longer ridges
+//! changed there.
 //!
 //! On half-turn-2to1's printable parts (1 327 228 + 685 584 vertices, 1 440 driver angles)
 //! the turns take 5.1–6.0 s (`mpc-rig simulate`; 5.5–6.3 s before the faces' ways, 7.1–8.1 s
 //! before the seeds and the per-point bounds, 22.7 s with the tracer); on screw-bob's
 //! (1R1T, 1 509 566 + 660 284 vertices) the four lines take 22–25 s (41 s before, 53 s
 //! with the tracer). docs/simulate.md, "Exact free turns", "Seeded, each way its own" and
-//! "A driver face looked up only from the ways it can be entered".
+//! "A driver face looked up only from the ways it can be entered". Simplified (340 052 +
+//! 189 768 vertices; 367 289 + 192 992 for screw-bob), on a faster machine where the parts
+//! above took 3.8–3.9 s and 18.6 s: 1.9 s and 9.0 s ("Simplified parts").
 
 use std::f64::consts::{PI, TAU};
 
