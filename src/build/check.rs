@@ -299,26 +299,11 @@ impl Queryable {
         let b = m.aabb().inflate(NEAR_MM + 2.0 * OCCUPANCY_VOXEL_MM);
         let grid = VoxelGrid::covering(b, OCCUPANCY_VOXEL_MM);
         // Near: within NEAR_MM of a voxel holding some of the surface. Each face marks
-        // every voxel its box meets, so every surface point lies in a marked voxel and is
-        // within a voxel's half diagonal of its centre, whatever the faces' sizes (the
-        // simplified meshes' edges reach 2 mm: marked by their vertices alone, the slack
-        // would have been half a diagonal plus the longest edge).
-        let mut marks = vec![false; grid.len()];
-        for i in 0..m.triangles.len() {
-            let c = m.corners(i).map(|x| Vec3::new(x[0], x[1], x[2]));
-            let lo = c[0].inf(&c[1]).inf(&c[2]);
-            let hi = c[0].sup(&c[1]).sup(&c[2]);
-            let (Some(a), Some(b)) = (grid.voxel_of(lo), grid.voxel_of(hi)) else {
-                continue;
-            };
-            for x in a[0]..=b[0] {
-                for y in a[1]..=b[1] {
-                    for z in a[2]..=b[2] {
-                        marks[grid.index([x, y, z])] = true;
-                    }
-                }
-            }
-        }
+        // every voxel its box meets, so every surface point is within a voxel's half
+        // diagonal of a marked centre, whatever the faces' sizes (marked by the vertices
+        // alone, the slack would be half a diagonal plus the longest edge, 2 mm on
+        // simplified meshes).
+        let marks = grid.marks_of_triangle_boxes((0..m.triangles.len()).map(|i| m.corners(i)));
         let to_surface = distance_transform(&grid, &marks);
         let half_diagonal = 0.5 * 3f64.sqrt() * grid.h;
         let to_surface_slack = half_diagonal;

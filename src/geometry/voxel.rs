@@ -130,6 +130,35 @@ impl VoxelGrid {
         }
         Some(out)
     }
+
+    /// For every voxel, whether its cell meets the box of one of `triangles` (corners, mm);
+    /// a box beyond the grid marks the voxels at its edge. Every point of every triangle in
+    /// the grid then lies in a marked voxel, within half a diagonal of its centre, however
+    /// large the triangles are: the build's check and the virtual prototype bound distances
+    /// from the surface on that (simplified meshes have edges of up to 2 mm).
+    pub fn marks_of_triangle_boxes(
+        &self,
+        triangles: impl IntoIterator<Item = [[f64; 3]; 3]>,
+    ) -> Vec<bool> {
+        let origin = [self.origin.x, self.origin.y, self.origin.z];
+        // The nearest centre along axis k, clamped to the grid (as `voxel_of` rounds).
+        let cell = |x: f64, k: usize| -> usize {
+            (((x - origin[k]) / self.h + 0.5).floor().max(0.0) as usize).min(self.n[k] - 1)
+        };
+        let mut marks = vec![false; self.len()];
+        for c in triangles {
+            let lo = [0, 1, 2].map(|k| cell(c[0][k].min(c[1][k]).min(c[2][k]), k));
+            let hi = [0, 1, 2].map(|k| cell(c[0][k].max(c[1][k]).max(c[2][k]), k));
+            for z in lo[2]..=hi[2] {
+                for y in lo[1]..=hi[1] {
+                    for x in lo[0]..=hi[0] {
+                        marks[self.index([x, y, z])] = true;
+                    }
+                }
+            }
+        }
+        marks
+    }
 }
 
 /// One f32 per voxel of a grid, sampled trilinearly between centres.
@@ -424,6 +453,33 @@ fn shorten(path: &[Vec3], field: &DistanceField, min_clearance: f64) -> Vec<Vec3
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Guards the marks the distance bounds rest on: points all over a triangle much
+    /// longer than a voxel lie in marked voxels, voxels beyond its box are not marked, and
+    /// a triangle beyond the grid marks the edge of the grid.
+    #[test]
+    fn a_long_triangle_marks_every_voxel_its_points_lie_in() {
+        let grid = VoxelGrid::covering(Aabb::new([0.0; 3], [10.0, 4.0, 4.0]), 1.0);
+        let t = [[0.2, 0.3, 0.4], [9.7, 1.1, 2.9], [4.4, 3.6, 0.6]];
+        let marks = grid.marks_of_triangle_boxes([t]);
+        for (u, v) in [
+            (0.1, 0.1),
+            (0.5, 0.2),
+            (0.2, 0.7),
+            (0.45, 0.45),
+            (0.9, 0.05),
+        ] {
+            let p = Vec3::from(t[0]) * (1.0 - u - v) + Vec3::from(t[1]) * u + Vec3::from(t[2]) * v;
+            let i = grid.voxel_of(p).expect("in the grid");
+            assert!(marks[grid.index(i)], "{p:?}");
+        }
+        // Only the voxels of the box: none beyond x = 10 or at z = 4 (the box ends at 2.9).
+        assert!(!marks[grid.index([0, 0, 4])]);
+        // A triangle beyond the grid marks the voxel at its edge, without a panic.
+        let out =
+            grid.marks_of_triangle_boxes([[[20.0, 1.0, 1.0], [21.0, 1.0, 1.0], [20.0, 2.0, 1.0]]]);
+        assert!(out[grid.index([10, 1, 1])]);
+    }
 
     /// Guards `voxel_of`'s rounding without libm: the voxel is the one `f64::round` picks,
     /// halves, the largest double below a half, both ends of the grid, beyond them and NaN

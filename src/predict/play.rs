@@ -203,23 +203,12 @@ impl Bounds {
     fn new(aabb: Aabb, verts: &[Point3<f64>], tris: &[[u32; 3]]) -> Bounds {
         let grid = VoxelGrid::covering(aabb.inflate(GRID_MARGIN_MM), GRID_MM);
         // Every voxel whose cell meets a triangle's box holds the surface points there.
-        let mut marks = vec![false; grid.len()];
-        let cell_of = |x: f64, k: usize| -> usize {
-            let o = [grid.origin.x, grid.origin.y, grid.origin.z][k];
-            (((x - o) / grid.h + 0.5).floor().max(0.0) as usize).min(grid.n[k] - 1)
-        };
-        for t in tris {
-            let c = t.map(|v| verts[v as usize]);
-            let lo = [0, 1, 2].map(|k| cell_of(c[0][k].min(c[1][k]).min(c[2][k]), k));
-            let hi = [0, 1, 2].map(|k| cell_of(c[0][k].max(c[1][k]).max(c[2][k]), k));
-            for a in lo[0]..=hi[0] {
-                for b in lo[1]..=hi[1] {
-                    for z in lo[2]..=hi[2] {
-                        marks[grid.index([a, b, z])] = true;
-                    }
-                }
-            }
-        }
+        let marks = grid.marks_of_triangle_boxes(tris.iter().map(|t| {
+            t.map(|v| {
+                let p = verts[v as usize];
+                [p.x, p.y, p.z]
+            })
+        }));
         let coarse = distance_transform(&grid, &marks);
         let exact = OnceValues::new(grid.len());
         Bounds {
