@@ -89,10 +89,11 @@ pub struct MeshError {
 /// 0.099 and 0.145 mm: other draws, whose 99th percentile rests on their 40 worst faces.
 pub fn mesh_error(solid: &dyn Sdf, mesh: &Mesh, cell: f64) -> MeshError {
     let n = mesh.triangles.len();
-    let areas: Vec<f64> = (0..n).into_par_iter().map(|i| mesh.face_area(i)).collect();
-    let (mut faces, weight): (Vec<usize>, Vec<f64>) = if n <= ERROR_SAMPLES {
-        ((0..n).collect(), areas.clone())
+    let every_face = n <= ERROR_SAMPLES;
+    let mut faces: Vec<usize> = if every_face {
+        (0..n).collect()
     } else {
+        let areas: Vec<f64> = (0..n).into_par_iter().map(|i| mesh.face_area(i)).collect();
         let mut cumulative = Vec::with_capacity(n);
         let mut total = 0.0;
         for a in &areas {
@@ -100,14 +101,15 @@ pub fn mesh_error(solid: &dyn Sdf, mesh: &Mesh, cell: f64) -> MeshError {
             cumulative.push(total);
         }
         let mut rng = ChaCha8Rng::seed_from_u64(ERROR_SEED);
-        let drawn = (0..ERROR_SAMPLES)
+        (0..ERROR_SAMPLES)
             .map(|_| {
                 let u = rng.random_range(0.0..total);
                 cumulative.partition_point(|&c| c <= u).min(n - 1)
             })
-            .collect();
-        (drawn, vec![1.0; n])
+            .collect()
     };
+    // A face drawn by its area counts once; where every face is measured, by its area.
+    let weight = |i: usize| if every_face { mesh.face_area(i) } else { 1.0 };
     // Neighbouring faces together: a solid that keeps work per region (the carve's
     // certificates) finds it again.
     let centre = |i: usize| Vec3::from(mesh.face_centre(i));
@@ -141,7 +143,7 @@ pub fn mesh_error(solid: &dyn Sdf, mesh: &Mesh, cell: f64) -> MeshError {
     let (max_mm, worst) = errors[count - 1];
     let at = centre(worst);
     let sharp = sharp_faces(mesh, &errors.iter().map(|e| e.1).collect::<Vec<_>>());
-    let weighted: Vec<(f64, f64)> = errors.iter().map(|&(e, i)| (e, weight[i])).collect();
+    let weighted: Vec<(f64, f64)> = errors.iter().map(|&(e, i)| (e, weight(i))).collect();
     let smooth: Vec<(f64, f64)> = weighted
         .iter()
         .zip(&sharp)
